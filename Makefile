@@ -1,0 +1,37 @@
+# Two commands set everything up on a fresh machine: `make demo` and `make test`.
+# Both create .venv and install what they need. torch is pinned to the CPU build (see README for GPU).
+PYTHON ?= python3
+VENV   ?= .venv
+PY     := $(VENV)/bin/python
+TORCH  ?= torch==2.13.0
+
+.PHONY: demo test bench lint clean venv
+
+venv: $(VENV)/.installed
+
+$(VENV)/.installed: pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q "$(TORCH)"
+	$(PY) -m pip install -q -e ".[cards,training,viewer,usd,dev]"
+	touch $@
+
+# Blender as a Python module (bpy 5.0, ~370 MB) for the DCC round-trip and Cycles tests.
+$(VENV)/.bpy: $(VENV)/.installed
+	$(PY) -m pip install -q "bpy==5.0.*"
+	touch $@
+
+demo: venv
+	$(VENV)/bin/cgh demo -o demo_out
+
+test: venv $(VENV)/.bpy
+	$(PY) -m pytest -q
+
+bench: venv
+	$(PY) -m pytest -q -m bench --benchmark-enable --benchmark-only -p no:randomly tests/bench
+
+lint: venv
+	$(VENV)/bin/ruff check .
+
+clean:
+	rm -rf $(VENV) demo_out .pytest_cache .benchmarks

@@ -1,0 +1,68 @@
+"""The ``cgh`` command line. Each verb lives in its own module with ``add_arguments`` and ``run``.
+
+Verb modules are imported only when their verb is used, so ``cgh info`` never loads torch or GL.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from ..errors import CghError
+
+# verb -> (module defining add_arguments(parser) and run(args) -> int, one-line help)
+VERBS: dict[str, tuple[str, str]] = {
+    "info": ("cghair_format.cli.info", "show counts, chunk sizes and bits per Gaussian of a .cgh"),
+    "validate": ("cghair_format.cli.validate", "check a .cgh file; exit 0 if valid, 1 with the reason"),
+    "encode": ("cghair_format.cli.encode", "re-encode a .cgh with another precision profile"),
+    "synth": ("cghair_format.cli.synth", "grow a built-in procedural hairstyle"),
+    "convert": ("cghair_format.cli.convert", "convert strands between formats (.cgh accepted as input)"),
+    "export": ("cghair_format.cli.export", "export a .cgh or strands to USD (curves, cards, Gaussians)"),
+    "cards": ("cghair_format.cli.cards", "build hair cards from strands and write a .cgh"),
+    "render-dataset": ("training.cli_dataset", "render a multi-view dataset of strands"),
+    "train": ("training.cli_train", "fit the compact appearance model to a multi-view dataset"),
+    "eval": ("training.cli_eval", "PSNR/SSIM of a .cgh on a dataset's held-out views"),
+    "view": ("viewer.cli", "open a .cgh in an interactive window"),
+    "render": ("viewer.cli_render", "render a .cgh to a PNG, GIF or MP4 without a display"),
+    "bench-viewer": ("viewer.cli_bench", "measure the viewer's load and frame times"),
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="cgh", description="CGHair: compact Gaussian hair assets (.cgh).")
+    sub = parser.add_subparsers(dest="verb", metavar="VERB")
+    for verb, (module, help_text) in VERBS.items():
+        p = sub.add_parser(verb, help=help_text, description=help_text)
+        p.set_defaults(_module=module)
+        try:
+            importlib.import_module(module).add_arguments(p)
+        except ImportError as exc:
+            p.set_defaults(_unavailable=str(exc))
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.verb is None:
+        parser.print_help()
+        return 2
+    if getattr(args, "_unavailable", None):
+        print(f"cgh {args.verb}: unavailable: {args._unavailable}", file=sys.stderr)
+        return 2
+    try:
+        return int(importlib.import_module(args._module).run(args) or 0)
+    except CghError as exc:
+        print(f"cgh {args.verb}: error: {exc}", file=sys.stderr)
+        return 1 if args.verb == "validate" else 2
+    except (FileNotFoundError, IsADirectoryError, PermissionError) as exc:
+        print(f"cgh {args.verb}: error: {exc.strerror}: {exc.filename}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"cgh {args.verb}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,147 @@
+"""Gaussians of a hair asset (spec: "Gaussians", "Appearance").
+
+One cylindrical Gaussian per strand segment ``p_i -> p_i+1``: mean at the midpoint, local z axis
+along the segment, scales ``(d, d, |p_i+1 - p_i| / 2)``, the segment's opacity, and SH colour
+coefficients from the appearance model.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .asset import Appearance, HairAsset
+from .geometry import strand_points
+
+SH_C0 = 0.28209479177387814
+SH_C1 = 0.4886025119029199
+SH_C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792,
+         0.5462742152960396)
+SH_C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154,
+         -0.4570457994644658, 1.445305721320277, -0.5900435899266435)
+
+
+@dataclass
+class Gaussians:
+    """A flat set of ``G`` 3D Gaussians, in the layout splatters use."""
+
+    means: np.ndarray  # [G, 3] float32
+    rotations: np.ndarray  # [G, 4] float32 unit quaternions (w, x, y, z)
+    scales: np.ndarray  # [G, 3] float32 standard deviations along the local axes
+    opacities: np.ndarray  # [G] float32 in [0, 1]
+    sh: np.ndarray  # [G, (deg+1)^2, 3] float32, real SH coefficients per RGB channel
+
+    @property
+    def count(self) -> int:
+        return int(self.means.shape[0])
+
+    @property
+    def sh_degree(self) -> int:
+        return int(round(np.sqrt(self.sh.shape[1]))) - 1
+
+
+def segment_frames(points: np.ndarray, thickness: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Means, rotations (w, x, y, z) and scales of the segment Gaussians of strands ``[S, P, 3]``.
+
+    The rotation is the shortest arc taking +z to the segment direction; a zero-length segment
+    gets the identity, a segment along -z a half turn about x.
+    """
+    p = points.astype(np.float64)
+    seg = p[:, 1:] - p[:, :-1]
+    length = np.linalg.norm(seg, axis=-1)
+    d = seg / np.maximum(length, 1e-30)[..., None]
+    d[length <= 0] = (0.0, 0.0, 1.0)
+    w = 1.0 + d[..., 2]
+    q = np.stack([w, -d[..., 1], d[..., 0], np.zeros_like(w)], axis=-1)
+    q[w < 1e-12] = (0.0, 1.0, 0.0, 0.0)
+    q /= np.linalg.norm(q, axis=-1, keepdims=True)
+    scales = np.stack([np.full_like(length, thickness), np.full_like(length, thickness), length / 2], -1)
+    means = (p[:, 1:] + p[:, :-1]) / 2
+    return (means.reshape(-1, 3).astype(np.float32), q.reshape(-1, 4).astype(np.float32),
+            scales.reshape(-1, 3).astype(np.float32))
+
+
+def strand_weights(appearance: Appearance) -> np.ndarray:
+    """Codebook weights ``[S, K]``: softmax of logits / temperature, or one-hot of the argmax."""
+    logits = appearance.logits.astype(np.float64)
+    if appearance.weight_mode == "hard":
+        w = np.zeros_like(logits)
+        w[np.arange(len(logits)), np.argmax(logits, axis=1)] = 1.0
+        return w
+    z = logits / appearance.temperature
+    z -= z.max(axis=1, keepdims=True)
+    e = np.exp(z)
+    return e / e.sum(axis=1, keepdims=True)
+
+
+def strand_latents(appearance: Appearance, strand_group: np.ndarray) -> np.ndarray:
+    """Each strand's latent ``[S, D]``: its weights over its card group's codebook."""
+    w = strand_weights(appearance)
+    return np.einsum("sk,skd->sd", w, appearance.codebooks.astype(np.float64)[strand_group])
+
+
+def run_mlp(appearance: Appearance, latents: np.ndarray, batch: int = 4096) -> np.ndarray:
+    """The global MLP applied to latents ``[S, D]``, in float32, batched; returns ``[S, out]``."""
+    out = np.empty((latents.shape[0], appearance.mlp[-1].weight.shape[0]), np.float32)
+    weights = [(layer.weight.astype(np.float32).T.copy(), layer.bias.astype(np.float32), layer.activation)
+               for layer in appearance.mlp]
+    for start in range(0, latents.shape[0], batch):
+        h = latents[start:start + batch].astype(np.float32)
+        for w, b, act in weights:
+            h = h @ w + b
+            if act == "relu":
+                np.maximum(h, 0, out=h)
+        out[start:start + batch] = h
+    return out
+
+
+def strand_sh(asset: HairAsset) -> np.ndarray:
+    """SH coefficients ``[S, P-1, (deg+1)^2, 3]`` of every Gaussian, from the appearance model."""
+    app = asset.appearance
+    group = asset.cards.group.astype(np.int64)[asset.strand_card]
+    out = run_mlp(app, strand_latents(app, group))
+    return out.reshape(asset.n_strands, asset.points_per_strand - 1, app.sh_coeffs, 3)
+
+
+def decode_points(asset: HairAsset) -> np.ndarray:
+    """World positions ``[S, P, 3]`` of all strand points."""
+    return strand_points(asset.cards, asset.strand_card, asset.uvd)
+
+
+def decode_gaussians(asset: HairAsset, points: np.ndarray | None = None) -> Gaussians:
+    """All Gaussians of the asset, strand-major then segment order, with SH from the MLP."""
+    if points is None:
+        points = decode_points(asset)
+    means, rotations, scales = segment_frames(points, asset.thickness)
+    sh = strand_sh(asset).reshape(asset.n_gaussians, asset.appearance.sh_coeffs, 3)
+    return Gaussians(means, rotations, scales, asset.opacity.reshape(-1).astype(np.float32), sh)
+
+
+def eval_sh(sh: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+    """RGB ``[G, 3]`` = ``max(0, sum_lm c_lm Y_lm(dir) + 0.5)``, the 3DGS (INRIA) convention.
+
+    ``sh`` is ``[G, (deg+1)^2, 3]``; ``dirs`` ``[G, 3]`` unit view directions (camera to Gaussian).
+    """
+    deg = int(round(np.sqrt(sh.shape[1]))) - 1
+    res = SH_C0 * sh[:, 0]
+    if deg > 0:
+        x, y, z = (dirs[:, i:i + 1] for i in range(3))
+        res = res - SH_C1 * y * sh[:, 1] + SH_C1 * z * sh[:, 2] - SH_C1 * x * sh[:, 3]
+        if deg > 1:
+            xx, yy, zz, xy, yz, xz = x * x, y * y, z * z, x * y, y * z, x * z
+            res = (res + SH_C2[0] * xy * sh[:, 4] + SH_C2[1] * yz * sh[:, 5]
+                   + SH_C2[2] * (2 * zz - xx - yy) * sh[:, 6] + SH_C2[3] * xz * sh[:, 7]
+                   + SH_C2[4] * (xx - yy) * sh[:, 8])
+            if deg > 2:
+                res = (res + SH_C3[0] * y * (3 * xx - yy) * sh[:, 9] + SH_C3[1] * xy * z * sh[:, 10]
+                       + SH_C3[2] * y * (4 * zz - xx - yy) * sh[:, 11]
+                       + SH_C3[3] * z * (2 * zz - 3 * xx - 3 * yy) * sh[:, 12]
+                       + SH_C3[4] * x * (4 * zz - xx - yy) * sh[:, 13]
+                       + SH_C3[5] * z * (xx - yy) * sh[:, 14] + SH_C3[6] * x * (xx - 3 * yy) * sh[:, 15])
+    return np.maximum(res + 0.5, 0.0)
+
+
+def rgb_to_sh0(rgb: np.ndarray) -> np.ndarray:
+    """The band-0 coefficient that renders as ``rgb`` (the inverse of the DC part of :func:`eval_sh`)."""
+    return (np.asarray(rgb) - 0.5) / SH_C0

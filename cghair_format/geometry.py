@@ -1,0 +1,102 @@
+"""Card strips and the card-to-world mapping of strand points (spec: "Card strips", "Strand points").
+
+A card of ``M`` segments has spine points ``c_k``, unit normals ``n_k`` and half-widths ``w_k``
+(``k = 0..M``). Its strip mesh has a left rail ``L_k = c_k - w_k b_k`` and a right rail
+``R_k = c_k + w_k b_k`` with ``b_k = normalize(n_k x t_k)``; UV ``(k/M, 0)`` on the left rail and
+``(k/M, 1)`` on the right. Quad ``k`` is split into the triangles ``(L_k, R_k, L_k+1)`` and
+``(R_k, R_k+1, L_k+1)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .asset import Cards
+
+
+def _normalize(v: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.maximum(n, 1e-30)
+
+
+def spine_tangents(spine: np.ndarray) -> np.ndarray:
+    """Unit tangents ``t_k`` of spines ``[C, M+1, 3]``: central differences, one-sided at the ends."""
+    d = np.empty_like(spine)
+    d[:, 1:-1] = spine[:, 2:] - spine[:, :-2]
+    d[:, 0] = spine[:, 1] - spine[:, 0]
+    d[:, -1] = spine[:, -1] - spine[:, -2]
+    return _normalize(d)
+
+
+def card_bitangents(cards: Cards) -> np.ndarray:
+    """Unit bitangents ``b_k = normalize(n_k x t_k)``, ``[C, M+1, 3]``."""
+    return _normalize(np.cross(cards.normal, spine_tangents(cards.spine)))
+
+
+@dataclass
+class CardMesh:
+    """The strip meshes of all cards, as one indexed triangle mesh."""
+
+    vertices: np.ndarray  # [C * 2(M+1), 3] float32; card c, spine point k: left 2(c(M+1)+k), right +1
+    normals: np.ndarray  # [C * 2(M+1), 3] float32
+    uvs: np.ndarray  # [C * 2(M+1), 2] float32
+    triangles: np.ndarray  # [C * 2M, 3] uint32
+    card_of_triangle: np.ndarray  # [C * 2M] int32
+
+
+def card_mesh(cards: Cards) -> CardMesh:
+    """Derive the strip mesh (vertices, normals, UVs, triangles) of every card."""
+    c, m1 = cards.spine.shape[:2]
+    m = m1 - 1
+    b = card_bitangents(cards)
+    w = cards.half_width[..., None]
+    rails = np.stack([cards.spine - w * b, cards.spine + w * b], axis=2)  # [C, M+1, 2, 3]
+    normals = np.repeat(cards.normal[:, :, None, :], 2, axis=2)
+    u = np.broadcast_to((np.arange(m1) / m)[None, :, None], (c, m1, 2))
+    v = np.broadcast_to(np.array([0.0, 1.0])[None, None, :], (c, m1, 2))
+    uvs = np.stack([u, v], axis=-1)
+    base = (np.arange(c) * 2 * m1)[:, None] + 2 * np.arange(m)[None, :]  # index of L_k, [C, M]
+    lk, rk, lk1, rk1 = base, base + 1, base + 2, base + 3
+    tri = np.stack([np.stack([lk, rk, lk1], -1), np.stack([rk, rk1, lk1], -1)], axis=2)  # [C, M, 2, 3]
+    return CardMesh(
+        vertices=rails.reshape(-1, 3).astype(np.float32),
+        normals=normals.reshape(-1, 3).astype(np.float32),
+        uvs=uvs.reshape(-1, 2).astype(np.float32),
+        triangles=tri.reshape(-1, 3).astype(np.uint32),
+        card_of_triangle=np.repeat(np.arange(c, dtype=np.int32), 2 * m),
+    )
+
+
+def triangle_and_barycentrics(uv: np.ndarray, segments: int) -> tuple[np.ndarray, np.ndarray]:
+    """Card triangle (``2k`` lower, ``2k+1`` upper) and barycentrics of card coordinates ``(u, v)``.
+
+    ``uv`` is ``[..., 2]``. Barycentrics refer to the triangle's vertices in the order
+    ``(L_k, R_k, L_k+1)`` or ``(R_k, R_k+1, L_k+1)``. Points outside the strip (``u`` outside
+    [0, 1] or ``v`` outside [0, 1]) get the nearest segment and extrapolating barycentrics.
+    """
+    s = uv[..., 0] * segments
+    k = np.clip(np.floor(s), 0, segments - 1)
+    f = s - k
+    v = uv[..., 1]
+    upper = f + v > 1
+    bary_lower = np.stack([1 - f - v, v, f], axis=-1)
+    bary_upper = np.stack([1 - f, f + v - 1, 1 - v], axis=-1)
+    bary = np.where(upper[..., None], bary_upper, bary_lower)
+    return (2 * k + upper).astype(np.int64), bary
+
+
+def strand_points(cards: Cards, strand_card: np.ndarray, uvd: np.ndarray) -> np.ndarray:
+    """World positions ``[S, P, 3]`` of strand points given by card coordinates ``uvd [S, P, 3]``.
+
+    ``x = sum_j beta_j V_j + delta * normalize(sum_j beta_j N_j)`` over the point's card triangle.
+    """
+    mesh = card_mesh(cards)
+    m = cards.segments
+    tri_local, bary = triangle_and_barycentrics(uvd[..., :2].astype(np.float64), m)
+    tri = strand_card.astype(np.int64)[:, None] * 2 * m + tri_local
+    corners = mesh.triangles[tri]  # [S, P, 3]
+    pos = np.einsum("spj,spjc->spc", bary, mesh.vertices[corners].astype(np.float64))
+    nrm = _normalize(np.einsum("spj,spjc->spc", bary, mesh.normals[corners].astype(np.float64)))
+    return (pos + uvd[..., 2:3] * nrm).astype(np.float32)
