@@ -1,0 +1,51 @@
+"""Shared pieces of the strand importers: the error type and size checks."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import CghError
+from ..strands import Strands
+
+
+class StrandFileError(CghError, ValueError):
+    """A strand file is truncated or malformed; the message names the file and what is wrong."""
+
+    def __init__(self, path: str | Path, message: str):
+        super().__init__(f"{path}: {message}")
+        self.path = str(path)
+
+
+class UnsupportedFormatError(CghError, ValueError):
+    """No importer or exporter is registered for a file extension."""
+
+
+def read_bytes(path: str | Path) -> bytes:
+    with open(path, "rb") as f:
+        return f.read()
+
+
+def need(path: str | Path, data: bytes, end: int, what: str) -> None:
+    """Raise if ``data`` ends before byte ``end`` (where ``what`` should end)."""
+    if end > len(data):
+        raise StrandFileError(path, f"truncated: {what} needs bytes up to {end}, the file has {len(data)}")
+
+
+def finish(path: str | Path, strands: Strands) -> Strands:
+    """Validate loaded strands, turning an inconsistency into an error that names the file."""
+    if strands.count == 0:
+        raise StrandFileError(path, "the file holds no strands")
+    if not np.isfinite(strands.points).all():
+        raise StrandFileError(path, "point coordinates contain NaN or infinite values")
+    try:
+        return strands.validate()
+    except CghError as exc:
+        raise StrandFileError(path, str(exc)) from exc
+
+
+def offsets_from_counts(counts: np.ndarray) -> np.ndarray:
+    off = np.zeros(len(counts) + 1, np.int64)
+    np.cumsum(counts, out=off[1:])
+    return off

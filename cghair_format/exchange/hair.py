@@ -1,0 +1,87 @@
+"""Cem Yuksel's HAIR format (``.hair``): a 128-byte header, then optional per-strand and per-point arrays.
+
+Header: ``"HAIR"``, u32 strand count, u32 point count, u32 array bits (1 segments, 2 points,
+4 thickness, 8 transparency, 16 colours), u32 default segments, f32 default thickness,
+f32 default transparency, f32x3 default colour, 88 bytes of text. Arrays follow in bit order:
+u16 segments per strand, f32x3 points, f32 thickness, f32 transparency, f32x3 colours.
+The format names no units or up axis.
+"""
+
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+
+import numpy as np
+
+from ..strands import Strands
+from ._common import StrandFileError, finish, need, offsets_from_counts, read_bytes
+
+MAGIC = b"HAIR"
+HEADER = struct.Struct("<4sIIIIff3f88s")  # 128 bytes
+BIT_SEGMENTS, BIT_POINTS, BIT_THICKNESS, BIT_TRANSPARENCY, BIT_COLORS = 1, 2, 4, 8, 16
+
+
+def load(path: str | Path) -> Strands:
+    data = read_bytes(path)
+    need(path, data, HEADER.size, "the 128-byte header")
+    magic, n_strands, n_points, bits, d_seg, d_thick, _d_transp, *rest = HEADER.unpack_from(data)
+    d_color = rest[:3]
+    if magic != MAGIC:
+        raise StrandFileError(path, f"not a Cem Yuksel .hair file: magic is {magic!r}, expected b'HAIR'")
+    if not bits & BIT_POINTS:
+        raise StrandFileError(path, "the header says the file has no points array")
+    pos = HEADER.size
+    if bits & BIT_SEGMENTS:
+        need(path, data, pos + 2 * n_strands, f"the segments array of {n_strands} strands")
+        segments = np.frombuffer(data, "<u2", n_strands, pos).astype(np.int64)
+        pos += 2 * n_strands
+    else:
+        segments = np.full(n_strands, d_seg, np.int64)
+    counts = segments + 1
+    if int(counts.sum()) != n_points:
+        raise StrandFileError(path, f"segment counts add up to {int(counts.sum())} points, "
+                                    f"the header declares {n_points}")
+    need(path, data, pos + 12 * n_points, f"the points array of {n_points} points")
+    points = np.frombuffer(data, "<f4", 3 * n_points, pos).reshape(-1, 3).astype(np.float32)
+    pos += 12 * n_points
+    widths = None
+    if bits & BIT_THICKNESS:
+        need(path, data, pos + 4 * n_points, "the thickness array")
+        widths = np.frombuffer(data, "<f4", n_points, pos).astype(np.float32)
+        pos += 4 * n_points
+    elif d_thick > 0:
+        widths = np.full(n_points, d_thick, np.float32)
+    if bits & BIT_TRANSPARENCY:
+        need(path, data, pos + 4 * n_points, "the transparency array")
+        pos += 4 * n_points
+    colors = None
+    if bits & BIT_COLORS:
+        need(path, data, pos + 12 * n_points, "the colours array")
+        colors = np.frombuffer(data, "<f4", 3 * n_points, pos).reshape(-1, 3).astype(np.float32)
+        colors = np.clip(colors, 0.0, 1.0)
+    elif any(c != 0 for c in d_color):
+        colors = np.tile(np.clip(np.asarray(d_color, np.float32), 0, 1), (n_points, 1))
+    return finish(path, Strands(points, offsets_from_counts(counts), colors, widths))
+
+
+def save(strands: Strands, path: str | Path) -> None:
+    counts = strands.point_counts
+    if (counts < 1).any() or (counts > 65536).any():
+        raise StrandFileError(path, ".hair stores 0..65535 segments per strand; got strands with "
+                                    f"{int(counts.min())}..{int(counts.max())} points")
+    bits = BIT_SEGMENTS | BIT_POINTS
+    if strands.widths is not None:
+        bits |= BIT_THICKNESS
+    if strands.colors is not None:
+        bits |= BIT_COLORS
+    info = b"Written by cghair (CGHair strand exchange)".ljust(88, b"\0")
+    header = HEADER.pack(MAGIC, strands.count, len(strands.points), bits, 0, 1.0, 0.0, 1.0, 1.0, 1.0, info)
+    with open(path, "wb") as f:
+        f.write(header)
+        f.write((counts - 1).astype("<u2").tobytes())
+        f.write(strands.points.astype("<f4").tobytes())
+        if strands.widths is not None:
+            f.write(strands.widths.astype("<f4").tobytes())
+        if strands.colors is not None:
+            f.write(strands.colors.astype("<f4").tobytes())

@@ -1,0 +1,112 @@
+"""Strand PLY: the hapPLY layout and the fixed-count vertex-only layout.
+
+hapPLY (CT2Hair, hairutil): ``vertex`` (x, y, z, optional red/green/blue, optional thickness),
+``strand`` (``nsegs`` per strand: the strand has ``nsegs + 1`` consecutive vertices) and ``edge``
+(vertex1, vertex2; redundant with ``strand``). Files with only ``edge`` are split where
+consecutive vertices are not joined by an edge. Vertex-only files (GaussianHaircut) hold strands
+of one fixed point count: given by ``points_per_strand``, else a ``comment points_per_strand N``
+header line, else 100 (GaussianHaircut's count) when it divides the vertex count.
+PLY names no units or up axis.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..strands import Strands
+from ._common import StrandFileError, finish, offsets_from_counts
+from ._ply import read_ply, write_ply
+
+DEFAULT_FIXED_COUNT = 100
+COUNT_PROPS = ("nsegs", "num_segments", "segments")
+ID_PROPS = ("strand_id", "curve_id", "strand")
+
+
+def load(path: str | Path, points_per_strand: int | None = None) -> Strands:
+    ply = read_ply(path)
+    vertex = ply.elements.get("vertex")
+    if vertex is None or not {"x", "y", "z"} <= set(vertex.data):
+        raise StrandFileError(path, "PLY file has no 'vertex' element with x, y, z")
+    v = vertex.data
+    points = np.stack([v["x"], v["y"], v["z"]], 1).astype(np.float32)
+    n = len(points)
+    counts = _strand_counts(path, ply, v, n, points_per_strand)
+    if int(counts.sum()) != n or (counts < 1).any():
+        raise StrandFileError(path, f"strand sizes add up to {int(counts.sum())} vertices, the file has {n}")
+    colors = _colors(v)
+    widths = None
+    for name in ("thickness", "width"):
+        if name in v:
+            widths = np.asarray(v[name], np.float32)
+            break
+    return finish(path, Strands(points, offsets_from_counts(counts), colors, widths))
+
+
+def _strand_counts(path, ply, v, n: int, points_per_strand: int | None) -> np.ndarray:
+    strand = ply.elements.get("strand")
+    if strand is not None:
+        for name in COUNT_PROPS:
+            if name in strand.data:
+                return np.asarray(strand.data[name], np.int64) + 1
+        raise StrandFileError(path, f"PLY 'strand' element has none of {COUNT_PROPS}")
+    for name in ID_PROPS:
+        if name in v:
+            ids = np.asarray(v[name])
+            breaks = np.flatnonzero(ids[1:] != ids[:-1]) + 1
+            return np.diff(np.concatenate([[0], breaks, [n]]))
+    edge = ply.elements.get("edge")
+    if edge is not None and {"vertex1", "vertex2"} <= set(edge.data):
+        a = np.asarray(edge.data["vertex1"], np.int64)
+        b = np.asarray(edge.data["vertex2"], np.int64)
+        joined = np.zeros(max(n - 1, 0), bool)
+        ok = (b == a + 1) & (a >= 0) & (a < n - 1)
+        joined[a[ok]] = True
+        breaks = np.flatnonzero(~joined) + 1
+        return np.diff(np.concatenate([[0], breaks, [n]]))
+    p = points_per_strand
+    if p is None:
+        for c in ply.comments:
+            parts = c.split()
+            if len(parts) == 2 and parts[0] in ("points_per_strand", "strand_points"):
+                p = int(parts[1])
+    if p is None and n % DEFAULT_FIXED_COUNT == 0:
+        p = DEFAULT_FIXED_COUNT
+    if p is None or p < 2 or n % p:
+        raise StrandFileError(path, f"vertex-only strand PLY: cannot split {n} vertices into strands of "
+                                    f"{p or DEFAULT_FIXED_COUNT} points; give the count with "
+                                    "--points-per-strand (points_per_strand=)")
+    return np.full(n // p, p, np.int64)
+
+
+def _colors(v: dict) -> np.ndarray | None:
+    for names in (("red", "green", "blue"), ("r", "g", "b")):
+        if all(k in v for k in names):
+            c = np.stack([np.asarray(v[k]) for k in names], 1)
+            if np.issubdtype(c.dtype, np.integer):
+                return (c.astype(np.float32) / np.iinfo(c.dtype).max).astype(np.float32)
+            return np.clip(c, 0, 1).astype(np.float32)
+    return None
+
+
+def save(strands: Strands, path: str | Path) -> None:
+    """Write the hapPLY layout (binary little-endian): vertex, strand nsegs, edge."""
+    counts = strands.point_counts
+    if (counts < 1).any() or (counts > 65536).any():
+        raise StrandFileError(path, "strand PLY stores 1..65536 points per strand (nsegs is a ushort)")
+    vertex = {"x": strands.points[:, 0].astype(np.float32), "y": strands.points[:, 1].astype(np.float32),
+              "z": strands.points[:, 2].astype(np.float32)}
+    if strands.colors is not None:
+        rgb = np.clip(np.rint(strands.colors * 255), 0, 255).astype(np.uint8)
+        vertex.update(red=rgb[:, 0], green=rgb[:, 1], blue=rgb[:, 2])
+    if strands.widths is not None:
+        vertex["thickness"] = strands.widths.astype(np.float32)
+    idx = np.arange(len(strands.points), dtype=np.int64)
+    last = np.zeros(len(idx), bool)
+    last[strands.offsets[1:] - 1] = True
+    starts = idx[~last]
+    edge = {"vertex1": starts.astype(np.int32), "vertex2": (starts + 1).astype(np.int32)}
+    nsegs = {"nsegs": (counts - 1).astype(np.uint16)}
+    write_ply(path, [("vertex", vertex), ("strand", nsegs), ("edge", edge)],
+              comments=["Written by cghair (hapPLY strand layout)"])

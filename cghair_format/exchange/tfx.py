@@ -1,0 +1,122 @@
+"""AMD TressFX ``.tfx``: the binary format of TressFX 3 and 4, and the TressFX 2.0 ASCII format.
+
+Binary: a 160-byte header (f32 version, u32 strand count, u32 points per strand, u32 byte offsets
+of the vertex positions, strand UVs, vertex UVs, strand thickness and vertex colours, 32 reserved
+u32), then ``float4`` positions (xyz and inverse mass) at their offset. Every strand has the same
+point count. ASCII 2.0: ``key value`` header lines, then per strand a line
+``strand i numVerts n texcoord u v`` followed by ``n`` lines of ``x y z``.
+TressFX assets are y-up (game-engine convention); the format names no units.
+"""
+
+from __future__ import annotations
+
+import struct
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from ..strands import Strands
+from ._common import StrandFileError, finish, need, offsets_from_counts, read_bytes
+
+HEADER = struct.Struct("<fIIIIIII32I")  # 160 bytes
+SUPPORTED_MAJOR = (3, 4)
+MAX_POINTS = 1 << 16
+
+
+def load(path: str | Path) -> Strands:
+    data = read_bytes(path)
+    if data[:7] == b"version" or data.lstrip()[:7] == b"version":
+        return _load_ascii(path, data)
+    return _load_binary(path, data)
+
+
+def _load_binary(path: str | Path, data: bytes) -> Strands:
+    need(path, data, HEADER.size, "the 160-byte TressFX header")
+    version, n_strands, n_per, off_pos, *_ = HEADER.unpack_from(data)
+    if not np.isfinite(version) or int(version) not in SUPPORTED_MAJOR:
+        raise StrandFileError(path, f"not a TressFX 3/4 binary file: version field reads {version!r} "
+                                    "(TressFX 2 files are ASCII and start with 'version')")
+    if n_strands == 0 or not 2 <= n_per <= MAX_POINTS:
+        raise StrandFileError(path, f"implausible header: {n_strands} strands of {n_per} points")
+    if off_pos < HEADER.size:
+        raise StrandFileError(path, f"vertex positions offset {off_pos} points inside the header")
+    n = n_strands * n_per
+    need(path, data, off_pos + 16 * n, f"the positions of {n_strands} strands x {n_per} points")
+    xyzw = np.frombuffer(data, "<f4", 4 * n, off_pos).reshape(-1, 4)
+    points = np.ascontiguousarray(xyzw[:, :3], np.float32)
+    return finish(path, Strands(points, np.arange(n_strands + 1, dtype=np.int64) * n_per, up_axis="Y"))
+
+
+def _load_ascii(path: str | Path, data: bytes) -> Strands:
+    try:
+        lines = data.decode("ascii").splitlines()
+    except UnicodeDecodeError as exc:
+        raise StrandFileError(path, f"TressFX ASCII file has a non-ASCII byte at offset {exc.start}") from exc
+    header: dict[str, list[str]] = {}
+    i = 0
+    while i < len(lines) and not lines[i].startswith("strand "):
+        parts = lines[i].split()
+        if parts:
+            header[parts[0]] = parts[1:]
+        i += 1
+    try:
+        declared = int(header["numStrands"][0])
+        scale = float(header.get("scale", ["1"])[0])
+        translation = np.array([float(v) for v in header.get("translation", ["0", "0", "0"])[:3]])
+        rotation = [float(v) for v in header.get("rotation", ["0", "0", "0"])[:3]]
+    except (KeyError, IndexError, ValueError) as exc:
+        raise StrandFileError(path, f"TressFX ASCII header is missing or garbles {exc}") from exc
+    if any(rotation):
+        warnings.warn(f"{path}: TressFX header rotation {rotation} is ignored", stacklevel=3)
+    counts, blocks = [], []
+    while i < len(lines):
+        parts = lines[i].split()
+        if not parts:
+            i += 1
+            continue
+        try:
+            if parts[0] != "strand" or parts[2] != "numVerts":
+                raise ValueError
+            c = int(parts[3])
+        except (IndexError, ValueError):
+            raise StrandFileError(path, f"line {i + 1}: expected 'strand i numVerts n ...', "
+                                        f"got {lines[i][:60]!r}") from None
+        if not 0 <= c <= MAX_POINTS or i + 1 + c > len(lines):
+            raise StrandFileError(path, f"line {i + 1}: strand {parts[1]} declares {c} points, "
+                                        f"the file has {len(lines) - i - 1} lines left (truncated?)")
+        try:
+            block = np.array([ln.split() for ln in lines[i + 1:i + 1 + c]], dtype=np.float32)
+        except ValueError:
+            raise StrandFileError(path, f"lines {i + 2}..{i + 1 + c}: point lines must hold 3 numbers "
+                                        f"(strand {parts[1]})") from None
+        if c and block.shape != (c, 3):
+            raise StrandFileError(path, f"lines {i + 2}..{i + 1 + c}: point lines must hold 3 numbers")
+        counts.append(c)
+        blocks.append(block.reshape(-1, 3))
+        i += 1 + c
+    if len(counts) != declared:
+        raise StrandFileError(path, f"header declares {declared} strands, the file holds {len(counts)} "
+                                    "(truncated?)")
+    points = np.concatenate(blocks) * scale + translation
+    offsets = offsets_from_counts(np.array(counts))
+    return finish(path, Strands(points.astype(np.float32), offsets, up_axis="Y"))
+
+
+def save(strands: Strands, path: str | Path) -> None:
+    """Write a TressFX 4 binary file; every strand must have the same point count."""
+    counts = strands.point_counts
+    if strands.count == 0 or (counts != counts[0]).any():
+        raise StrandFileError(path, "TressFX needs the same point count in every strand: resample first "
+                                    "(cgh convert --points N, or cghair_format.strands.resample)")
+    n_per = int(counts[0])
+    xyzw = np.ones((len(strands.points), 4), "<f4")
+    xyzw[:, :3] = strands.points
+    xyzw.reshape(strands.count, n_per, 4)[:, :2, 3] = 0.0  # roots are immovable (zero inverse mass)
+    off_pos = HEADER.size
+    off_uv = off_pos + xyzw.nbytes
+    header = HEADER.pack(4.0, strands.count, n_per, off_pos, off_uv, 0, 0, 0, *([0] * 32))
+    with open(path, "wb") as f:
+        f.write(header)
+        f.write(xyzw.tobytes())
+        f.write(np.zeros((strands.count, 2), "<f4").tobytes())
