@@ -1,0 +1,405 @@
+"""HairAsset <-> .cgh bytes (spec: "Chunks"): quantized streams per profile, verified on write.
+
+``write``/``read`` are the public entry points; ``encode``/``decode`` work on bytes.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import BinaryIO
+
+import numpy as np
+
+from . import container
+from .asset import ACTIVATIONS, UP_AXES, WEIGHT_MODES, Appearance, Cards, HairAsset, MlpLayer
+from .errors import AssetError, InvalidContentError, LimitError
+from .geometry import card_mesh, strand_points
+from .profiles import Profile, get_profile
+from .quantize import hier_decode, hier_encode, oct_decode, oct_encode, rows_int8_decode, rows_int8_encode
+from .streams import StreamReader, StreamWriter
+
+REQUIRED_CHUNKS = ("META", "CARD", "STRD", "OPAC", "LOGT", "CBKS", "MLPW")
+OPTIONAL_CHUNKS = ("SIDS", "ROOT", "SCOL", "XMET")
+LIMITS = {"strands": 1 << 24, "points": 4096, "cards": 1 << 20, "segments": 1024, "groups": 1 << 16,
+          "k": 256, "latent_dim": 4096, "mlp_layers": 16, "mlp_width": 1 << 20, "meta_bytes": 1 << 20}
+CARD_STEP_FRACTION = 1 / 8  # card geometry is quantized 8x finer than strand points
+NORMAL_BITS = 16
+MAX_TIGHTENINGS = 8
+
+
+@dataclass
+class EncodeReport:
+    profile: str
+    step: float | None  # strand-point quantization step (scene units), None if lossless
+    max_point_error: float  # measured, scene units
+    bbox_diagonal: float
+    chunk_sizes: dict[str, int] = field(default_factory=dict)  # stored bytes per chunk
+
+
+# --- public API ----------------------------------------------------------------------------------
+
+def write(asset: HairAsset, path: str | os.PathLike, profile: str | Profile = "compact") -> EncodeReport:
+    """Write ``asset`` to ``path`` atomically (temporary file, then rename)."""
+    data, report = encode(asset, profile)
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return report
+
+
+def read(source: str | os.PathLike | bytes | bytearray | memoryview | BinaryIO) -> HairAsset:
+    """Read a .cgh from a path, bytes or a binary file object; raises ``CghFormatError`` if bad."""
+    return decode(_read_bytes(source))
+
+
+def _read_bytes(source) -> bytes:
+    if isinstance(source, (bytes, bytearray, memoryview)):
+        return bytes(source)
+    if hasattr(source, "read"):
+        data = source.read()
+        if not isinstance(data, (bytes, bytearray)):
+            raise TypeError("read() needs a binary file object (open the file with 'rb')")
+        return bytes(data)
+    return Path(source).read_bytes()
+
+
+def encode(asset: HairAsset, profile: str | Profile = "compact") -> tuple[bytes, EncodeReport]:
+    """Serialise a validated asset; returns the bytes and what the quantization measured."""
+    prof = get_profile(profile)
+    asset.validate()
+    points = strand_points(asset.cards, asset.strand_card, asset.uvd).astype(np.float64)
+    diag = float(np.linalg.norm(points.reshape(-1, 3).max(0) - points.reshape(-1, 3).min(0)))
+    tol = prof.position_tolerance * max(diag, 1e-12)
+    # start from the step whose worst case (half a step on each of u, v, delta) meets the bound
+    step = None if prof.lossless else 0.9 * 2 * tol / math.sqrt(3)
+    for _ in range(MAX_TIGHTENINGS):
+        chunks = _chunks(asset, prof, step, diag)
+        data = container.pack(chunks, level=prof.zstd_level)
+        decoded = decode(data)
+        err = float(np.abs(strand_points(decoded.cards, decoded.strand_card, decoded.uvd) - points)
+                    .max()) if step is not None else 0.0
+        if step is None or err <= tol:
+            break
+        step *= 0.8 * tol / err if err > 0 else 0.8
+    else:
+        raise AssetError(f"could not meet the position tolerance {tol:g} (error {err:g})")
+    _, infos = container.read_table(data)
+    return data, EncodeReport(prof.name, step, err, diag, {i.type: i.stored for i in infos})
+
+
+def decode(data: bytes) -> HairAsset:
+    _, _, payloads = container.unpack(data, set(REQUIRED_CHUNKS) | set(OPTIONAL_CHUNKS))
+    for name in REQUIRED_CHUNKS:
+        if name not in payloads:
+            raise InvalidContentError(f"required chunk {name!r} is missing", chunk=name)
+    meta = _parse_meta(payloads["META"])
+    try:
+        asset = _decode_chunks(meta, payloads)
+        asset.validate()
+    except AssetError as exc:
+        raise InvalidContentError(f"decoded contents are inconsistent: {exc}") from None
+    return asset
+
+
+# --- META ----------------------------------------------------------------------------------------
+
+def _meta(asset: HairAsset, prof: Profile, step: float | None, diag: float) -> dict:
+    app = asset.appearance
+    return {
+        "strands": asset.n_strands, "points": asset.points_per_strand, "cards": asset.cards.count,
+        "segments": asset.cards.segments, "groups": app.n_groups, "k": app.k, "latent_dim": app.latent_dim,
+        "sh_degree": app.sh_degree, "weight_mode": app.weight_mode, "temperature": float(app.temperature),
+        "mlp": [{"out": int(layer.weight.shape[0]), "activation": layer.activation} for layer in app.mlp],
+        "thickness": float(asset.thickness), "meters_per_unit": float(asset.meters_per_unit),
+        "up_axis": asset.up_axis, "generator": asset.generator, "attribution": asset.attribution,
+        "bbox_diagonal": diag, "profile": prof.name,
+        "quant": {"lossless": True} if step is None else {
+            "lossless": False, "step": step, "card_step": step * CARD_STEP_FRACTION,
+            "normal_bits": NORMAL_BITS, "base_stride": prof.base_stride, "opacity_scale": prof.opacity_scale,
+            "logit_step": prof.logit_step, "logit_floor": prof.logit_floor, "half_bias": prof.half_bias},
+    }
+
+
+def _parse_meta(raw: bytes) -> dict:
+    if len(raw) > LIMITS["meta_bytes"]:
+        raise LimitError(f"META of {len(raw)} bytes exceeds {LIMITS['meta_bytes']}", chunk="META")
+    try:
+        meta = json.loads(raw.decode("utf-8"))
+    except (UnicodeDecodeError, ValueError, RecursionError) as exc:
+        raise InvalidContentError(f"META is not valid UTF-8 JSON: {exc}", chunk="META") from None
+    if not isinstance(meta, dict):
+        raise InvalidContentError("META must be a JSON object", chunk="META")
+
+    def need(key, kind, lo=None, hi=None, src=meta):
+        v = src.get(key)
+        ok = isinstance(v, kind) and not isinstance(v, bool) if kind is not bool else isinstance(v, bool)
+        if ok and isinstance(v, float) and not math.isfinite(v):
+            ok = False
+        if not ok or (lo is not None and v < lo) or (hi is not None and v > hi):
+            raise InvalidContentError(f"META field {key!r} is missing or out of range: {v!r}", chunk="META")
+        return v
+
+    for key, lo in (("strands", 1), ("points", 2), ("cards", 1), ("segments", 1), ("groups", 1),
+                    ("k", 1), ("latent_dim", 1)):
+        need(key, int, lo, LIMITS[key])
+    need("sh_degree", int, 0, 3)
+    if meta.get("weight_mode") not in WEIGHT_MODES or meta.get("up_axis") not in UP_AXES:
+        raise InvalidContentError("META weight_mode or up_axis has an unknown value", chunk="META")
+    for key in ("temperature", "thickness", "meters_per_unit"):
+        need(key, (int, float), 1e-30)
+    for key in ("generator", "attribution", "profile"):
+        need(key, str)
+    layers = meta.get("mlp")
+    if not isinstance(layers, list) or not 1 <= len(layers) <= LIMITS["mlp_layers"]:
+        raise InvalidContentError("META mlp must list 1 to 16 layers", chunk="META")
+    for layer in layers:
+        if not isinstance(layer, dict) or layer.get("activation") not in ACTIVATIONS:
+            raise InvalidContentError("META mlp layer needs an activation of relu or none", chunk="META")
+        need("out", int, 1, LIMITS["mlp_width"], src=layer)
+    quant = meta.get("quant")
+    if not isinstance(quant, dict):
+        raise InvalidContentError("META quant must be an object", chunk="META")
+    if not need("lossless", bool, src=quant):
+        for key in ("step", "card_step", "opacity_scale", "logit_step"):
+            need(key, (int, float), 1e-30, src=quant)
+        need("logit_floor", (int, float), -1e6, 0, src=quant)
+        need("normal_bits", int, 8, 24, src=quant)
+        need("base_stride", int, 1, 256, src=quant)
+        need("half_bias", bool, src=quant)
+    return meta
+
+
+# --- chunks ---------------------------------------------------------------------------------------
+
+def _chunks(asset: HairAsset, prof: Profile, step: float | None, diag: float) -> list[container.Chunk]:
+    meta = _meta(asset, prof, step, diag)
+    q = meta["quant"]
+    cards_w, strd_w, opac_w, logt_w, cbks_w, mlp_w = (StreamWriter() for _ in range(6))
+    app = asset.appearance
+    strd_w.ints(np.diff(asset.strand_card.astype(np.int64), prepend=0))
+    if q["lossless"]:
+        for a in (asset.cards.spine, asset.cards.normal, asset.cards.half_width):
+            cards_w.array(a.astype(np.float32), shuffle=True)
+        strd_w.array(asset.uvd.astype(np.float32), shuffle=True)
+        opac_w.array(asset.opacity.astype(np.float32), shuffle=True)
+        logt_w.array(app.logits.astype(np.float32), shuffle=True)
+        cbks_w.array(app.codebooks.astype(np.float32), shuffle=True)
+        for layer in app.mlp:
+            mlp_w.array(layer.weight.astype(np.float32), shuffle=True)
+            mlp_w.array(layer.bias.astype(np.float32), shuffle=True)
+    else:
+        cards = _encode_cards(asset.cards, q, cards_w)
+        su, sv = _card_scales(cards, q["step"])
+        c = asset.strand_card
+        y = np.stack([asset.uvd[..., 0] * su[c, None], asset.uvd[..., 1] * sv[c, None], asset.uvd[..., 2]],
+                     axis=0) / q["step"]
+        for channel in y:
+            _put_hier(strd_w, channel, q["base_stride"])
+        _put_hier(opac_w, asset.opacity * q["opacity_scale"], q["base_stride"])
+        if app.weight_mode == "hard":
+            logt_w.ints(np.argmax(app.logits, axis=1))
+        else:
+            z = np.maximum(app.logits - app.logits.max(axis=1, keepdims=True), q["logit_floor"])
+            logt_w.ints(np.rint(-z / q["logit_step"]))
+        qc, sc = rows_int8_encode(app.codebooks.reshape(-1, app.latent_dim))
+        cbks_w.array(qc)
+        cbks_w.array(sc)
+        for layer in app.mlp:
+            qw, sw = rows_int8_encode(layer.weight)
+            mlp_w.array(qw)
+            mlp_w.array(sw)
+            mlp_w.array(layer.bias.astype(np.float16 if q["half_bias"] else np.float32))
+    cards_w.array(asset.cards.group.astype(np.uint16 if app.n_groups <= 65536 else np.uint32), shuffle=True)
+    chunks = [container.Chunk("META", json.dumps(meta, separators=(",", ":")).encode("utf-8"))]
+    chunks += [container.Chunk(t, w.getvalue()) for t, w in
+               (("CARD", cards_w), ("STRD", strd_w), ("OPAC", opac_w), ("LOGT", logt_w), ("CBKS", cbks_w),
+                ("MLPW", mlp_w))]
+    return chunks + _optional_chunks(asset)
+
+
+def _optional_chunks(asset: HairAsset) -> list[container.Chunk]:
+    out = []
+    if asset.strand_ids is not None:
+        w = StreamWriter()
+        w.ints(np.diff(asset.strand_ids.astype(np.int64), prepend=0))
+        out.append(container.Chunk("SIDS", w.getvalue(), required=False))
+    if asset.root_uv is not None:
+        w = StreamWriter()
+        w.array(asset.root_uv.astype(np.float32), shuffle=True)
+        out.append(container.Chunk("ROOT", w.getvalue(), required=False))
+    if asset.source_color is not None:
+        w = StreamWriter()
+        w.array(np.rint(np.clip(asset.source_color, 0, 1) * 255).astype(np.uint8))
+        out.append(container.Chunk("SCOL", w.getvalue(), required=False))
+    if asset.metadata:
+        out.append(container.Chunk("XMET", json.dumps(asset.metadata).encode("utf-8"), required=False))
+    return out
+
+
+def _put_hier(w: StreamWriter, y: np.ndarray, base_stride: int) -> None:
+    base, levels = hier_encode(y, base_stride)
+    w.ints(base)
+    for r in levels:
+        w.ints(r)
+
+
+def _get_hier(r: StreamReader, rows: int, n: int, base_stride: int, name: str) -> np.ndarray:
+    from .quantize import level_plan
+
+    base_idx, plan = level_plan(n, base_stride)
+    base = r.ints((rows, len(base_idx)), f"{name} base")
+    levels = [r.ints((rows, len(idx)), f"{name} level {i}") for i, (idx, _, _) in enumerate(plan)]
+    return hier_decode(base, levels, n, base_stride)
+
+
+def _encode_cards(cards: Cards, q: dict, w: StreamWriter) -> Cards:
+    """Write the card streams; return the cards as the decoder will see them."""
+    c, m1 = cards.half_width.shape
+    cq, s = q["card_step"], q["base_stride"]
+    _put_hier(w, cards.spine.transpose(0, 2, 1).reshape(-1, m1) / cq, s)
+    scale = (1 << (q["normal_bits"] - 1)) - 1
+    octf = oct_encode(cards.normal, 24) / ((1 << 23) - 1) * scale  # unrounded octahedral coordinates
+    _put_hier(w, octf.transpose(0, 2, 1).reshape(-1, m1), s)
+    _put_hier(w, cards.half_width / cq, s)
+    return _decode_cards(StreamReader(w.getvalue(), "CARD"), c, m1, q, np.zeros(c, np.int32))
+
+
+def _decode_cards(r: StreamReader, c: int, m1: int, q: dict, group: np.ndarray | None = None) -> Cards:
+    cq, s = q["card_step"], q["base_stride"]
+    spine = _get_hier(r, c * 3, m1, s, "spine").reshape(c, 3, m1).transpose(0, 2, 1) * cq
+    octv = _get_hier(r, c * 2, m1, s, "normal").reshape(c, 2, m1).transpose(0, 2, 1)
+    normal = oct_decode(octv, q["normal_bits"])
+    half_width = np.maximum(_get_hier(r, c, m1, s, "half_width") * cq, 0.0)
+    return Cards(spine.astype(np.float32), normal.astype(np.float32), half_width.astype(np.float32),
+                 group if group is not None else np.zeros(c, np.int32))
+
+
+def _card_scales(cards: Cards, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per card, the world length of one unit of u and of v (upper bounds), at least ``step``."""
+    mesh = card_mesh(cards)
+    m1 = cards.spine.shape[1]
+    rails = mesh.vertices.astype(np.float64).reshape(cards.count, m1, 2, 3)
+    seg = np.linalg.norm(np.diff(rails, axis=1), axis=-1).max(axis=(1, 2))
+    su = np.maximum((m1 - 1) * seg, step)
+    sv = np.maximum(2 * cards.half_width.astype(np.float64).max(axis=1), step)
+    return su, sv
+
+
+def _decode_chunks(meta: dict, payloads: dict[str, bytes]) -> HairAsset:
+    s, p, c, m, nt, k, d = (meta[key] for key in ("strands", "points", "cards", "segments", "groups", "k",
+                                                    "latent_dim"))
+    q = meta["quant"]
+    rd = {name: StreamReader(payloads[name], name) for name in REQUIRED_CHUNKS[1:]}
+    strand_card = np.cumsum(rd["STRD"].ints((s,), "strand_card"))
+    if strand_card.min() < 0 or strand_card.max() >= c:
+        raise InvalidContentError(f"strand_card refers to cards outside [0, {c})", chunk="STRD")
+    widths = [d] + [layer["out"] for layer in meta["mlp"]]
+    if q["lossless"]:
+        f4 = ("<f4",)
+        cards = Cards(rd["CARD"].array((c, m + 1, 3), "spine", f4), rd["CARD"].array((c, m + 1, 3), "normal", f4),
+                      rd["CARD"].array((c, m + 1), "half_width", f4), np.zeros(c, np.int32))
+        uvd = rd["STRD"].array((s, p, 3), "uvd", f4)
+        opacity = rd["OPAC"].array((s, p - 1), "opacity", f4)
+        logits = rd["LOGT"].array((s, k), "logits", f4)
+        codebooks = rd["CBKS"].array((nt, k, d), "codebooks", f4)
+        mlp = [MlpLayer(rd["MLPW"].array((o, i), f"mlp[{j}].weight", f4), rd["MLPW"].array((o,), f"mlp[{j}].bias", f4),
+                        layer["activation"])
+               for j, (i, o, layer) in enumerate(zip(widths[:-1], widths[1:], meta["mlp"], strict=True))]
+    else:
+        stride, step = q["base_stride"], q["step"]
+        cards = _decode_cards(rd["CARD"], c, m + 1, q)
+        su, sv = _card_scales(cards, step)
+        uvd = np.stack([_get_hier(rd["STRD"], s, p, stride, name) for name in ("u", "v", "delta")], axis=-1)
+        uvd *= step
+        uvd[..., 0] /= su[strand_card, None]
+        uvd[..., 1] /= sv[strand_card, None]
+        opacity = np.clip(_get_hier(rd["OPAC"], s, p - 1, stride, "opacity") / q["opacity_scale"], 0, 1)
+        if meta["weight_mode"] == "hard":
+            idx = rd["LOGT"].ints((s,), "assignment")
+            if idx.min() < 0 or idx.max() >= k:
+                raise InvalidContentError(f"codebook assignment outside [0, {k})", chunk="LOGT")
+            logits = np.full((s, k), q["logit_floor"], np.float32)
+            logits[np.arange(s), idx] = 0.0
+        else:
+            logits = -rd["LOGT"].ints((s, k), "logits") * q["logit_step"]
+        cq = rd["CBKS"].array((nt * k, d), "codebooks", ("|i1",))
+        codebooks = rows_int8_decode(cq, rd["CBKS"].array((nt * k,), "codebook scales", ("<f4",))).reshape(nt, k, d)
+        mlp = []
+        for j, (i, o, layer) in enumerate(zip(widths[:-1], widths[1:], meta["mlp"], strict=True)):
+            qw = rd["MLPW"].array((o, i), f"mlp[{j}].weight", ("|i1",))
+            sw = rd["MLPW"].array((o,), f"mlp[{j}].scale", ("<f4",))
+            bias = rd["MLPW"].array((o,), f"mlp[{j}].bias", ("<f2", "<f4"))
+            mlp.append(MlpLayer(rows_int8_decode(qw, sw), bias.astype(np.float32), layer["activation"]))
+    cards.group = rd["CARD"].array((c,), "group", ("<u2", "<u4")).astype(np.int32)
+    for reader in rd.values():
+        reader.finish()
+    appearance = Appearance(np.asarray(logits, np.float32), np.asarray(codebooks, np.float32), mlp,
+                            meta["sh_degree"], meta["weight_mode"], float(meta["temperature"]))
+    asset = HairAsset(cards, strand_card.astype(np.int32), uvd.astype(np.float32), opacity.astype(np.float32),
+                      appearance, float(meta["thickness"]), float(meta["meters_per_unit"]), meta["up_axis"],
+                      meta["generator"], meta["attribution"])
+    _decode_optional(asset, payloads, s, p)
+    return asset
+
+
+def _decode_optional(asset: HairAsset, payloads: dict[str, bytes], s: int, p: int) -> None:
+    if "SIDS" in payloads:
+        r = StreamReader(payloads["SIDS"], "SIDS")
+        ids = np.cumsum(r.ints((s,), "strand_ids"))
+        r.finish()
+        if ids.min() < 0 or ids.max() >= 1 << 32:
+            raise InvalidContentError("strand ids outside the u32 range", chunk="SIDS")
+        asset.strand_ids = ids.astype(np.uint32)
+    if "ROOT" in payloads:
+        r = StreamReader(payloads["ROOT"], "ROOT")
+        asset.root_uv = r.array((s, 2), "root_uv", ("<f4",))
+        r.finish()
+    if "SCOL" in payloads:
+        r = StreamReader(payloads["SCOL"], "SCOL")
+        asset.source_color = r.array((s, p, 3), "source_color", ("|u1",)).astype(np.float32) / 255
+        r.finish()
+    if "XMET" in payloads:
+        try:
+            asset.metadata = json.loads(payloads["XMET"].decode("utf-8"))
+        except (UnicodeDecodeError, ValueError, RecursionError) as exc:
+            raise InvalidContentError(f"XMET is not valid UTF-8 JSON: {exc}", chunk="XMET") from None
+        if not isinstance(asset.metadata, dict):
+            raise InvalidContentError("XMET must be a JSON object", chunk="XMET")
+
+
+def read_info(source) -> dict:
+    """What ``cgh info`` prints: header, chunk table and counts, without decoding the streams."""
+    data = _read_bytes(source)
+    version, infos = container.read_table(data)
+    _, _, payloads = container.unpack(data, set(REQUIRED_CHUNKS) | set(OPTIONAL_CHUNKS), {"META"})
+    if "META" not in payloads:
+        raise InvalidContentError("required chunk 'META' is missing", chunk="META")
+    meta = _parse_meta(payloads["META"])
+    gaussians = meta["strands"] * (meta["points"] - 1)
+    return {
+        "version": f"{version[0]}.{version[1]}", "file_bytes": len(data), "profile": meta["profile"],
+        "strands": meta["strands"], "points_per_strand": meta["points"], "gaussians": gaussians,
+        "cards": meta["cards"], "card_segments": meta["segments"], "groups": meta["groups"],
+        "codebook_size": meta["k"], "latent_dim": meta["latent_dim"], "sh_degree": meta["sh_degree"],
+        "weight_mode": meta["weight_mode"], "mlp": [layer["out"] for layer in meta["mlp"]],
+        "thickness": meta["thickness"], "meters_per_unit": meta["meters_per_unit"], "up_axis": meta["up_axis"],
+        "generator": meta["generator"], "attribution": meta["attribution"],
+        "bits_per_gaussian": 8 * len(data) / gaussians,
+        "chunks": [{"type": i.type, "required": i.required, "codec": ["raw", "zstd"][i.codec],
+                    "stored_bytes": i.stored, "raw_bytes": i.raw} for i in infos],
+    }
+
+

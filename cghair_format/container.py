@@ -1,0 +1,190 @@
+"""The byte layer of a .cgh file: header, chunk table, checksums and zstd (spec: "File layout").
+
+This module knows nothing of hair: it turns a list of :class:`Chunk` into bytes and back, checking
+every size against the file length before allocating and every checksum before decoding.
+"""
+
+from __future__ import annotations
+
+import struct
+import zlib
+from dataclasses import dataclass
+
+import zstandard
+
+from .errors import (
+    BadMagicError,
+    CghFormatError,
+    ChecksumError,
+    LimitError,
+    TruncatedError,
+    UnknownRequiredChunkError,
+    UnsupportedVersionError,
+)
+
+MAGIC = b"\x89CGH\r\n\x1a\n"
+VERSION_MAJOR = 1
+VERSION_MINOR = 0
+HEADER = struct.Struct("<8sHHIQII")  # magic, major, minor, flags, file length, chunk count, crc
+ENTRY = struct.Struct("<4sHBBQQQII")  # type, flags, codec, reserved, offset, stored, raw, crc, reserved
+HEADER_SIZE = HEADER.size  # 32
+ENTRY_SIZE = ENTRY.size  # 40
+ALIGN = 8
+CODEC_RAW, CODEC_ZSTD = 0, 1
+FLAG_REQUIRED = 1
+
+MAX_CHUNKS = 64
+MAX_RAW_CHUNK = 1 << 31  # 2 GiB decompressed per chunk (implementation and format limit)
+MAX_EXPANSION = 1 << 12  # a zstd chunk may not claim more than 4096 x its stored size
+
+
+@dataclass
+class Chunk:
+    type: str  # four ASCII characters
+    payload: bytes  # uncompressed
+    required: bool = True
+
+
+def crc32(data: bytes | memoryview) -> int:
+    return zlib.crc32(data) & 0xFFFFFFFF
+
+
+def pack(chunks: list[Chunk], level: int = 19) -> bytes:
+    """Serialise chunks: header, table, then each chunk (zstd when smaller) aligned to 8 bytes."""
+    if len(chunks) > MAX_CHUNKS:
+        raise LimitError(f"{len(chunks)} chunks exceed the limit of {MAX_CHUNKS}")
+    bodies = []
+    for c in chunks:
+        if len(c.type) != 4 or not c.type.isascii():
+            raise ValueError(f"chunk type must be 4 ASCII characters, got {c.type!r}")
+        if len(c.payload) > MAX_RAW_CHUNK:
+            raise LimitError(f"chunk {c.type!r} of {len(c.payload)} bytes exceeds {MAX_RAW_CHUNK}")
+        z = zstandard.ZstdCompressor(level=level, write_content_size=True).compress(c.payload)
+        codec, stored = (CODEC_ZSTD, z) if len(z) < len(c.payload) else (CODEC_RAW, c.payload)
+        bodies.append((c, codec, stored))
+    offset = _align(HEADER_SIZE + ENTRY_SIZE * len(chunks))
+    table, layout = b"", []
+    for c, codec, stored in bodies:
+        flags = FLAG_REQUIRED if c.required else 0
+        table += ENTRY.pack(c.type.encode("ascii"), flags, codec, 0, offset, len(stored), len(c.payload),
+                            crc32(stored), 0)
+        layout.append((offset, stored))
+        offset = _align(offset + len(stored))
+    total = offset
+    head = HEADER.pack(MAGIC, VERSION_MAJOR, VERSION_MINOR, 0, total, len(chunks), 0)[:-4]
+    out = bytearray(total)
+    out[:HEADER_SIZE] = head + struct.pack("<I", crc32(head + table))
+    out[HEADER_SIZE:HEADER_SIZE + len(table)] = table
+    for off, stored in layout:
+        out[off:off + len(stored)] = stored
+    return bytes(out)
+
+
+@dataclass
+class ChunkInfo:
+    type: str
+    required: bool
+    codec: int
+    offset: int
+    stored: int
+    raw: int
+
+
+def read_table(data: bytes | memoryview) -> tuple[tuple[int, int], list[ChunkInfo]]:
+    """Parse and check the header and chunk table; returns ``(version, chunk infos)``."""
+    data = memoryview(data)
+    if len(data) < HEADER_SIZE:
+        if bytes(data[:len(MAGIC)]) != MAGIC[:len(data)]:
+            raise BadMagicError("not a .cgh file: wrong magic bytes", offset=0)
+        raise TruncatedError(f"file of {len(data)} bytes is shorter than the {HEADER_SIZE}-byte header",
+                             offset=len(data))
+    magic, major, minor, _flags, length, count, head_crc = HEADER.unpack_from(data, 0)
+    if magic != MAGIC:
+        raise BadMagicError("not a .cgh file: wrong magic bytes", offset=0)
+    if major != VERSION_MAJOR:
+        raise UnsupportedVersionError(f"format version {major}.{minor} is not supported by this reader "
+                                      f"(major {VERSION_MAJOR}); upgrade cghair", offset=8)
+    if count > MAX_CHUNKS:
+        raise LimitError(f"chunk count {count} exceeds the limit of {MAX_CHUNKS}", offset=24)
+    table_end = HEADER_SIZE + ENTRY_SIZE * count
+    if length != len(data):
+        kind = TruncatedError if length > len(data) else CghFormatError
+        raise kind(f"header declares {length} bytes but the file has {len(data)}", offset=16)
+    if table_end > len(data):
+        raise TruncatedError(f"chunk table of {count} entries runs past the end of the file", offset=24)
+    if crc32(bytes(data[:HEADER_SIZE - 4]) + bytes(data[HEADER_SIZE:table_end])) != head_crc:
+        raise ChecksumError("header or chunk table checksum mismatch", offset=28)
+    infos, seen, prev_end = [], set(), table_end
+    for i in range(count):
+        pos = HEADER_SIZE + ENTRY_SIZE * i
+        ctype, flags, codec, _r, offset, stored, raw, _crc, _r2 = ENTRY.unpack_from(data, pos)
+        try:
+            name = ctype.decode("ascii")
+        except UnicodeDecodeError:
+            raise CghFormatError(f"chunk {i} has a non-ASCII type {ctype!r}", offset=pos) from None
+        if name in seen:
+            raise CghFormatError(f"duplicate chunk {name!r}", offset=pos, chunk=name)
+        seen.add(name)
+        if codec not in (CODEC_RAW, CODEC_ZSTD):
+            raise CghFormatError(f"unknown codec {codec}", offset=pos + 6, chunk=name)
+        if offset < prev_end or offset % ALIGN or offset + stored > len(data):
+            raise LimitError(f"chunk data [{offset}, {offset + stored}) is misplaced or outside the file "
+                             f"of {len(data)} bytes", offset=pos + 8, chunk=name)
+        if raw > MAX_RAW_CHUNK or (codec == CODEC_RAW and raw != stored) or \
+                (codec == CODEC_ZSTD and raw > stored * MAX_EXPANSION):
+            raise LimitError(f"declared size {raw} is impossible for {stored} stored bytes",
+                             offset=pos + 24, chunk=name)
+        _check_padding(data, prev_end, offset)
+        prev_end = offset + stored
+        infos.append(ChunkInfo(name, bool(flags & FLAG_REQUIRED), codec, offset, stored, raw))
+    _check_padding(data, prev_end, len(data))
+    return (major, minor), infos
+
+
+def _check_padding(data: memoryview, start: int, end: int) -> None:
+    """Bytes between chunks (alignment padding) must be zero, so that every byte is checked."""
+    if end - start >= ALIGN:
+        raise CghFormatError(f"{end - start} unused bytes before the next chunk (at most {ALIGN - 1} allowed)",
+                             offset=start)
+    if any(data[start:end]):
+        raise CghFormatError("alignment padding must be zero bytes", offset=start)
+
+
+def unpack(data: bytes | memoryview, known: set[str], wanted: set[str] | None = None
+           ) -> tuple[tuple[int, int], list[ChunkInfo], dict[str, bytes]]:
+    """Verify and decompress the ``wanted`` chunks (default: all ``known``); unknown optional chunks
+    are skipped, an unknown required chunk fails."""
+    data = memoryview(data)
+    version, infos = read_table(data)
+    payloads = {}
+    for i, info in enumerate(infos):
+        pos = HEADER_SIZE + ENTRY_SIZE * i
+        if info.type not in known:
+            if info.required:
+                raise UnknownRequiredChunkError(
+                    f"required chunk type {info.type!r} is unknown to this reader; upgrade cghair",
+                    offset=pos, chunk=info.type)
+            continue
+        if wanted is not None and info.type not in wanted:
+            continue
+        stored = data[info.offset:info.offset + info.stored]
+        if crc32(stored) != struct.unpack_from("<I", data, pos + 32)[0]:
+            raise ChecksumError("chunk checksum mismatch: the file is corrupt", offset=info.offset,
+                                chunk=info.type)
+        if info.codec == CODEC_RAW:
+            payloads[info.type] = bytes(stored)
+            continue
+        try:
+            raw = zstandard.ZstdDecompressor().decompress(stored, max_output_size=info.raw)
+        except zstandard.ZstdError as exc:
+            raise CghFormatError(f"zstd stream is corrupt: {exc}", offset=info.offset,
+                                 chunk=info.type) from None
+        if len(raw) != info.raw:
+            raise CghFormatError(f"chunk decompresses to {len(raw)} bytes, {info.raw} declared",
+                                 offset=info.offset, chunk=info.type)
+        payloads[info.type] = raw
+    return version, infos, payloads
+
+
+def _align(n: int) -> int:
+    return (n + ALIGN - 1) // ALIGN * ALIGN

@@ -1,0 +1,48 @@
+"""Precision profiles: how the writer quantizes each part of an asset (spec: "Profiles").
+
+Each profile states its error bounds; the writer enforces the position bound by measuring the
+decoded points and tightening the step until it holds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Profile:
+    name: str
+    lossless: bool = False
+    position_tolerance: float = 2e-4  # max point error / bounding-box diagonal
+    opacity_scale: float = 127.5  # opacity = round(o * scale) / scale: max error 0.5 / scale
+    logit_step: float = 1 / 16  # logits (minus the strand's max) quantized to this step ...
+    logit_floor: float = -16.0  # ... and clamped at this value
+    half_bias: bool = True  # MLP biases as float16 (else float32)
+    base_stride: int = 16  # hierarchical predictor: coarse samples every this many points
+    zstd_level: int = 19
+    description: str = ""
+
+    @property
+    def opacity_tolerance(self) -> float:
+        return 0.5 / self.opacity_scale
+
+
+PROFILES: dict[str, Profile] = {
+    "lossless": Profile("lossless", lossless=True, zstd_level=9,
+                        description="every float32 value stored exactly (byte-shuffled + zstd)"),
+    "high": Profile("high", position_tolerance=2e-5, opacity_scale=1023.5, logit_step=1 / 64,
+                    logit_floor=-24.0, half_bias=False,
+                    description="points within 2e-5 of the bbox diagonal, opacity within 1/2047"),
+    "compact": Profile("compact", description="the default: points within 2e-4 of the bbox diagonal, "
+                                              "opacity within 1/255, int8 weights"),
+}
+DEFAULT_PROFILE = "compact"
+
+
+def get_profile(name: str | Profile) -> Profile:
+    if isinstance(name, Profile):
+        return name
+    try:
+        return PROFILES[name]
+    except KeyError:
+        raise ValueError(f"unknown profile {name!r}; choose one of {', '.join(PROFILES)}") from None

@@ -1,0 +1,155 @@
+"""Quantizers and predictors: pure numpy functions with exact inverses (spec: "Quantization").
+
+Nothing here knows about files. Each ``*_encode`` returns integers; the matching ``*_decode`` is
+the normative reconstruction the spec's pseudocode describes.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+
+# --- integer mappings --------------------------------------------------------------------------
+
+def zigzag(x: np.ndarray) -> np.ndarray:
+    """Signed to unsigned: 0, -1, 1, -2, 2 ... -> 0, 1, 2, 3, 4 ..."""
+    x = x.astype(np.int64)
+    return ((x << 1) ^ (x >> 63)).astype(np.uint64)
+
+
+def unzigzag(u: np.ndarray) -> np.ndarray:
+    u = u.astype(np.uint64)
+    return ((u >> np.uint64(1)).astype(np.int64)) ^ -((u & np.uint64(1)).astype(np.int64))
+
+
+# --- hierarchical interpolating predictor along strands ------------------------------------------
+
+@lru_cache(maxsize=64)
+def level_plan(n: int, base_stride: int) -> tuple[np.ndarray, tuple[tuple[np.ndarray, np.ndarray, np.ndarray], ...]]:
+    """The coding order of ``n`` samples: base indices, then refinement levels.
+
+    Base: ``0, B, 2B, ...`` and ``n - 1``. Each later level (stride ``h = B/2, B/4, ..., 1``) adds the
+    indices ``i`` with ``i mod 2h == h``, ``i < n - 1``, predicted by Lagrange interpolation through
+    the (up to) two nearest known indices on each side. Returns the base indices and, per level,
+    ``(indices [L], neighbour indices [L, 4], weights [L, 4])`` (unused neighbour slots have weight 0).
+    """
+    base = sorted(set(range(0, n, base_stride)) | {n - 1})
+    known = np.zeros(n, bool)
+    known[base] = True
+    levels = []
+    h = base_stride // 2
+    while h >= 1:
+        idx = [i for i in range(h, n - 1, 2 * h) if not known[i]]
+        if idx:
+            kn = np.flatnonzero(known)
+            nb = np.zeros((len(idx), 4), np.int64)
+            wt = np.zeros((len(idx), 4), np.float64)
+            for row, i in enumerate(idx):
+                pos = np.searchsorted(kn, i)
+                pts = list(kn[max(0, pos - 2):pos]) + list(kn[pos:pos + 2])
+                for col, j in enumerate(pts):
+                    w = 1.0
+                    for m in pts:
+                        if m != j:
+                            w *= (i - m) / (j - m)
+                    nb[row, col], wt[row, col] = j, w
+            levels.append((np.array(idx), nb, wt))
+            known[idx] = True
+        h //= 2
+    assert known.all()
+    return np.array(base), tuple(levels)
+
+
+def hier_encode(y: np.ndarray, base_stride: int) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Code sequences ``y [S, n]`` (already in quantization-step units) along axis 1.
+
+    Base samples: DPCM with linear extrapolation of the previous two reconstructed base samples,
+    residuals ``round(y - pred)``, reconstruction integer. Refinement samples: ``pred`` = Lagrange
+    interpolation of reconstructed neighbours, residual ``r = round(y - pred)``, reconstruction
+    ``pred + r`` (no re-rounding, so a sample within half a step of its prediction costs a zero).
+    Every reconstructed sample is within 0.5 of ``y``. Returns the base residuals ``[S, nb]`` and
+    one residual array ``[S, L]`` per level, all int64.
+    """
+    y = np.asarray(y, np.float64)
+    base, levels = level_plan(y.shape[1], base_stride)
+    rec = np.zeros_like(y)
+    base_res = np.zeros((y.shape[0], len(base)), np.int64)
+    for j, i in enumerate(base):
+        pred = _base_pred(rec, base, j)
+        r = np.rint(y[:, i] - pred)
+        base_res[:, j] = r
+        rec[:, i] = pred + r
+    out = []
+    for idx, nb, wt in levels:
+        pred = _interp(rec, nb, wt)
+        r = np.rint(y[:, idx] - pred)
+        rec[:, idx] = pred + r
+        out.append(r.astype(np.int64))
+    return base_res, out
+
+
+def hier_decode(base_res: np.ndarray, level_res: list[np.ndarray], n: int, base_stride: int) -> np.ndarray:
+    """Inverse of :func:`hier_encode`: the reconstructed samples ``[S, n]`` (float64, step units)."""
+    base, levels = level_plan(n, base_stride)
+    if len(levels) != len(level_res) or base_res.shape[1] != len(base):
+        raise ValueError("residual streams do not match the level plan")
+    rec = np.zeros((base_res.shape[0], n), np.float64)
+    for j, i in enumerate(base):
+        rec[:, i] = _base_pred(rec, base, j) + base_res[:, j]
+    for (idx, nb, wt), r in zip(levels, level_res, strict=True):
+        rec[:, idx] = _interp(rec, nb, wt) + r
+    return rec
+
+
+def _base_pred(rec: np.ndarray, base: np.ndarray, j: int) -> np.ndarray | float:
+    if j == 0:
+        return 0.0
+    if j == 1:
+        return rec[:, base[0]]
+    a, b, c = base[j - 2], base[j - 1], base[j]
+    return rec[:, b] + (rec[:, b] - rec[:, a]) * ((c - b) / (b - a))
+
+
+def _interp(rec: np.ndarray, nb: np.ndarray, wt: np.ndarray) -> np.ndarray:
+    return (rec[:, nb[:, 0]] * wt[:, 0] + rec[:, nb[:, 1]] * wt[:, 1]
+            + rec[:, nb[:, 2]] * wt[:, 2] + rec[:, nb[:, 3]] * wt[:, 3])
+
+
+# --- unit vectors ------------------------------------------------------------------------------
+
+def oct_encode(n: np.ndarray, bits: int = 16) -> np.ndarray:
+    """Octahedral map of unit vectors ``[..., 3]`` to signed integers ``[..., 2]`` of ``bits`` bits."""
+    n = n / np.abs(n).sum(axis=-1, keepdims=True)
+    x, y, z = n[..., 0], n[..., 1], n[..., 2]
+    ox = np.where(z >= 0, x, (1 - np.abs(y)) * np.where(x >= 0, 1.0, -1.0))
+    oy = np.where(z >= 0, y, (1 - np.abs(x)) * np.where(y >= 0, 1.0, -1.0))
+    scale = (1 << (bits - 1)) - 1
+    return np.rint(np.stack([ox, oy], axis=-1) * scale).astype(np.int64)
+
+
+def oct_decode(q: np.ndarray, bits: int = 16) -> np.ndarray:
+    """Inverse of :func:`oct_encode`: unit vectors ``[..., 3]`` (float64)."""
+    scale = (1 << (bits - 1)) - 1
+    ox, oy = q[..., 0] / scale, q[..., 1] / scale
+    z = 1 - np.abs(ox) - np.abs(oy)
+    t = np.maximum(-z, 0)
+    x = ox - np.where(ox >= 0, t, -t)
+    y = oy - np.where(oy >= 0, t, -t)
+    v = np.stack([x, y, z], axis=-1)
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+# --- weights -----------------------------------------------------------------------------------
+
+def rows_int8_encode(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Symmetric int8 per row of ``[R, C]``: ``w ~ q * scale[row]``, ``scale = absmax / 127``."""
+    w = np.asarray(w, np.float64)
+    scale = np.abs(w).max(axis=1) / 127.0
+    scale = np.where(scale > 0, scale, 1.0).astype(np.float32)
+    q = np.clip(np.rint(w / scale[:, None].astype(np.float64)), -127, 127).astype(np.int8)
+    return q, scale
+
+
+def rows_int8_decode(q: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    return (q.astype(np.float32) * scale[:, None]).astype(np.float32)
