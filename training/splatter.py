@@ -129,31 +129,44 @@ def project(means: Tensor, quats: Tensor, scales: Tensor, camera: Camera) -> Pro
     return Projection(index, mean2d, conic, z, radius)
 
 
-def _pairs(proj: Projection, width: int, height: int) -> tuple[Tensor, Tensor]:
-    """(pixel id, visible-Gaussian id) of every pixel centre inside each Gaussian's support square."""
+def _spans(lo: Tensor, hi: Tensor, limit: int) -> tuple[Tensor, Tensor, Tensor]:
+    """Integer pixel indices ``k`` with ``lo <= k + 0.5 <= hi`` clipped to ``[0, limit)``, as
+    (owner of each index, index, count per owner)."""
+    k0 = torch.ceil(lo - 0.5).clamp(0, limit).long()
+    k1 = (torch.floor(hi - 0.5).clamp(-1, limit - 1).long() + 1).clamp_min(k0)
+    counts = k1 - k0
+    total = int(counts.sum())
+    owner = torch.repeat_interleave(torch.arange(len(counts), device=lo.device), counts, output_size=total)
+    start = torch.cumsum(counts, 0) - counts
+    return owner, k0[owner] + torch.arange(total, device=lo.device) - start[owner], counts
+
+
+def _pairs(proj: Projection, opacity: Tensor, width: int, height: int) -> tuple[Tensor, Tensor, Tensor]:
+    """(pixel x, pixel y, Gaussian) of every pair that can reach alpha >= 1/255, Gaussian-major.
+
+    An acceleration only: outside the ellipse ``q <= 2 ln(255 o)`` the alpha is below 1/255, so
+    rows are limited to the ellipse's vertical extent and each row to its chord, both intersected
+    with the 3-sigma square. A small margin keeps borderline pairs; the caller filters exactly.
+    """
     with torch.no_grad():
         m = proj.mean2d.detach()
+        con = proj.conic.detach()
+        det = con[:, 0] * con[:, 2] - con[:, 1] ** 2  # of the conic, = 1 / det(Sigma2)
+        q = 2 * torch.log(torch.clamp_min(opacity.detach() / ALPHA_MIN, 1e-30)) * (1 + 1e-6) + 1e-6
+        q = torch.clamp_min(q, 0.0)
         r = proj.radius.to(m.dtype)
-        # pixel i is inside iff m - r <= i + 0.5 <= m + r
-        x0 = torch.ceil(m[:, 0] - r - 0.5).clamp(0, width).long()
-        x1 = torch.floor(m[:, 0] + r - 0.5).clamp(-1, width - 1).long() + 1
-        y0 = torch.ceil(m[:, 1] - r - 0.5).clamp(0, height).long()
-        y1 = torch.floor(m[:, 1] + r - 0.5).clamp(-1, height - 1).long() + 1
-        bw = (x1 - x0).clamp_min(0)
-        bh = (y1 - y0).clamp_min(0)
-        counts = bw * bh
-        total = int(counts.sum())
-        dev = m.device
-        if total == 0:
-            empty = torch.zeros(0, dtype=torch.long, device=dev)
-            return empty, empty
-        gid = torch.repeat_interleave(torch.arange(len(counts), device=dev), counts, output_size=total)
-        start = torch.cumsum(counts, 0) - counts
-        local = torch.arange(total, device=dev) - start[gid]
-        bwg = bw[gid]
-        px = x0[gid] + local % bwg
-        py = y0[gid] + local // bwg
-        return py * width + px, gid
+        hy = torch.minimum(torch.sqrt(q * con[:, 0] / det), r)  # Sigma2_yy = a / det(conic)
+        row_g, row_y, _ = _spans(m[:, 1] - hy, m[:, 1] + hy, height)
+        a, b, c = con[row_g].unbind(-1)
+        dy = row_y.to(m.dtype) + 0.5 - m[row_g, 1]
+        disc = torch.clamp_min((b * dy) ** 2 - a * (c * dy * dy - q[row_g]), 0.0)
+        half = torch.sqrt(disc) / a + 1e-4
+        centre = -b * dy / a
+        rg = r[row_g]
+        lo = m[row_g, 0] + torch.maximum(centre - half, -rg)
+        hi = m[row_g, 0] + torch.minimum(centre + half, rg)
+        row_of_pair, px, _ = _spans(lo, hi, width)
+        return px, row_y[row_of_pair], row_g[row_of_pair]
 
 
 def render(
@@ -174,50 +187,48 @@ def render(
     if sh.ndim != 3 or sh.shape[0] != g or sh.shape[2] != 3 or sh.shape[1] not in (1, 4, 9, 16):
         raise ValueError(f"sh must be [G, (deg+1)^2, 3] with deg 0..3, got {tuple(sh.shape)}")
     width, height = int(camera.width), int(camera.height)
-    n_pix = width * height
     dtype, dev = means.dtype, means.device
     bg = torch.as_tensor(background, dtype=dtype, device=dev).reshape(3)
 
     proj = project(means, quats, scales, camera)
-    pix, vid = _pairs(proj, width, height)
+    # visible Gaussians in depth order, so Gaussian-major pairs are already depth-ordered per pixel
+    by_depth = torch.argsort(proj.depth.detach(), stable=True)
+    proj = Projection(proj.index[by_depth], proj.mean2d[by_depth], proj.conic[by_depth],
+                      proj.depth[by_depth], proj.radius[by_depth])
+    dirs = means[proj.index] - _camera_tensors(camera, means)[2]
+    dirs = dirs / dirs.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    opac = opacities[proj.index]
+    # per visible Gaussian: mean2d (2), conic (3), opacity, depth, colour (3); gathered once per pair
+    feat = torch.cat([proj.mean2d, proj.conic, opac[:, None], proj.depth[:, None],
+                      eval_sh(sh[proj.index], dirs)], -1)
 
-    # alpha per pair; drop the ones under 1/255 before sorting (the cut is not differentiated)
-    centre = torch.stack([(pix % width).to(dtype) + 0.5, (pix // width).to(dtype) + 0.5], -1)
-    d = centre - proj.mean2d[vid]
-    con = proj.conic[vid]
-    power = -0.5 * (con[:, 0] * d[:, 0] ** 2 + con[:, 2] * d[:, 1] ** 2) - con[:, 1] * d[:, 0] * d[:, 1]
-    alpha = torch.clamp_max(opacities[proj.index][vid] * torch.exp(power), ALPHA_MAX)
-    keep = torch.nonzero(alpha.detach() >= ALPHA_MIN).squeeze(1)
-    pix, vid, alpha = pix[keep], vid[keep], alpha[keep]
+    px, py, vid = _pairs(proj, opac, width, height)
+    with torch.no_grad():  # a stable sort by pixel keeps the Gaussian-major depth order per pixel
+        pix, order = torch.sort((py * width + px).to(torch.int32), stable=True)
+        pix = pix.long()
+        px, py, vid = px.index_select(0, order), py.index_select(0, order), vid.index_select(0, order)
 
-    # one sort by (pixel, depth rank)
-    n_vis = proj.depth.shape[0]
-    rank = torch.empty(n_vis, dtype=torch.long, device=dev)
-    rank[torch.argsort(proj.depth.detach(), stable=True)] = torch.arange(n_vis, device=dev)
-    order = torch.argsort(pix * max(n_vis, 1) + rank[vid])
-    pix, vid, alpha = pix[order], vid[order], alpha[order]
+    mx, my, ca, cb, cc, o, z, cr, cg, cbl = torch.index_select(feat.T, 1, vid).unbind(0)
+    dx, dy = px.to(dtype) + 0.5 - mx, py.to(dtype) + 0.5 - my
+    alpha = o * torch.exp(-0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy)
+    # contributions under 1/255 are skipped: zero alpha leaves the transmittance unchanged
+    alpha = torch.where(alpha.detach() >= ALPHA_MIN, torch.clamp_max(alpha, ALPHA_MAX), 0.0)
 
     # transmittance: exclusive cumulative sum of log(1 - a) within each pixel's run, in float64
     # because a global running sum over millions of pairs would lose float32 precision
     log1m = torch.log1p(-alpha.to(torch.float64))
-    incl = torch.cumsum(log1m, 0)
-    excl = incl - log1m
-    first = torch.ones_like(pix, dtype=torch.bool)
-    first[1:] = pix[1:] != pix[:-1]
-    run_start = torch.cummax(torch.where(first, torch.arange(len(pix), device=dev), 0), 0).values
-    trans = torch.exp(excl - excl[run_start]).to(dtype)
-    weight = alpha * trans
+    excl = torch.cumsum(log1m, 0) - log1m
+    with torch.no_grad():
+        first = torch.ones_like(pix, dtype=torch.bool)
+        first[1:] = pix[1:] != pix[:-1]
+        run_start = torch.cummax(torch.where(first, torch.arange(len(pix), device=dev), 0), 0).values
+    weight = alpha * torch.exp(excl - excl[run_start]).to(dtype)
 
-    dirs = means[proj.index] - _camera_tensors(camera, means)[2]
-    dirs = dirs / dirs.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-    colour = eval_sh(sh[proj.index], dirs)  # [V, 3]
-
-    rgb = torch.zeros(n_pix, 3, dtype=dtype, device=dev).index_add(0, pix, weight[:, None] * colour[vid])
-    acc = torch.zeros(n_pix, dtype=dtype, device=dev).index_add(0, pix, weight)
-    depth = torch.zeros(n_pix, dtype=dtype, device=dev).index_add(0, pix, weight * proj.depth[vid])
-    rgb = rgb + (1.0 - acc)[:, None] * bg
-    return RenderOutput(rgb.reshape(height, width, 3), acc.reshape(height, width),
-                        depth.reshape(height, width))
+    values = torch.stack([cr, cg, cbl, torch.ones_like(alpha), z], -1)
+    acc = torch.zeros(width * height, 5, dtype=dtype, device=dev).index_add(0, pix, weight[:, None] * values)
+    rgb = acc[:, :3] + (1.0 - acc[:, 3:4]) * bg
+    return RenderOutput(rgb.reshape(height, width, 3), acc[:, 3].reshape(height, width),
+                        acc[:, 4].reshape(height, width))
 
 
 def render_batch(means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, sh: Tensor,
