@@ -1,0 +1,25 @@
+"""``cgh encode IN.cgh -o OUT.cgh --profile P``: re-encode with another precision profile."""
+
+from __future__ import annotations
+
+import argparse
+
+from ..profiles import PROFILES
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("input", help="a .cgh file")
+    p.add_argument("-o", "--output", required=True, help="the .cgh file to write")
+    p.add_argument("--profile", choices=list(PROFILES), default="compact",
+                   help="precision profile (default: compact)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..codec import read, write
+
+    report = write(read(args.input), args.output, args.profile)
+    total = sum(report.chunk_sizes.values())
+    print(f"wrote {args.output}: profile {report.profile}, {total:,} bytes of chunks, max point error "
+          f"{report.max_point_error:.3g} ({report.max_point_error / max(report.bbox_diagonal, 1e-30):.2e} "
+          "of the bbox diagonal)")
+    return 0

@@ -1,0 +1,42 @@
+"""``cgh info FILE [--json]``: counts, per-chunk sizes, bits per Gaussian and profile."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("file", help="a .cgh file")
+    p.add_argument("--json", action="store_true", help="print machine-readable JSON")
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..codec import read_info
+
+    info = read_info(args.file)
+    if args.json:
+        print(json.dumps(info, indent=2))
+        return 0
+    print(format_info(args.file, info))
+    return 0
+
+
+def format_info(name: str, info: dict) -> str:
+    lines = [
+        f"{name}: .cgh {info['version']}, profile {info['profile']}, {info['file_bytes']:,} bytes",
+        f"  strands     {info['strands']:,} x {info['points_per_strand']} points, "
+        f"{info['gaussians']:,} Gaussians ({info['bits_per_gaussian']:.2f} bits per Gaussian)",
+        f"  cards       {info['cards']:,} cards of {info['card_segments']} segments, {info['groups']} groups",
+        f"  appearance  K={info['codebook_size']} latents of D={info['latent_dim']} per group, "
+        f"{info['weight_mode']} weights, MLP {info['latent_dim']}->{'->'.join(map(str, info['mlp']))}, "
+        f"SH degree {info['sh_degree']}",
+        f"  scene       thickness {info['thickness']:.3g}, {info['meters_per_unit']:g} m per unit, "
+        f"up axis {info['up_axis']}",
+        f"  generator   {info['generator']}" + (f"; attribution: {info['attribution']}" if info["attribution"] else ""),
+        "  chunk  required  codec      stored        raw   share",
+    ]
+    for c in info["chunks"]:
+        lines.append(f"  {c['type']:<6} {'yes' if c['required'] else 'no':<9} {c['codec']:<5} {c['stored_bytes']:>11,} "
+                     f"{c['raw_bytes']:>10,} {100 * c['stored_bytes'] / info['file_bytes']:6.1f}%")
+    return "\n".join(lines)

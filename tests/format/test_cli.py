@@ -1,0 +1,68 @@
+"""`cgh info`, `cgh validate`, `cgh encode`: output, exit codes and clear errors."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+import cghair_format as cgh
+from cghair_format.cli import main
+from cghair_format.examples import example_asset
+
+
+@pytest.fixture()
+def asset_file(tmp_path):
+    path = tmp_path / "a.cgh"
+    cgh.write(example_asset(1), path)
+    return path
+
+
+def test_info_text_and_json(asset_file, capsys):
+    assert main(["info", str(asset_file)]) == 0
+    out = capsys.readouterr().out
+    assert "bits per Gaussian" in out and "STRD" in out and "profile compact" in out
+    assert main(["info", str(asset_file), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["strands"] == 64 and info["profile"] == "compact"
+
+
+def test_validate_exit_codes(asset_file, tmp_path, capsys):
+    assert main(["validate", str(asset_file)]) == 0
+    bad = tmp_path / "bad.cgh"
+    data = bytearray(asset_file.read_bytes())
+    data[200] ^= 0x55
+    bad.write_bytes(bytes(data))
+    assert main(["validate", str(bad)]) == 1
+    err = capsys.readouterr().err
+    assert "checksum" in err and "byte offset" in err
+
+
+def test_encode_changes_profile(asset_file, tmp_path, capsys):
+    out = tmp_path / "l.cgh"
+    assert main(["encode", str(asset_file), "-o", str(out), "--profile", "lossless"]) == 0
+    assert cgh.read_info(out)["profile"] == "lossless"
+
+
+def test_missing_file_and_not_a_cgh(tmp_path, capsys):
+    assert main(["info", str(tmp_path / "nope.cgh")]) == 2
+    assert "No such file" in capsys.readouterr().err
+    txt = tmp_path / "x.cgh"
+    txt.write_text("hello")
+    assert main(["validate", str(txt)]) == 1
+    assert "not a .cgh file" in capsys.readouterr().err
+
+
+def test_every_verb_has_help():
+    from cghair_format.cli import VERBS
+
+    for verb in VERBS:
+        r = subprocess.run([sys.executable, "-m", "cghair_format", verb, "--help"], capture_output=True, text=True)
+        assert r.returncode == 0, f"cgh {verb} --help failed: {r.stderr}"
+        assert "usage: cgh" in r.stdout
+
+
+def test_bad_arguments_give_usage_not_traceback():
+    r = subprocess.run([sys.executable, "-m", "cghair_format", "encode", "x.cgh", "--profile", "tiny"],
+                       capture_output=True, text=True)
+    assert r.returncode == 2 and "invalid choice" in r.stderr and "Traceback" not in r.stderr

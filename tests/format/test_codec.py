@@ -1,0 +1,131 @@
+"""HairAsset <-> .cgh: round trips within each profile's bound, sources, atomic writes."""
+
+import io
+import os
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import cghair_format as cgh
+from cghair_format.errors import AssetError
+from cghair_format.examples import example_asset
+from cghair_format.gaussians import strand_weights
+
+
+def _diag(points):
+    flat = points.reshape(-1, 3)
+    return float(np.linalg.norm(flat.max(0) - flat.min(0)))
+
+
+def _check_bounds(a, b, profile):
+    prof = cgh.PROFILES[profile]
+    pa, pb = cgh.decode_points(a), cgh.decode_points(b)
+    if prof.lossless:
+        for x, y in ((a.uvd, b.uvd), (a.opacity, b.opacity), (a.appearance.logits, b.appearance.logits),
+                     (a.appearance.codebooks, b.appearance.codebooks), (a.cards.spine, b.cards.spine)):
+            assert np.array_equal(x.astype(np.float32), y)
+        for la, lb in zip(a.appearance.mlp, b.appearance.mlp, strict=True):
+            assert np.array_equal(la.weight, lb.weight) and np.array_equal(la.bias, lb.bias)
+        return
+    assert np.abs(pa - pb).max() <= prof.position_tolerance * _diag(pa)
+    assert np.abs(a.opacity - b.opacity).max() <= prof.opacity_tolerance + 1e-7
+    assert np.array_equal(a.strand_card, b.strand_card) and np.array_equal(a.cards.group, b.cards.group)
+    # codebooks and MLP: within half an int8 step of each row's absmax
+    cb = a.appearance.codebooks.reshape(-1, a.appearance.latent_dim)
+    step = np.abs(cb).max(axis=1, keepdims=True) / 127
+    assert (np.abs(b.appearance.codebooks.reshape(cb.shape) - cb) <= step / 2 + 1e-6).all()
+    for la, lb in zip(a.appearance.mlp, b.appearance.mlp, strict=True):
+        step = np.abs(la.weight).max(axis=1, keepdims=True) / 127
+        assert (np.abs(lb.weight - la.weight) <= step / 2 + 1e-6).all()
+    # soft weights: logits quantized after subtracting the strand's max, clamped at the floor
+    wa, wb = strand_weights(a.appearance), strand_weights(b.appearance)
+    assert np.abs(wa - wb).max() <= prof.logit_step / a.appearance.temperature + np.exp(prof.logit_floor) * 10
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 10**6), strands=st.integers(1, 40), points=st.integers(2, 40),
+       cards=st.integers(1, 6), segments=st.integers(1, 12), groups=st.integers(1, 3), k=st.integers(1, 5),
+       sh=st.integers(0, 3), mode=st.sampled_from(["soft", "hard"]),
+       profile=st.sampled_from(["lossless", "high", "compact"]))
+def test_round_trip_within_profile_bounds(seed, strands, points, cards, segments, groups, k, sh, mode, profile):
+    a = example_asset(seed, strands, points, cards, segments, groups, k, latent_dim=5, hidden=7, sh_degree=sh,
+                      weight_mode=mode)
+    data, report = cgh.encode(a, profile)
+    b = cgh.decode(data)
+    _check_bounds(a, b, profile)
+    assert report.max_point_error <= cgh.PROFILES[profile].position_tolerance * report.bbox_diagonal
+    if mode == "hard":
+        assert np.array_equal(np.argmax(a.appearance.logits, 1), np.argmax(b.appearance.logits, 1))
+
+
+def test_gaussians_decode_shapes_and_values():
+    a = example_asset(3, sh_degree=2)
+    g = cgh.decode_gaussians(a)
+    n = a.n_gaussians
+    assert g.means.shape == (n, 3) and g.rotations.shape == (n, 4) and g.sh.shape == (n, 9, 3)
+    pts = cgh.decode_points(a)
+    seg = pts[:, 1:] - pts[:, :-1]
+    assert np.allclose(g.means, ((pts[:, 1:] + pts[:, :-1]) / 2).reshape(-1, 3), atol=1e-6)
+    assert np.allclose(g.scales[:, 2], np.linalg.norm(seg, axis=-1).reshape(-1) / 2, atol=1e-6)
+    # the rotation takes +z onto the segment direction
+    w, x, y, z = g.rotations.T
+    zaxis = np.stack([2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)], -1)
+    d = seg.reshape(-1, 3) / np.linalg.norm(seg.reshape(-1, 3), axis=1, keepdims=True)
+    assert np.allclose(zaxis, d, atol=1e-5)
+
+
+def test_sources_path_bytes_and_file_objects(tmp_path):
+    a = example_asset(5)
+    path = tmp_path / "a.cgh"
+    cgh.write(a, path, "lossless")
+    raw = path.read_bytes()
+    for source in (path, str(path), raw, bytearray(raw), memoryview(raw), io.BytesIO(raw)):
+        assert np.array_equal(cgh.read(source).uvd, a.uvd)
+
+
+def test_optional_chunks_round_trip_and_are_skippable():
+    a = example_asset(6, strands=10, points=5)
+    a.strand_ids = np.arange(100, 110, dtype=np.uint32)
+    a.root_uv = np.random.default_rng(0).random((10, 2)).astype(np.float32)
+    a.source_color = np.random.default_rng(1).random((10, 5, 3)).astype(np.float32)
+    a.metadata = {"training": {"iters": 3}}
+    b = cgh.decode(cgh.encode(a, "compact")[0])
+    assert np.array_equal(b.strand_ids, a.strand_ids) and np.array_equal(b.root_uv, a.root_uv)
+    assert np.abs(b.source_color - a.source_color).max() <= 0.5 / 255 + 1e-7
+    assert b.metadata == a.metadata
+    info = cgh.read_info(cgh.encode(a, "compact")[0])
+    assert {c["type"]: c["required"] for c in info["chunks"]}["SCOL"] is False
+
+
+def test_invalid_asset_is_refused_before_writing(tmp_path):
+    a = example_asset(7)
+    a.opacity[0, 0] = 2.0
+    with pytest.raises(AssetError, match="opacity"):
+        cgh.write(a, tmp_path / "x.cgh")
+    assert not (tmp_path / "x.cgh").exists()
+
+
+def test_interrupted_write_keeps_the_old_file(tmp_path, monkeypatch):
+    path = tmp_path / "keep.cgh"
+    cgh.write(example_asset(8), path)
+    before = path.read_bytes()
+
+    def boom(*_):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(os, "fsync", boom)
+    with pytest.raises(OSError, match="disk full"):
+        cgh.write(example_asset(9), path)
+    assert path.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == ["keep.cgh"]  # no temporary file left behind
+
+
+def test_info_reports_counts_and_bits():
+    a = example_asset(10)
+    data, _ = cgh.encode(a)
+    info = cgh.read_info(data)
+    assert info["strands"] == a.n_strands and info["gaussians"] == a.n_gaussians
+    assert info["bits_per_gaussian"] == pytest.approx(8 * len(data) / a.n_gaussians)
+    assert sum(c["stored_bytes"] for c in info["chunks"]) < len(data)

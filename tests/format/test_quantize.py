@@ -1,0 +1,54 @@
+"""The quantizers alone: exact inverses and their error bounds."""
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from cghair_format.quantize import (hier_decode, hier_encode, level_plan, oct_decode, oct_encode,
+                                    rows_int8_decode, rows_int8_encode, unzigzag, zigzag)
+
+
+@given(st.lists(st.integers(-2**62, 2**62), min_size=1, max_size=50))
+def test_zigzag_is_exact_inverse(values):
+    x = np.array(values, np.int64)
+    assert (unzigzag(zigzag(x)) == x).all()
+    assert (zigzag(x) >= 0).all()
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(2, 130), stride=st.sampled_from([1, 2, 4, 16, 64]), seed=st.integers(0, 10**6),
+       scale=st.floats(0.1, 1e5))
+def test_hierarchical_coder_is_within_half_a_step(n, stride, seed, scale):
+    rng = np.random.default_rng(seed)
+    y = np.cumsum(rng.normal(size=(5, n)), axis=1) * scale
+    base, levels = hier_encode(y, stride)
+    rec = hier_decode(base, levels, n, stride)
+    assert np.abs(rec - y).max() <= 0.5 + 1e-9 * scale
+    base_idx, plan = level_plan(n, stride)
+    assert len(base_idx) + sum(len(idx) for idx, _, _ in plan) == n  # every sample coded exactly once
+
+
+def test_hierarchical_coder_zeroes_smooth_curves():
+    t = np.linspace(0, 1, 100)
+    y = 400 * np.sin(2 * t)[None, :]  # smooth: refinement residuals vanish
+    _, levels = hier_encode(y, 16)
+    assert np.mean(np.concatenate(levels, axis=1) == 0) > 0.9
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 10**6))
+def test_octahedral_normals_within_bound(seed):
+    n = np.random.default_rng(seed).normal(size=(500, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    back = oct_decode(oct_encode(n, 16), 16)
+    # octahedral quantization at b bits: angular error below ~2 / (2^(b-1) - 1) radians
+    assert np.abs(back - n).max() < 2.0 / (2**15 - 1)
+    assert np.allclose(np.linalg.norm(back, axis=1), 1.0)
+
+
+def test_int8_rows_error_is_half_a_step_per_row():
+    w = np.random.default_rng(0).normal(size=(40, 30))
+    q, scale = rows_int8_encode(w)
+    assert q.dtype == np.int8 and scale.shape == (40,)
+    err = np.abs(rows_int8_decode(q, scale) - w)
+    assert (err <= scale[:, None] / 2 + 1e-6).all()
