@@ -1,0 +1,96 @@
+"""Regenerate the conformance vectors in this folder: ``python spec/vectors/generate.py``.
+
+Valid files come with ``NAME.expected.npz`` (decoded points and Gaussians, float32). Must-reject
+files are listed in ``reject.json`` with the error class and a fragment of its message.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+from pathlib import Path
+
+import numpy as np
+
+import cghair_format as cgh
+from cghair_format import container
+from cghair_format.examples import example_asset
+
+HERE = Path(__file__).resolve().parent
+
+
+def _expected(name: str, data: bytes) -> None:
+    (HERE / f"{name}.cgh").write_bytes(data)
+    asset = cgh.decode(data)
+    g = cgh.decode_gaussians(asset)
+    np.savez_compressed(HERE / f"{name}.expected.npz", points=cgh.decode_points(asset), means=g.means,
+                        rotations=g.rotations, scales=g.scales, opacities=g.opacities, sh=g.sh)
+
+
+def _rechunk(data: bytes, edit) -> bytes:
+    """Unpack, let ``edit`` change the chunk list, pack again with valid checksums."""
+    known = {"META", "CARD", "STRD", "OPAC", "LOGT", "CBKS", "MLPW", "SIDS", "ROOT", "SCOL", "XMET"}
+    _, infos, payloads = container.unpack(data, known)
+    chunks = [container.Chunk(i.type, payloads[i.type], i.required) for i in infos]
+    return container.pack(edit(chunks))
+
+
+def _with_header(data: bytes, major: int, minor: int) -> bytes:
+    magic, _, _, flags, length, count, _ = container.HEADER.unpack_from(data)
+    head = container.HEADER.pack(magic, major, minor, flags, length, count, 0)[:-4]
+    table = data[container.HEADER_SIZE:container.HEADER_SIZE + container.ENTRY_SIZE * count]
+    return head + struct.pack("<I", container.crc32(head + table)) + data[container.HEADER_SIZE:]
+
+
+def _meta_edit(chunks, change):
+    meta = json.loads(chunks[0].payload)
+    change(meta)
+    chunks[0] = container.Chunk("META", json.dumps(meta).encode())
+    return chunks
+
+
+def main() -> None:
+    minimal = example_asset(1, strands=3, points=2, cards=1, segments=1, groups=1, k=1, latent_dim=1, hidden=1,
+                            sh_degree=0, weight_mode="hard")
+    small = example_asset(0)
+    _expected("minimal_lossless", cgh.encode(minimal, "lossless")[0])
+    _expected("minimal_compact", cgh.encode(minimal, "compact")[0])
+    compact = cgh.encode(small, "compact")[0]
+    _expected("small_compact", compact)
+    _expected("small_high_hard", cgh.encode(example_asset(2, sh_degree=3, weight_mode="hard"), "high")[0])
+    extras = example_asset(3, strands=6, points=4)
+    extras.strand_ids = np.arange(6, dtype=np.uint32) * 7
+    extras.source_color = np.linspace(0, 1, 6 * 4 * 3, dtype=np.float32).reshape(6, 4, 3)
+    extras.metadata = {"note": "optional chunks"}
+    _expected("optional_chunks", _rechunk(cgh.encode(extras, "compact")[0],
+                                          lambda c: c + [container.Chunk("ZEXT", b"future data", required=False)]))
+    _expected("newer_minor", _with_header(compact, 1, 9))
+
+    reject = {}
+
+    def bad(name: str, data: bytes, error: str, fragment: str) -> None:
+        (HERE / f"{name}.cgh").write_bytes(data)
+        reject[f"{name}.cgh"] = {"error": error, "message": fragment}
+
+    bad("reject_not_cgh", b"ply\nformat binary_little_endian 1.0\n" + compact[40:], "BadMagicError", "not a .cgh")
+    bad("reject_truncated", compact[:-100], "TruncatedError", "declares")
+    flipped = bytearray(compact)
+    flipped[len(compact) // 2] ^= 0x01
+    bad("reject_flipped_byte", bytes(flipped), "ChecksumError", "checksum")
+    bad("reject_major_2", _with_header(compact, 2, 0), "UnsupportedVersionError", "version 2.0")
+    bad("reject_unknown_required", _rechunk(compact, lambda c: c + [container.Chunk("ZREQ", b"x")]),
+        "UnknownRequiredChunkError", "ZREQ")
+    bad("reject_missing_chunk", _rechunk(compact, lambda c: [x for x in c if x.type != "OPAC"]),
+        "InvalidContentError", "OPAC")
+    bad("reject_bad_meta", _rechunk(compact, lambda c: _meta_edit(c, lambda m: m.update(points=1))),
+        "InvalidContentError", "points")
+    bad("reject_shape_mismatch", _rechunk(compact, lambda c: _meta_edit(c, lambda m: m.update(strands=65))),
+        "InvalidContentError", "shape")
+    padded = bytearray(cgh.encode(minimal, "lossless")[0])
+    padded[-1] = 0xAA
+    bad("reject_nonzero_padding", bytes(padded), "CghFormatError", "padding")
+    (HERE / "reject.json").write_text(json.dumps(reject, indent=2) + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,39 @@
+"""The conformance vectors in spec/vectors: valid files decode to their expected values, must-reject
+files raise the named error."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import cghair_format as cgh
+from cghair_format import errors
+
+VECTORS = Path(__file__).resolve().parents[2] / "spec" / "vectors"
+VALID = sorted(p for p in VECTORS.glob("*.cgh") if not p.name.startswith("reject_"))
+REJECT = json.loads((VECTORS / "reject.json").read_text())
+
+
+def test_vector_folder_is_complete():
+    assert len(VALID) >= 5 and len(REJECT) >= 8
+    assert sorted(p.name for p in VECTORS.glob("reject_*.cgh")) == sorted(REJECT)
+
+
+@pytest.mark.parametrize("path", VALID, ids=lambda p: p.stem)
+def test_valid_vector_decodes_to_expected(path):
+    expected = np.load(path.with_name(path.stem + ".expected.npz"))
+    asset = cgh.read(path)
+    g = cgh.decode_gaussians(asset)
+    # float32 results of an independent implementation may differ in the last bits (summation order)
+    np.testing.assert_allclose(cgh.decode_points(asset), expected["points"], rtol=0, atol=1e-6)
+    for name in ("means", "rotations", "scales", "opacities"):
+        np.testing.assert_allclose(getattr(g, name), expected[name], rtol=0, atol=1e-6, err_msg=name)
+    np.testing.assert_allclose(g.sh, expected["sh"], rtol=1e-5, atol=1e-5)
+
+
+@pytest.mark.parametrize("name", sorted(REJECT))
+def test_reject_vector_raises_named_error(name):
+    spec = REJECT[name]
+    with pytest.raises(getattr(errors, spec["error"]), match=spec["message"]):
+        cgh.read(VECTORS / name)
