@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import os
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -35,58 +36,73 @@ def export_usd(path: str | Path, *, asset: HairAsset | None = None, strands: Str
                curves: bool = True, cards: bool = False, gaussians: bool = False, groom: bool = True) -> None:
     """Write ``asset`` (or plain ``strands``) to a USD file; ``cards``/``gaussians`` need an asset."""
     path = Path(path)
-    ext = path.suffix.lower()
-    if ext not in EXTENSIONS:
-        raise CghError(f"{path}: USD export writes {', '.join(EXTENSIONS)}, not {ext or 'no extension'}")
     if (asset is None) == (strands is None):
         raise CghError("export_usd needs exactly one of asset= or strands=")
     if asset is None and (cards or gaussians):
         raise CghError("card meshes and Gaussians exist only for a .cgh asset, not for plain strands")
     if not (curves or cards or gaussians):
         raise CghError("nothing to export: enable curves, cards or gaussians")
+    src = asset if asset is not None else strands
+
+    def build(stage, root) -> None:
+        if groom:
+            root.AddAppliedSchema("GroomAPI")
+        if asset is not None:
+            if generator := getattr(asset, "generator", None):
+                root.SetCustomDataByKey("cghair:generator", str(generator))
+            if attribution := getattr(asset, "attribution", None):
+                root.SetCustomDataByKey("cghair:attribution", str(attribution))
+        if curves:
+            if asset is not None:
+                from .cgh_strands import strands_from_asset
+
+                s = strands_from_asset(asset)
+                opacity = _point_average(asset.opacity.astype(np.float32)[..., None])[..., 0].reshape(-1)
+                group = asset.cards.group.astype(np.int32)[asset.strand_card]
+                root_uv = getattr(asset, "root_uv", None)
+            else:
+                s, opacity, group, root_uv = strands, None, None, None
+            write_curves(stage, f"{ROOT}/Strands", s, opacity=opacity, group=group, root_uv=root_uv, groom=groom)
+        if cards:
+            write_cards(stage, f"{ROOT}/Cards", asset)
+        if gaussians:
+            from ..gaussians import decode_gaussians
+
+            write_gaussians(stage, f"{ROOT}/Gaussians", decode_gaussians(asset))
+
+    write_stage(path, build, src.meters_per_unit, src.up_axis)
+
+
+def export_gaussians_usd(path: str | Path, gaussians, meters_per_unit: float = 1.0, up_axis: str = "Y") -> None:
+    """Write bare Gaussians (e.g. read from a 3DGS PLY) as ``/Hair/Gaussians``."""
+    write_stage(Path(path), lambda stage, root: write_gaussians(stage, f"{ROOT}/Gaussians", gaussians),
+                meters_per_unit, up_axis)
+
+
+def write_stage(path: Path, build: Callable, meters_per_unit: float, up_axis: str) -> None:
+    """Create a stage at ``path`` (a .usdz is packaged from a temporary .usdc) with units, up axis
+    and the ``/Hair`` default prim, let ``build(stage, root_prim)`` fill it, and save it."""
+    ext = path.suffix.lower()
+    if ext not in EXTENSIONS:
+        raise CghError(f"{path}: USD export writes {', '.join(EXTENSIONS)}, not {ext or 'no extension'}")
     require("pxr.Usd", "usd", "USD export", package="usd-core")
     from pxr import Usd, UsdGeom, UsdUtils
 
     if ext == ".usdz":
         with tempfile.TemporaryDirectory() as tmp:
             inner = Path(tmp) / (path.stem + ".usdc")
-            export_usd(inner, asset=asset, strands=strands, curves=curves, cards=cards, gaussians=gaussians,
-                       groom=groom)
+            write_stage(inner, build, meters_per_unit, up_axis)
             if path.exists():
                 os.remove(path)
             if not UsdUtils.CreateNewUsdzPackage(str(inner), str(path)):
                 raise CghError(f"{path}: usd-core could not write the .usdz package")
         return
     stage = Usd.Stage.CreateNew(str(path))
-    src = asset if asset is not None else strands
-    UsdGeom.SetStageMetersPerUnit(stage, float(src.meters_per_unit))
-    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y if src.up_axis == "Y" else UsdGeom.Tokens.z)
+    UsdGeom.SetStageMetersPerUnit(stage, float(meters_per_unit))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y if up_axis == "Y" else UsdGeom.Tokens.z)
     root = UsdGeom.Xform.Define(stage, ROOT).GetPrim()
     stage.SetDefaultPrim(root)
-    if groom:
-        root.AddAppliedSchema("GroomAPI")
-    if asset is not None:
-        if generator := getattr(asset, "generator", None):
-            root.SetCustomDataByKey("cghair:generator", str(generator))
-        if attribution := getattr(asset, "attribution", None):
-            root.SetCustomDataByKey("cghair:attribution", str(attribution))
-    if curves:
-        if asset is not None:
-            from .cgh_strands import strands_from_asset
-
-            s = strands_from_asset(asset)
-            opacity = _point_average(asset.opacity.astype(np.float32)[..., None])[..., 0].reshape(-1)
-            group = asset.cards.group.astype(np.int32)[asset.strand_card]
-            root_uv = getattr(asset, "root_uv", None)
-        else:
-            s, opacity, group, root_uv = strands, None, None, None
-        write_curves(stage, f"{ROOT}/Strands", s, opacity=opacity, group=group, root_uv=root_uv, groom=groom)
-    if cards:
-        write_cards(stage, f"{ROOT}/Cards", asset)
-    if gaussians:
-        from ..gaussians import decode_gaussians
-
-        write_gaussians(stage, f"{ROOT}/Gaussians", decode_gaussians(asset))
+    build(stage, root)
     stage.GetRootLayer().Save()
 
 
