@@ -1,0 +1,193 @@
+"""The card builder: strands -> cards, card coordinates and a default appearance (a HairAsset)."""
+
+from __future__ import annotations
+
+import io
+import sys
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..asset import Cards, HairAsset
+from ..errors import CghError
+from ..gaussians import decode_points
+from ..strands import Strands
+from . import appearance as app
+from ._util import project_to_spines, timed
+from .cluster import cluster_strands
+from .guide import guide_spines
+from .inverse import STRIP_TOLERANCE, fit_strip
+from .normals import card_half_widths, card_normals
+from .textures import card_groups, strand_textures
+
+DEFAULT_SEGMENTS = 32  # M: 33 spine points per card; with P = 100 about 3 strand points per segment
+STAGES = ("resample", "cluster", "guide", "normals", "uv", "textures", "appearance", "verify")
+
+
+class CardBuildError(CghError, ValueError):
+    """The card builder cannot work on these strands or options."""
+
+
+@dataclass
+class ReconstructionError:
+    """Point error of decoded strands against the (resampled) input."""
+
+    mean_abs: float
+    max_abs: float
+    bbox_diagonal: float
+
+    @property
+    def mean_rel(self) -> float:
+        return self.mean_abs / self.bbox_diagonal if self.bbox_diagonal > 0 else 0.0
+
+    @property
+    def max_rel(self) -> float:
+        return self.max_abs / self.bbox_diagonal if self.bbox_diagonal > 0 else 0.0
+
+    @classmethod
+    def measure(cls, reference: np.ndarray, decoded: np.ndarray) -> ReconstructionError:
+        ref = reference.reshape(-1, 3).astype(np.float64)
+        err = np.linalg.norm(decoded.reshape(-1, 3).astype(np.float64) - ref, axis=-1)
+        diag = float(np.linalg.norm(ref.max(0) - ref.min(0)))
+        return cls(float(err.mean()), float(err.max()), diag)
+
+    def line(self, label: str) -> str:
+        return (f"{label}: mean {self.mean_abs:.3g} ({self.mean_rel:.2e} of bbox diagonal), "
+                f"max {self.max_abs:.3g} ({self.max_rel:.2e})")
+
+
+@dataclass
+class CardBuild:
+    """The result of :func:`build_cards`."""
+
+    asset: HairAsset  # validated, with the default appearance
+    timings: dict[str, float]  # seconds per stage, in STAGES order
+    error: ReconstructionError  # decoded (float, before quantization) vs resampled input
+    points: np.ndarray  # [S, P, 3] float32, the resampled input the error refers to
+    textures: np.ndarray  # [C, T, T] float32 strand coverage images, rows along u
+    strip_rounds: int = 0  # widen / extend rounds used by the inverse UV mapping
+    unsolved_points: int = 0  # points without an exact card solution (kept at nearest-spine coords)
+    outside_strip: int = 0  # points with v outside [0, 1] (beyond the tolerance)
+    info: dict = field(default_factory=dict)
+
+    def quantized_error(self, profile: str = "compact") -> tuple[ReconstructionError, int]:
+        """Error after encoding with ``profile`` and decoding, and the encoded size in bytes."""
+        from ..codec import decode, encode
+
+        data, _ = encode(self.asset, profile)
+        return ReconstructionError.measure(self.points, decode_points(decode(data))), len(data)
+
+    def timing_table(self) -> str:
+        out = io.StringIO()
+        out.write(f"{'stage':<12}{'seconds':>10}\n")
+        for stage in STAGES:
+            if stage in self.timings:
+                out.write(f"{stage:<12}{self.timings[stage]:>10.2f}\n")
+        out.write(f"{'total':<12}{sum(self.timings.values()):>10.2f}\n")
+        return out.getvalue()
+
+
+def _check_options(strands: Strands, n_cards: int, n_groups: int, segments: int, points: int,
+                   sh_degree: int) -> None:
+    if not isinstance(strands, Strands):
+        raise CardBuildError(f"build_cards needs Strands, got {type(strands).__name__}")
+    strands.validate()
+    if strands.count < 1:
+        raise CardBuildError("no strands to build cards from")
+    if (strands.point_counts < 1).any():
+        raise CardBuildError(f"{int((strands.point_counts < 1).sum())} strands have no points")
+    for name, value, low in (("n_cards", n_cards, 1), ("n_groups", n_groups, 1), ("segments", segments, 1),
+                             ("points", points, 4)):
+        if int(value) != value or value < low:
+            raise CardBuildError(f"{name} must be an integer >= {low}, got {value}")
+    if segments > 4096 or points > 100000:
+        raise CardBuildError(f"segments ({segments}) or points ({points}) is unreasonably large")
+    if sh_degree not in (0, 1, 2, 3):
+        raise CardBuildError(f"sh_degree must be 0..3, got {sh_degree}")
+
+
+def resample(strands: Strands, points: int):
+    """Equal-length arrays from strands (the interchange module's resampler when it exists)."""
+    from .resample import resample_arrays
+
+    return resample_arrays(strands, points)
+
+
+def build_cards(strands: Strands, n_cards: int = 800, n_groups: int = 64, segments: int = DEFAULT_SEGMENTS,
+                points: int = 100, seed: int = 0, progress: bool = True, *, sh_degree: int = 3,
+                log=None) -> CardBuild:
+    """Build the cards of ``strands`` and return a :class:`CardBuild` (asset, timings, error).
+
+    ``n_cards`` and ``n_groups`` are capped at the strand and card counts. The result depends only
+    on the inputs and ``seed``. ``log`` (a text stream, default stderr when ``progress``) receives
+    one line per finished stage.
+    """
+    _check_options(strands, n_cards, n_groups, segments, points, sh_degree)
+    log = log if log is not None else (sys.stderr if progress else None)
+    timings: dict[str, float] = {}
+
+    def done(stage: str) -> None:
+        if log is not None:
+            print(f"cards: {stage:<11}{timings[stage]:8.2f} s", file=log, flush=True)
+
+    with timed(timings, "resample"):
+        pts, colors, widths = resample(strands, points)
+        s_count = len(pts)
+        flat = pts.reshape(-1, 3)
+        diag = float(np.linalg.norm(flat.max(0) - flat.min(0)))
+        if not diag > 0:
+            raise CardBuildError("all strand points coincide: nothing to build cards from")
+    done("resample")
+
+    with timed(timings, "cluster"):
+        labels = cluster_strands(pts, n_cards, seed)
+        c = int(labels.max()) + 1
+    done("cluster")
+
+    with timed(timings, "guide"):
+        spine = guide_spines(pts, labels, c, segments)
+    done("guide")
+
+    point_card = np.repeat(labels, points)
+    with timed(timings, "normals"):
+        s = project_to_spines(spine, point_card, flat, show_progress=progress)
+        normal = card_normals(spine, flat, point_card, s, hair_centre=pts[:, 0].mean(0))
+        half = card_half_widths(spine, normal, flat, point_card, s, diag)
+        cards = Cards(spine.astype(np.float32), normal.astype(np.float32), half.astype(np.float32),
+                      np.zeros(c, np.int32))
+    done("normals")
+
+    with timed(timings, "uv"):
+        cards, uvd, solved, rounds = fit_strip(cards, flat, point_card, s, show_progress=progress)
+        uvd = uvd.reshape(s_count, points, 3).astype(np.float32)
+    done("uv")
+
+    with timed(timings, "textures"):
+        textures = strand_textures(uvd[..., :2], labels, c)
+        groups = card_groups(textures, n_groups, seed)
+        cards.group = groups
+        n_t = int(groups.max()) + 1
+    done("textures")
+
+    with timed(timings, "appearance"):
+        profiles = app.colour_profiles(colors, s_count, seed)
+        appearance = app.default_appearance(profiles, groups[labels], n_t, points, sh_degree, seed)
+        asset = HairAsset(
+            cards=cards, strand_card=labels.astype(np.int32), uvd=uvd,
+            opacity=app.default_opacity(s_count, points), appearance=appearance,
+            thickness=app.default_thickness(pts, widths), meters_per_unit=float(strands.meters_per_unit),
+            up_axis=strands.up_axis, generator="cghair cards",
+            metadata={"cards": {"seed": int(seed), "segments": int(segments), "points": int(points),
+                                "requested_cards": int(n_cards), "requested_groups": int(n_groups)}},
+        ).validate()
+    done("appearance")
+
+    with timed(timings, "verify"):
+        error = ReconstructionError.measure(pts, decode_points(asset))
+        v = uvd[..., 1]
+        outside = int(((v < -STRIP_TOLERANCE) | (v > 1 + STRIP_TOLERANCE)).sum())
+    done("verify")
+    return CardBuild(asset=asset, timings=timings, error=error, points=pts.astype(np.float32),
+                     textures=textures, strip_rounds=rounds, unsolved_points=int((~solved).sum()),
+                     outside_strip=outside,
+                     info={"cards": c, "groups": n_t, "strands": s_count, "points": points})

@@ -1,0 +1,82 @@
+"""Stage 2: guide strands. Each cluster's centroid, fitted with a smoothing B-spline and resampled
+to ``M`` card segments of equal arc length, extended so the cluster's roots and tips lie inside."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import require
+from ._util import normalize
+
+DENSE_PER_SEGMENT = 8  # spline samples per card segment for the arc-length resampling
+END_MARGIN = 0.01  # extra length at each end, as a fraction of the guide's length
+
+
+def cluster_centroids(points: np.ndarray, labels: np.ndarray, n_clusters: int) -> np.ndarray:
+    """Mean strand ``[C, P, 3]`` of each cluster (the k-means centroid in point space)."""
+    s, p = points.shape[:2]
+    flat = points.reshape(s, -1).astype(np.float64)
+    sums = np.zeros((n_clusters, flat.shape[1]))
+    np.add.at(sums, labels, flat)
+    counts = np.bincount(labels, minlength=n_clusters).astype(np.float64)
+    return (sums / np.maximum(counts, 1)[:, None]).reshape(n_clusters, p, 3)
+
+
+def spline_coefficients(p: int, segments: int) -> int:
+    """Coefficients of the smoothing (least-squares) cubic B-spline: what ``M`` segments resolve."""
+    return int(min(p, max(4, segments // 2 + 3)))
+
+
+def smoothing_spline(centroids: np.ndarray, segments: int, samples: int) -> np.ndarray:
+    """Least-squares cubic B-spline fits of curves ``[C, P, 3]``, evaluated at ``samples`` points.
+
+    The knots are uniform in the point index (strands are resampled to equal arc length, so their
+    mean is close to uniform too), so one design matrix serves every card.
+    """
+    interpolate = require("scipy.interpolate", "cards", "card guide splines", package="scipy")
+    c, p = centroids.shape[:2]
+    degree = min(3, p - 1)
+    n_coef = max(spline_coefficients(p, segments), degree + 1)
+    inner = np.linspace(0.0, 1.0, n_coef - degree + 1)
+    knots = np.concatenate([np.zeros(degree), inner, np.ones(degree)])
+    x = np.linspace(0.0, 1.0, p)
+    basis = interpolate.BSpline.design_matrix(x, knots, degree).toarray()  # [P, n_coef]
+    fit = np.linalg.pinv(basis)  # [n_coef, P]
+    coef = np.einsum("kp,cpd->ckd", fit, centroids)
+    dense = interpolate.BSpline.design_matrix(np.linspace(0.0, 1.0, samples), knots, degree).toarray()
+    return np.einsum("qk,ckd->cqd", dense, coef)
+
+
+def guide_spines(points: np.ndarray, labels: np.ndarray, n_clusters: int, segments: int) -> np.ndarray:
+    """Card spines ``[C, M+1, 3]``: each cluster's smoothed centroid at ``M + 1`` equal arc-length steps.
+
+    Each guide is extended straight along its end tangents so that the cluster's roots and tips
+    project inside it (a strand longer than the mean would otherwise leave its card's strip).
+    """
+    centroids = cluster_centroids(points, labels, n_clusters)
+    dense = smoothing_spline(centroids, segments, DENSE_PER_SEGMENT * segments + 1)  # [C, Q, 3]
+    t0 = normalize(dense[:, 1] - dense[:, 0])
+    t1 = normalize(dense[:, -1] - dense[:, -2])
+    arc = np.concatenate([np.zeros((n_clusters, 1)),
+                          np.cumsum(np.linalg.norm(np.diff(dense, axis=1), axis=-1), axis=1)], axis=1)
+    length = arc[:, -1]
+    root_proj = np.einsum("sd,sd->s", points[:, 0] - dense[labels, 0], t0[labels])
+    tip_proj = np.einsum("sd,sd->s", points[:, -1] - dense[labels, -1], t1[labels])
+    before = np.zeros(n_clusters)
+    after = np.zeros(n_clusters)
+    np.minimum.at(before, labels, root_proj)
+    np.maximum.at(after, labels, tip_proj)
+    before = -before + END_MARGIN * length
+    after = after + END_MARGIN * length
+    spines = np.empty((n_clusters, segments + 1, 3))
+    for c in range(n_clusters):
+        target = np.linspace(-before[c], length[c] + after[c], segments + 1)
+        inside = np.clip(target, 0.0, length[c])
+        pts = np.stack([np.interp(inside, arc[c], dense[c, :, d]) for d in range(3)], axis=-1)
+        pts += np.minimum(target - 0.0, 0.0)[:, None] * t0[c] + np.maximum(target - length[c], 0.0)[:, None] * t1[c]
+        spines[c] = pts
+    if (length <= 0).any():  # a cluster of zero-length strands: give its card a tiny length
+        tiny = 1e-6 * max(float(np.ptp(points.reshape(-1, 3), axis=0).max()), 1e-12)
+        for c in np.flatnonzero(length <= 0):
+            spines[c] += np.linspace(0.0, tiny, segments + 1)[:, None] * np.array([0.0, 0.0, 1.0])
+    return spines
