@@ -12,6 +12,7 @@ from ..asset import Cards, HairAsset
 from ..errors import CghError
 from ..gaussians import decode_points
 from ..strands import Strands
+from ..strands import resample as resample_strands
 from . import appearance as app
 from ._util import project_to_spines, timed
 from .cluster import cluster_strands
@@ -106,11 +107,14 @@ def _check_options(strands: Strands, n_cards: int, n_groups: int, segments: int,
         raise CardBuildError(f"sh_degree must be 0..3, got {sh_degree}")
 
 
-def resample(strands: Strands, points: int):
-    """Equal-length arrays from strands (the interchange module's resampler when it exists)."""
-    from .resample import resample_arrays
-
-    return resample_arrays(strands, points)
+def resample(strands: Strands, points: int) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """Points ``[S, P, 3]`` (float64), colours ``[S, P, 3]`` and widths ``[S, P]`` (or None),
+    every strand resampled to ``points`` points evenly spaced along its arc length."""
+    out = resample_strands(strands, points)
+    s = out.count
+    colors = None if out.colors is None else out.colors.reshape(s, points, 3).astype(np.float64).clip(0, 1)
+    widths = None if out.widths is None else out.widths.reshape(s, points).astype(np.float64)
+    return out.to_array().astype(np.float64), colors, widths
 
 
 def build_cards(strands: Strands, n_cards: int = 800, n_groups: int = 64, segments: int = DEFAULT_SEGMENTS,

@@ -31,7 +31,7 @@ STRIP_TOLERANCE = 1e-3  # v in [-tol, 1 + tol] counts as inside the strip
 WIDEN_MARGIN = 1.02
 MAX_WIDEN = 4.0  # per round: a card widens at most 4x ...
 MAX_EXTEND = 1.0  # ... and each end segment grows by at most its own length
-ROUNDS = 4
+ROUNDS = 6
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
