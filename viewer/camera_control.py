@@ -1,0 +1,142 @@
+"""Camera control of the interactive viewer as pure logic (no GL, no window): testable headless.
+
+:class:`OrbitController` holds an orbit camera (target, distance, azimuth, elevation) and applies
+mouse orbit, pan and zoom, WASD fly and reset. :class:`ViewerState` maps key presses to the
+viewer's toggles (cards, strands, group colours, SH degree, splat scale) and actions.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from cghair_format.camera import Camera
+
+from .renderer import ViewSettings
+
+ORBIT_DEG_PER_PIXEL = 0.3
+ZOOM_PER_STEP = 0.9  # distance factor per scroll step
+MIN_DISTANCE = 1e-3
+MAX_ELEVATION = 89.0
+FLY_SPEED = 0.5  # fraction of the orbit distance per second
+
+
+@dataclass
+class OrbitController:
+    """An orbit camera around ``target``; angles in degrees, distance in scene units."""
+
+    target: np.ndarray
+    distance: float
+    azimuth: float = 0.0
+    elevation: float = 0.0
+    up_axis: str = "Y"
+    fov_y: float = 40.0
+    _home: tuple | None = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        self.target = np.asarray(self.target, np.float64).copy()
+        if self._home is None:
+            self._home = (self.target.copy(), self.distance, self.azimuth, self.elevation)
+
+    @classmethod
+    def framing(cls, lo: np.ndarray, hi: np.ndarray, up_axis: str = "Y", fov_y: float = 40.0,
+                azimuth: float = 0.0, elevation: float = 0.0) -> OrbitController:
+        """A controller whose view contains the box ``[lo, hi]``."""
+        lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+        radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-6)
+        distance = radius / math.sin(math.radians(fov_y) / 2) * 1.05
+        return cls((lo + hi) / 2, distance, azimuth, elevation, up_axis, fov_y)
+
+    def camera(self, width: int, height: int) -> Camera:
+        return Camera.orbit(self.target, self.distance, self.azimuth, self.elevation, width, height,
+                            self.up_axis, self.fov_y)
+
+    def orbit(self, dx: float, dy: float) -> None:
+        """Mouse drag by ``(dx, dy)`` pixels: turn around the target."""
+        self.azimuth = (self.azimuth - dx * ORBIT_DEG_PER_PIXEL) % 360.0
+        self.elevation = float(np.clip(self.elevation + dy * ORBIT_DEG_PER_PIXEL, -MAX_ELEVATION, MAX_ELEVATION))
+
+    def zoom(self, steps: float) -> None:
+        """Scroll by ``steps`` (positive: closer)."""
+        self.distance = max(MIN_DISTANCE, self.distance * ZOOM_PER_STEP ** steps)
+
+    def _axes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """World-space right, down and forward axes of the current camera."""
+        r = self.camera(2, 2).world_to_camera[:3, :3]
+        return r[0], r[1], r[2]
+
+    def pan(self, dx: float, dy: float, viewport_height: int) -> None:
+        """Mouse drag by ``(dx, dy)`` pixels: move the target so the scene follows the pointer."""
+        world_per_pixel = 2 * self.distance * math.tan(math.radians(self.fov_y) / 2) / max(viewport_height, 1)
+        right, down, _ = self._axes()
+        self.target = self.target - (dx * right + dy * down) * world_per_pixel
+
+    def fly(self, forward: float, right: float, up: float, seconds: float) -> None:
+        """WASD flight: move the target (and camera) along the view axes for ``seconds``."""
+        r, down, fwd = self._axes()
+        step = FLY_SPEED * self.distance * seconds
+        self.target = self.target + step * (forward * fwd + right * r - up * down)
+
+    def reset(self) -> None:
+        target, self.distance, self.azimuth, self.elevation = self._home
+        self.target = target.copy()
+
+
+# key name -> (action, argument)
+KEYMAP: dict[str, tuple[str, object]] = {
+    "C": ("toggle", "show_cards"), "L": ("toggle", "show_strands"), "G": ("toggle", "color_by_group"),
+    "H": ("toggle", "hide_splats"), "0": ("sh_degree", 0), "1": ("sh_degree", 1), "2": ("sh_degree", 2),
+    "3": ("sh_degree", 3), "=": ("scale", 1.25), "+": ("scale", 1.25), "-": ("scale", 0.8),
+    "R": ("reset", None), "P": ("screenshot", None), "F12": ("screenshot", None), "ESCAPE": ("quit", None),
+}
+# held keys -> (forward, right, up) flight direction
+FLY_KEYS: dict[str, tuple[float, float, float]] = {
+    "W": (1, 0, 0), "S": (-1, 0, 0), "D": (0, 1, 0), "A": (0, -1, 0), "E": (0, 0, 1), "Q": (0, 0, -1),
+}
+HELP = ("drag: orbit | right/middle drag or shift-drag: pan | scroll: zoom | WASD QE: fly | R: reset | "
+        "C: cards | L: strands | G: group colours | H: hide splats | 0-3: SH degree | +/-: splat scale | "
+        "P: screenshot | Esc: quit")
+
+
+@dataclass
+class ViewerState:
+    """Everything the keyboard changes, with the camera controller."""
+
+    controller: OrbitController
+    settings: ViewSettings = field(default_factory=ViewSettings)
+    max_sh_degree: int = 3
+
+    def press(self, key: str) -> str | None:
+        """Apply a key press; returns ``"screenshot"`` or ``"quit"`` when the app must act."""
+        action, arg = KEYMAP.get(key.upper(), (None, None))
+        s = self.settings
+        if action == "toggle":
+            self.settings = replace(s, **{arg: not getattr(s, arg)})
+        elif action == "sh_degree":
+            self.settings = replace(s, sh_degree=min(int(arg), self.max_sh_degree))
+        elif action == "scale":
+            self.settings = replace(s, splat_scale=float(np.clip(s.splat_scale * float(arg), 0.05, 20.0)))
+        elif action == "reset":
+            self.controller.reset()
+            self.settings = replace(s, splat_scale=1.0, sh_degree=None)
+        elif action in ("screenshot", "quit"):
+            return action
+        return None
+
+    def fly(self, held: set[str], seconds: float) -> None:
+        """Move for the keys held during the last ``seconds``."""
+        f = r = u = 0.0
+        for key in held:
+            df, dr, du = FLY_KEYS.get(key.upper(), (0, 0, 0))
+            f, r, u = f + df, r + dr, u + du
+        if f or r or u:
+            self.controller.fly(f, r, u, seconds)
+
+    def status(self) -> str:
+        s = self.settings
+        deg = "file" if s.sh_degree is None else str(s.sh_degree)
+        flags = [name for name, on in (("cards", s.show_cards), ("strands", s.show_strands),
+                                        ("groups", s.color_by_group), ("no splats", s.hide_splats)) if on]
+        return f"SH {deg}, scale {s.splat_scale:.2f}" + (f", {', '.join(flags)}" if flags else "")

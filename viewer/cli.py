@@ -1,0 +1,36 @@
+"""``cgh view FILE.cgh``: open a .cgh in an interactive window."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("file", help="the .cgh file to open")
+    parser.add_argument("--width", type=int, default=1280, help="window width in pixels (default 1280)")
+    parser.add_argument("--height", type=int, default=720, help="window height in pixels (default 720)")
+    parser.add_argument("--sort", choices=("auto", "gpu", "cpu"), default="auto",
+                        help="depth sort: GPU radix sort, numpy, or auto (GPU except on software renderers)")
+    parser.add_argument("--screenshots", default=".", help="folder for screenshots (key P)")
+
+
+def positive(parser_name: str, value: int) -> None:
+    from cghair_format.errors import CghError
+
+    if value < 1 or value > 16384:
+        raise CghError(f"--{parser_name} must be between 1 and 16384, got {value}")
+
+
+def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    import cghair_format
+
+    from .app import run_viewer
+
+    positive("width", args.width)
+    positive("height", args.height)
+    asset = cghair_format.read(args.file)
+    run_viewer(asset, title=f"cgh view {Path(args.file).name}", file_size=Path(args.file).stat().st_size,
+               width=args.width, height=args.height, sort=args.sort, screenshot_dir=args.screenshots)
+    return 0

@@ -1,0 +1,68 @@
+"""``cgh render FILE.cgh -o out.png``: pictures and turntables without a display (EGL)."""
+
+from __future__ import annotations
+
+import argparse
+
+IMAGE_EXTS = (".png",)
+ANIMATION_EXTS = (".gif", ".mp4")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("file", help="the .cgh file to render")
+    parser.add_argument("-o", "--output", required=True, help="output .png, or .gif/.mp4 for --turntable")
+    parser.add_argument("--width", type=int, default=None, help="image width (default 800, or transforms.json w)")
+    parser.add_argument("--height", type=int, default=None, help="image height (default 800, or its h)")
+    cam = parser.add_argument_group("orbit camera (default: framing the whole asset)")
+    cam.add_argument("--azimuth", type=float, default=0.0, help="degrees about the up axis (default 0)")
+    cam.add_argument("--elevation", type=float, default=10.0, help="degrees above the horizon (default 10)")
+    cam.add_argument("--distance", type=float, default=None, help="from the target, scene units")
+    cam.add_argument("--target", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
+                     help="point looked at (default: centre of the asset's bounds)")
+    cam.add_argument("--fov", type=float, default=40.0, help="vertical field of view, degrees (default 40)")
+    parser.add_argument("--camera", default=None, metavar="TRANSFORMS_JSON",
+                        help="use a camera from a NeRF-style transforms.json instead of the orbit")
+    parser.add_argument("--frame", type=int, default=0, help="frame index in --camera (default 0)")
+    parser.add_argument("--turntable", type=int, default=0, metavar="N",
+                        help="render N views around the up axis into an animated .gif or .mp4")
+    parser.add_argument("--fps", type=float, default=24.0, help="turntable frame rate (default 24)")
+    look = parser.add_argument_group("appearance")
+    look.add_argument("--background", type=float, nargs=3, default=(0.0, 0.0, 0.0), metavar=("R", "G", "B"))
+    look.add_argument("--sh-degree", type=int, choices=(0, 1, 2, 3), default=None,
+                      help="evaluate SH up to this degree (default: the file's)")
+    look.add_argument("--splat-scale", type=float, default=1.0, help="multiply Gaussian scales (default 1)")
+    look.add_argument("--color-by-group", action="store_true", help="colour splats by card group")
+    look.add_argument("--cards", action="store_true", help="overlay the card strips")
+    look.add_argument("--strands", action="store_true", help="overlay the strands as lines")
+    parser.add_argument("--sort", choices=("auto", "gpu", "cpu"), default="auto", help="depth sort (default auto)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    import cghair_format
+    from cghair_format.errors import CghError
+
+    from .render_jobs import RenderJob, render_job
+
+    out = Path(args.output)
+    ext = out.suffix.lower()
+    if ext not in IMAGE_EXTS + ANIMATION_EXTS:
+        raise CghError(f"unsupported output {out.name!r}: use .png, or .gif/.mp4 with --turntable")
+    if args.turntable < 0:
+        raise CghError(f"--turntable must be >= 0, got {args.turntable}")
+    if args.turntable and ext == ".png":
+        raise CghError("--turntable writes an animation: name the output .gif or .mp4")
+    if args.turntable and args.camera:
+        raise CghError("--turntable orbits the asset: it cannot be combined with --camera")
+    if not out.parent.exists():
+        raise CghError(f"output folder {out.parent} does not exist")
+    asset = cghair_format.read(args.file)
+    job = RenderJob(width=args.width, height=args.height, azimuth=args.azimuth, elevation=args.elevation,
+                    distance=args.distance, target=args.target, fov=args.fov, transforms=args.camera,
+                    frame=args.frame, turntable=args.turntable, fps=args.fps, background=tuple(args.background),
+                    sh_degree=args.sh_degree, splat_scale=args.splat_scale,
+                    color_by_group=args.color_by_group, cards=args.cards, strands=args.strands, sort=args.sort)
+    written = render_job(asset, job, out)
+    print(f"wrote {written}")
+    return 0

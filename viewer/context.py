@@ -1,0 +1,70 @@
+"""The one place that creates OpenGL contexts: a glfw window, or a headless EGL context.
+
+Both ask for OpenGL 4.3 core (compute shaders, storage buffers). Mesa's llvmpipe provides it
+without a GPU or a display, which is how tests and ``cgh render`` run on servers and in CI.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from typing import Any
+
+from cghair_format.errors import CghError, require
+
+GL_REQUIRE = 430
+
+
+class GLContextError(CghError):
+    """No usable OpenGL 4.3 context could be created (no driver, no display, old GL)."""
+
+
+class GLError(CghError):
+    """OpenGL reported an error while the viewer was drawing or computing."""
+
+
+def check_gl(ctx: Any, where: str) -> None:
+    """Raise :class:`GLError` if ``ctx.error`` is not ``GL_NO_ERROR``."""
+    err = ctx.error
+    if err != "GL_NO_ERROR":
+        raise GLError(f"OpenGL error {err} during {where}")
+
+
+def create_headless_context() -> Any:
+    """A standalone OpenGL 4.3 context without a window (EGL, e.g. Mesa llvmpipe on a CPU)."""
+    moderngl = require("moderngl", "viewer", "headless rendering")
+    errors = []
+    for kwargs in ({"backend": "egl"}, {}):
+        try:
+            return moderngl.create_standalone_context(require=GL_REQUIRE, **kwargs)
+        except Exception as exc:  # moderngl raises plain Exception subclasses from its loaders
+            errors.append(f"{kwargs.get('backend', 'default')}: {exc}")
+    raise GLContextError(
+        "could not create a headless OpenGL 4.3 context (" + "; ".join(errors) + "). Install Mesa's "
+        "EGL and software renderer (Debian/Ubuntu: apt-get install libegl1 libgl1-mesa-dri) or a GPU driver.")
+
+
+def create_window(width: int, height: int, title: str) -> tuple[Any, Any]:
+    """A glfw window with an OpenGL 4.3 core context; returns ``(window, moderngl context)``."""
+    glfw = require("glfw", "viewer", "the interactive viewer")
+    moderngl = require("moderngl", "viewer", "the interactive viewer")
+    no_display = not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY")
+    with warnings.catch_warnings():  # glfw warns, then returns False: the error below says it better
+        warnings.simplefilter("ignore")
+        ok = glfw.init()
+    if not ok:
+        hint = " (no DISPLAY or WAYLAND_DISPLAY is set)" if no_display else ""
+        raise GLContextError(f"cannot open a window: glfw failed to initialise{hint}. Without a display, "
+                             "use `cgh render FILE.cgh -o out.png` for pictures.")
+    glfw.window_hint(glfw.CONTEXT_VERSION_MAJOR, 4)
+    glfw.window_hint(glfw.CONTEXT_VERSION_MINOR, 3)
+    glfw.window_hint(glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE)
+    glfw.window_hint(glfw.OPENGL_FORWARD_COMPAT, True)
+    window = glfw.create_window(width, height, title, None, None)
+    if not window:
+        glfw.terminate()
+        raise GLContextError("cannot open an OpenGL 4.3 window (the driver may be too old). "
+                             "Use `cgh render FILE.cgh -o out.png` for pictures without a window.")
+    glfw.make_context_current(window)
+    glfw.swap_interval(0)
+    return window, moderngl.create_context(require=GL_REQUIRE)

@@ -1,0 +1,210 @@
+"""GPU decode: a :class:`HairAsset` (or plain :class:`Gaussians`) to Gaussians in storage buffers.
+
+Compute shaders rebuild the card strips, the strand points (card triangle + barycentrics +
+delta), the segment Gaussians' frames, the strand latents and the appearance MLP, reproducing
+:func:`cghair_format.decode_gaussians` in float32. SH coefficients can exceed one storage
+block (2.5 M Gaussians x 48 floats is 480 MB; llvmpipe allows 128 MiB per block), so they live
+in chunks of whole strands, each in its own buffer.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from cghair_format import Gaussians, HairAsset
+
+from .pipeline import Programs, bind, dispatch, set_uniforms
+
+DEFAULT_BLOCK_LIMIT = 128 << 20
+
+
+@dataclass
+class ShChunk:
+    first: int  # first Gaussian
+    count: int  # Gaussians in this chunk
+    buffer: Any  # [count * coeffs * 3] float32
+
+
+@dataclass
+class GpuScene:
+    """Gaussians resident on the GPU, plus what the overlays need."""
+
+    count: int  # G
+    sh_coeffs: int  # (deg+1)^2 stored per Gaussian
+    segments: int  # Gaussians per strand (P - 1); 1 for plain Gaussians
+    means: Any  # [G] vec4: xyz, opacity
+    rotations: Any  # [G] vec4: wxyz
+    scales: Any  # [G] vec4: xyz, 0
+    sh: list[ShChunk]
+    strand_card: Any  # [S] uint
+    card_group: Any  # [C] uint
+    bounds: tuple[np.ndarray, np.ndarray]  # world-space min and max of the means (for framing)
+    points: Any | None = None  # [S * P] vec4 strand points
+    strand_group: Any | None = None  # [S] uint
+    mesh_pos: Any | None = None  # [C * 2(M+1)] vec4 card strip vertices
+    mesh_triangles: Any | None = None  # index buffer of the strips
+    card_vertices: int = 0  # 2(M+1)
+    n_strands: int = 0
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def sh_degree(self) -> int:
+        return int(round(self.sh_coeffs ** 0.5)) - 1
+
+    def release(self) -> None:
+        for buf in (self.means, self.rotations, self.scales, self.strand_card, self.card_group,
+                    self.points, self.strand_group, self.mesh_pos, self.mesh_triangles):
+            if buf is not None:
+                buf.release()
+        for chunk in self.sh:
+            chunk.buffer.release()
+        self.sh = []
+
+
+def block_limit(ctx: Any) -> int:
+    """Largest storage block the context allows, in bytes."""
+    limit = ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or DEFAULT_BLOCK_LIMIT
+    return int(min(limit, 1 << 31))
+
+
+def _vec4(a: np.ndarray, w: float = 0.0) -> np.ndarray:
+    out = np.full((len(a), 4), w, np.float32)
+    out[:, :a.shape[1]] = a
+    return out
+
+
+def _buffer(ctx: Any, data: np.ndarray | None = None, nbytes: int = 0) -> Any:
+    """A storage buffer from ``data``, or an uninitialised one of ``nbytes`` (at least 16 bytes)."""
+    if data is not None:
+        raw = np.ascontiguousarray(data).tobytes()
+        return ctx.buffer(raw if raw else bytes(16))
+    return ctx.buffer(reserve=max(int(nbytes), 16))
+
+
+def upload_asset(ctx: Any, programs: Programs, asset: HairAsset) -> GpuScene:
+    """Upload an asset's compact data and decode it on the GPU."""
+    asset.validate()
+    cards, app = asset.cards, asset.appearance
+    c, m1 = cards.spine.shape[:2]
+    s, p = asset.n_strands, asset.points_per_strand
+    g = asset.n_gaussians
+    spine = _buffer(ctx, _vec4(cards.spine.reshape(-1, 3), 1.0))
+    normal = _buffer(ctx, _vec4(cards.normal.reshape(-1, 3)))
+    half_width = _buffer(ctx, cards.half_width.astype(np.float32).reshape(-1))
+    card_group = _buffer(ctx, cards.group.astype(np.uint32))
+    mesh_pos = _buffer(ctx, nbytes=c * 2 * m1 * 16)
+    mesh_nrm = _buffer(ctx, nbytes=c * 2 * m1 * 16)
+    prog = programs.compute("card_mesh")
+    bind(spine, normal, half_width, mesh_pos, mesh_nrm)
+    set_uniforms(prog, u_count=c * m1, u_points=m1)
+    dispatch(ctx, prog, c * m1)
+
+    strand_card = _buffer(ctx, asset.strand_card.astype(np.uint32))
+    uvd = _buffer(ctx, asset.uvd.astype(np.float32).reshape(-1))
+    opacity = _buffer(ctx, asset.opacity.astype(np.float32).reshape(-1))
+    means, rotations, scales = (_buffer(ctx, nbytes=g * 16) for _ in range(3))
+    points = _buffer(ctx, nbytes=s * p * 16)
+    prog = programs.compute("decode_geometry")
+    bind(mesh_pos, mesh_nrm, strand_card, uvd, opacity, means, rotations, scales, points)
+    set_uniforms(prog, u_count=g, u_points=p, u_segments=m1 - 1, u_thickness=float(asset.thickness))
+    dispatch(ctx, prog, g)
+
+    sh = _decode_appearance(ctx, programs, asset, strand_card, card_group)
+    for buf in (spine, normal, half_width, mesh_nrm, uvd, opacity):
+        buf.release()
+
+    from cghair_format.geometry import card_mesh
+
+    triangles = card_mesh(cards).triangles
+    strand_group = cards.group.astype(np.uint32)[asset.strand_card]
+    lo = cards.spine.reshape(-1, 3).min(axis=0) - cards.half_width.max()
+    hi = cards.spine.reshape(-1, 3).max(axis=0) + cards.half_width.max()
+    return GpuScene(
+        count=g, sh_coeffs=app.sh_coeffs, segments=p - 1, means=means, rotations=rotations,
+        scales=scales, sh=sh, strand_card=strand_card, card_group=card_group, bounds=(lo, hi),
+        points=points, strand_group=_buffer(ctx, strand_group), mesh_pos=mesh_pos,
+        mesh_triangles=ctx.buffer(triangles.astype(np.uint32).tobytes()), card_vertices=2 * m1,
+        n_strands=s)
+
+
+def _decode_appearance(ctx: Any, programs: Programs, asset: HairAsset, strand_card: Any,
+                       card_group: Any) -> list[ShChunk]:
+    """Latents and MLP per chunk of strands; each chunk's output is its Gaussians' SH."""
+    app = asset.appearance
+    s, segs = asset.n_strands, asset.points_per_strand - 1
+    widths = [layer.weight.shape[0] for layer in app.mlp]
+    out_width = widths[-1]
+    widest = max([app.latent_dim, *widths])
+    per_chunk = max(1, block_limit(ctx) // (4 * widest))
+    per_chunk = min(per_chunk, s)
+    logits = _buffer(ctx, app.logits.astype(np.float32).reshape(-1))
+    codebooks = _buffer(ctx, app.codebooks.astype(np.float32).reshape(-1))
+    layers = [(_buffer(ctx, layer.weight.astype(np.float32).reshape(-1)),
+               _buffer(ctx, layer.bias.astype(np.float32)), layer.activation == "relu",
+               layer.weight.shape[1], layer.weight.shape[0]) for layer in app.mlp]
+    hidden = [_buffer(ctx, nbytes=per_chunk * widest * 4) for _ in range(2)]
+    latent_prog = programs.compute("latent")
+    layer_prog = programs.compute("mlp_layer")
+    chunks = []
+    for first in range(0, s, per_chunk):
+        n = min(per_chunk, s - first)
+        bind(logits, codebooks, strand_card, card_group, hidden[0])
+        set_uniforms(latent_prog, u_first=first, u_count=n, u_k=app.k, u_d=app.latent_dim,
+                     u_temperature=float(app.temperature), u_hard=app.weight_mode == "hard")
+        dispatch(ctx, latent_prog, n, local_size=64)
+        src = 0
+        out = None
+        for i, (w, b, relu, n_in, n_out) in enumerate(layers):
+            last = i == len(layers) - 1
+            out = _buffer(ctx, nbytes=n * out_width * 4) if last else hidden[1 - src]
+            bind(hidden[src], w, b, out)
+            set_uniforms(layer_prog, u_count=n * n_out, u_in=n_in, u_out=n_out, u_relu=relu)
+            dispatch(ctx, layer_prog, n * n_out)
+            src = 1 - src
+        chunks.append(ShChunk(first * segs, n * segs, out))
+    for buf in (logits, codebooks, *hidden):
+        buf.release()
+    for w, b, *_ in layers:
+        w.release()
+        b.release()
+    return chunks
+
+
+def upload_gaussians(ctx: Any, gaussians: Gaussians) -> GpuScene:
+    """Upload a plain Gaussian set (no strands or cards: overlays and group colours unavailable)."""
+    g = gaussians.count
+    coeffs = gaussians.sh.shape[1]
+    per_chunk = max(1, block_limit(ctx) // (coeffs * 3 * 4))
+    sh = gaussians.sh.astype(np.float32).reshape(g, -1)
+    chunks = [ShChunk(first, min(per_chunk, g - first), _buffer(ctx, sh[first:first + per_chunk]))
+              for first in range(0, g, per_chunk)]
+    means = np.concatenate([gaussians.means, gaussians.opacities[:, None]], axis=1).astype(np.float32)
+    return GpuScene(
+        count=g, sh_coeffs=coeffs, segments=1, means=_buffer(ctx, means),
+        rotations=_buffer(ctx, gaussians.rotations.astype(np.float32)),
+        scales=_buffer(ctx, _vec4(gaussians.scales.astype(np.float32))), sh=chunks,
+        strand_card=_buffer(ctx, np.zeros(max(g, 1), np.uint32)),
+        card_group=_buffer(ctx, np.zeros(1, np.uint32)),
+        bounds=(gaussians.means.min(axis=0), gaussians.means.max(axis=0)), n_strands=g)
+
+
+def read_gaussians(scene: GpuScene) -> Gaussians:
+    """Read the decoded Gaussians back from the GPU (for tests and exports)."""
+    g = scene.count
+    means = np.frombuffer(scene.means.read(), np.float32).reshape(-1, 4)[:g]
+    rotations = np.frombuffer(scene.rotations.read(), np.float32).reshape(-1, 4)[:g]
+    scales = np.frombuffer(scene.scales.read(), np.float32).reshape(-1, 4)[:g]
+    sh = np.concatenate([np.frombuffer(c.buffer.read(), np.float32)[:c.count * scene.sh_coeffs * 3]
+                         for c in scene.sh]).reshape(g, scene.sh_coeffs, 3)
+    return Gaussians(means[:, :3].copy(), rotations.copy(), scales[:, :3].copy(), means[:, 3].copy(), sh)
+
+
+def read_points(scene: GpuScene) -> np.ndarray:
+    """Strand points ``[S, P, 3]`` decoded on the GPU."""
+    if scene.points is None:
+        raise ValueError("this scene was uploaded as plain Gaussians: it has no strand points")
+    pts = np.frombuffer(scene.points.read(), np.float32).reshape(-1, 4)[:, :3]
+    return pts.reshape(scene.n_strands, scene.segments + 1, 3).copy()

@@ -1,0 +1,79 @@
+"""Shader loading and compute dispatch shared by the decode, sort and render stages.
+
+Shaders are ``.glsl`` files shipped in ``viewer/shaders``; a line ``#include "NAME"`` is replaced
+by that file's text (GLSL has no includes). Programs are cached per context.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+from .context import GLError
+
+LOCAL_SIZE = 256  # work-group size of the one-invocation-per-item compute shaders
+MAX_GROUPS = 65535  # guaranteed per-axis work-group count limit
+SHADER_DIR = Path(__file__).resolve().parent / "shaders"
+_INCLUDE = re.compile(r'^#include "([\w.]+)"\s*$', re.MULTILINE)
+
+
+@cache
+def shader_source(name: str) -> str:
+    """The text of ``viewer/shaders/NAME`` with its ``#include`` lines expanded."""
+    text = (SHADER_DIR / name).read_text(encoding="utf-8")
+    return _INCLUDE.sub(lambda m: shader_source(m.group(1)), text)
+
+
+class Programs:
+    """Compiled programs of one context, built on first use."""
+
+    def __init__(self, ctx: Any):
+        self.ctx = ctx
+        self._cache: dict[tuple[str, ...], Any] = {}
+
+    def compute(self, name: str) -> Any:
+        key = (name,)
+        if key not in self._cache:
+            try:
+                self._cache[key] = self.ctx.compute_shader(shader_source(f"{name}.comp.glsl"))
+            except Exception as exc:
+                raise GLError(f"compute shader {name} failed to compile: {exc}") from exc
+        return self._cache[key]
+
+    def render(self, vertex: str, fragment: str) -> Any:
+        key = (vertex, fragment)
+        if key not in self._cache:
+            try:
+                self._cache[key] = self.ctx.program(vertex_shader=shader_source(f"{vertex}.vert.glsl"),
+                                                    fragment_shader=shader_source(f"{fragment}.frag.glsl"))
+            except Exception as exc:
+                raise GLError(f"shader program {vertex}/{fragment} failed to compile: {exc}") from exc
+        return self._cache[key]
+
+
+def set_uniforms(program: Any, **values: Any) -> None:
+    """Set the uniforms a program uses; names the compiler optimised away are skipped."""
+    for name, value in values.items():
+        if name in program:
+            program[name].value = value
+
+
+def dispatch(ctx: Any, program: Any, count: int, local_size: int = LOCAL_SIZE) -> None:
+    """Run ``program`` over ``count`` items as a 2D grid of work groups (see ``global_index()``)."""
+    if count <= 0:
+        return
+    groups = math.ceil(count / local_size)
+    gx = min(groups, MAX_GROUPS)
+    gy = math.ceil(groups / gx)
+    program.run(gx, gy, 1)
+    ctx.memory_barrier()
+
+
+def bind(*buffers: Any) -> None:
+    """Bind storage buffers to bindings 0, 1, ... in order (``None`` leaves a binding alone)."""
+    for binding, buf in enumerate(buffers):
+        if buf is not None:
+            buf.bind_to_storage_buffer(binding)

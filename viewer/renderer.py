@@ -1,0 +1,230 @@
+"""The splatting renderer: per-frame preprocess, depth sort and instanced splats (headless or window).
+
+Image model: the rendering contract shared with ``training/splatter.py``. Per frame a compute
+shader projects every Gaussian (EWA 2D covariance, conic, 3-sigma radius, SH colour, depth key);
+the keys are sorted (GPU radix sort, or numpy); one instanced quad per Gaussian is drawn front to
+back into an RGBA32F target with the "under" operator (``dst += (1 - dst.a) * (c a, a)``), which
+gives ``C = sum c_i a_i T_i`` and ``alpha = 1 - T``; a last pass adds the background.
+Framebuffer row ``j`` holds image row ``j`` (image y points down), so reads need no flip.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from cghair_format import Gaussians, HairAsset
+from cghair_format.camera import Camera
+
+from .context import check_gl
+from .decode import GpuScene, upload_asset, upload_gaussians
+from .pipeline import Programs, bind, dispatch, set_uniforms
+from .sort import SORT_MODES, GpuRadixSort, cpu_sort
+
+NEAR, FAR = 0.01, 1.0e4  # clip planes of the overlays (the splats use the contract's near plane)
+SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast")
+
+
+@dataclass
+class ViewSettings:
+    """What the viewer's toggles change."""
+
+    sh_degree: int | None = None  # None: the file's degree
+    splat_scale: float = 1.0
+    color_by_group: bool = False
+    show_cards: bool = False
+    show_strands: bool = False
+    hide_splats: bool = False
+    background: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+def default_sort_mode(ctx: Any) -> str:
+    """``gpu`` on hardware; ``cpu`` on software renderers, where numpy's sort is measured faster."""
+    name = str(ctx.info.get("GL_RENDERER", "")).lower()
+    return "cpu" if any(s in name for s in SOFTWARE_RENDERERS) else "gpu"
+
+
+def projection_matrix(camera: Camera) -> np.ndarray:
+    """OpenCV camera coordinates to clip space, keeping image row j at framebuffer row j."""
+    w, h = camera.width, camera.height
+    return np.array([
+        [2 * camera.fx / w, 0, 2 * camera.cx / w - 1, 0],
+        [0, 2 * camera.fy / h, 2 * camera.cy / h - 1, 0],
+        [0, 0, (FAR + NEAR) / (FAR - NEAR), -2 * FAR * NEAR / (FAR - NEAR)],
+        [0, 0, 1, 0]], np.float64)
+
+
+def _mat_bytes(m: np.ndarray) -> bytes:
+    """A matrix as the column-major float32 bytes GLSL expects."""
+    return np.ascontiguousarray(np.asarray(m, np.float64).T, np.float32).tobytes()
+
+
+class Renderer:
+    """Draws one :class:`GpuScene` from any camera. ``sort`` is ``"gpu"``, ``"cpu"`` or ``"auto"``."""
+
+    def __init__(self, ctx: Any, scene: GpuScene, sort: str = "auto", programs: Programs | None = None):
+        if sort not in (*SORT_MODES, "auto"):
+            raise ValueError(f"sort must be one of {(*SORT_MODES, 'auto')}, got {sort!r}")
+        self.ctx = ctx
+        self.scene = scene
+        self.programs = programs or Programs(ctx)
+        self.sort_mode = default_sort_mode(ctx) if sort == "auto" else sort
+        n = max(scene.count, 1)
+        self.center = ctx.buffer(reserve=16 * n)
+        self.conic = ctx.buffer(reserve=16 * n)
+        self.color = ctx.buffer(reserve=16 * n)
+        self.axes = ctx.buffer(reserve=16 * n)
+        self.keys = ctx.buffer(reserve=4 * n)
+        self.values = ctx.buffer(reserve=4 * n)
+        self.sorter = GpuRadixSort(ctx, self.programs, n) if self.sort_mode == "gpu" else None
+        self._targets: dict[tuple[int, int], tuple[Any, Any, Any, Any]] = {}
+        self._empty_vao: dict[str, Any] = {}
+        self._mesh_vao = None
+
+    @classmethod
+    def from_asset(cls, ctx: Any, asset: HairAsset, sort: str = "auto") -> Renderer:
+        programs = Programs(ctx)
+        return cls(ctx, upload_asset(ctx, programs, asset), sort, programs)
+
+    @classmethod
+    def from_gaussians(cls, ctx: Any, gaussians: Gaussians, sort: str = "auto") -> Renderer:
+        return cls(ctx, upload_gaussians(ctx, gaussians), sort)
+
+    # -- the three per-frame stages, separable for timing ------------------------------------------------
+
+    def preprocess(self, camera: Camera, settings: ViewSettings | None = None) -> None:
+        """Project, colour and key every Gaussian for ``camera``."""
+        s = settings or ViewSettings()
+        scene = self.scene
+        degree = scene.sh_degree if s.sh_degree is None else max(0, min(int(s.sh_degree), scene.sh_degree))
+        prog = self.programs.compute("preprocess")
+        w2c = np.asarray(camera.world_to_camera, np.float64)
+        set_uniforms(prog, u_trans=tuple(float(x) for x in w2c[:3, 3]),
+                     u_cam_center=tuple(float(x) for x in camera.center),
+                     u_intrinsics=(float(camera.fx), float(camera.fy), float(camera.cx), float(camera.cy)),
+                     u_viewport=(float(camera.width), float(camera.height)), u_coeffs=scene.sh_coeffs,
+                     u_degree=degree, u_scale=float(s.splat_scale), u_color_mode=int(s.color_by_group),
+                     u_segments=scene.segments)
+        prog["u_rot"].write(_mat_bytes(w2c[:3, :3]))
+        for chunk in scene.sh:
+            bind(scene.means, scene.rotations, scene.scales, chunk.buffer, self.center, self.conic,
+                 self.color, self.keys, self.values, scene.strand_card, scene.card_group, self.axes)
+            set_uniforms(prog, u_base=chunk.first, u_count=chunk.count)
+            dispatch(self.ctx, prog, chunk.count)
+
+    def sort(self) -> None:
+        """Order the splats front to back (values become the draw order)."""
+        if self.sorter is not None:
+            self.sorter.sort(self.keys, self.values, self.scene.count)
+        else:
+            cpu_sort(self.keys, self.values, self.scene.count)
+
+    def draw(self, width: int, height: int, bare: bool = False) -> None:
+        """Splat into the accumulation target of this size (cleared first).
+
+        ``bare`` draws the same instanced quads with a constant-colour fragment shader: the
+        benchmark's baseline.
+        """
+        accum_fbo = self._target(width, height)[1]
+        accum_fbo.use()
+        accum_fbo.clear(0.0, 0.0, 0.0, 0.0)
+        if self.scene.count == 0:
+            return
+        prog = self.programs.render("splat", "bare_quad" if bare else "splat")
+        set_uniforms(prog, u_viewport=(float(width), float(height)))
+        bind(self.values, self.center, self.conic, self.color, self.axes)
+        self.ctx.enable_only(self.ctx.BLEND)
+        if bare:
+            self.ctx.blend_func = self.ctx.SRC_ALPHA, self.ctx.ONE_MINUS_SRC_ALPHA
+        else:
+            self.ctx.blend_func = self.ctx.ONE_MINUS_DST_ALPHA, self.ctx.ONE
+        self._vao(prog).render(mode=self.ctx.TRIANGLE_STRIP, vertices=4, instances=self.scene.count)
+        self.ctx.blend_func = self.ctx.SRC_ALPHA, self.ctx.ONE_MINUS_SRC_ALPHA
+
+    def composite(self, camera: Camera, settings: ViewSettings, target: Any = None,
+                  flip_y: bool = False) -> None:
+        """Background behind the splats, then overlays, into ``target`` (default: the output FBO)."""
+        accum_tex, _, _, out_fbo = self._target(camera.width, camera.height)
+        fbo = target or out_fbo
+        fbo.use()
+        self.ctx.disable(self.ctx.BLEND)
+        prog = self.programs.render("composite", "composite")
+        accum_tex.use(0)
+        set_uniforms(prog, u_accum=0, u_background=tuple(float(c) for c in settings.background),
+                     u_flip_y=flip_y)
+        if settings.hide_splats:
+            fbo.clear(*settings.background, 0.0)
+        else:
+            self._vao(prog).render(mode=self.ctx.TRIANGLES, vertices=3)
+        if settings.show_cards or settings.show_strands:
+            self._overlays(camera, settings, flip_y)
+
+    def render(self, camera: Camera, settings: ViewSettings | None = None) -> np.ndarray:
+        """The image ``[H, W, 4]`` float32 (RGB with background, and alpha) seen by ``camera``."""
+        s = settings or ViewSettings()
+        if not s.hide_splats:
+            self.preprocess(camera, s)
+            self.sort()
+            self.draw(camera.width, camera.height)
+        else:
+            self._target(camera.width, camera.height)[1].clear(0.0, 0.0, 0.0, 0.0)
+        self.composite(camera, s)
+        out_tex = self._target(camera.width, camera.height)[2]
+        image = np.frombuffer(out_tex.read(), np.float32).reshape(camera.height, camera.width, 4)
+        check_gl(self.ctx, "render")
+        return image.copy()
+
+    # -- helpers ---------------------------------------------------------------------------------------
+
+    def _target(self, width: int, height: int) -> tuple[Any, Any, Any, Any]:
+        key = (int(width), int(height))
+        if key not in self._targets:
+            accum = self.ctx.texture(key, 4, dtype="f4")
+            out = self.ctx.texture(key, 4, dtype="f4")
+            self._targets[key] = (accum, self.ctx.framebuffer([accum]), out, self.ctx.framebuffer([out]))
+        return self._targets[key]
+
+    def _vao(self, program: Any) -> Any:
+        key = str(id(program))
+        if key not in self._empty_vao:
+            self._empty_vao[key] = self.ctx.vertex_array(program, [])
+        return self._empty_vao[key]
+
+    def _overlays(self, camera: Camera, settings: ViewSettings, flip_y: bool) -> None:
+        scene = self.scene
+        if scene.points is None:
+            return
+        prog = self.programs.render("overlay", "overlay")
+        proj = projection_matrix(camera)
+        if flip_y:
+            proj = np.diag([1.0, -1.0, 1.0, 1.0]) @ proj
+        prog["u_view"].write(_mat_bytes(camera.world_to_camera))
+        prog["u_projection"].write(_mat_bytes(proj))
+        self.ctx.enable_only(self.ctx.BLEND)
+        self.ctx.blend_func = self.ctx.SRC_ALPHA, self.ctx.ONE_MINUS_SRC_ALPHA
+        if settings.show_cards:
+            bind(scene.mesh_pos, scene.card_group)
+            set_uniforms(prog, u_mode=1, u_points=scene.card_vertices, u_by_group=settings.color_by_group,
+                         u_alpha=0.35)
+            if self._mesh_vao is None:
+                self._mesh_vao = self.ctx.vertex_array(prog, [], index_buffer=scene.mesh_triangles,
+                                                       index_element_size=4)
+            self._mesh_vao.render(mode=self.ctx.TRIANGLES, vertices=scene.mesh_triangles.size // 4)
+        if settings.show_strands:
+            bind(scene.points, scene.strand_group)
+            set_uniforms(prog, u_mode=0, u_points=scene.segments + 1, u_by_group=settings.color_by_group,
+                         u_alpha=0.8)
+            self._vao(prog).render(mode=self.ctx.LINES, vertices=2 * scene.count)
+
+    def release(self) -> None:
+        for buf in (self.center, self.conic, self.color, self.axes, self.keys, self.values):
+            buf.release()
+        if self.sorter is not None:
+            self.sorter.release()
+        for accum, accum_fbo, out, out_fbo in self._targets.values():
+            for obj in (accum_fbo, accum, out_fbo, out):
+                obj.release()
+        self._targets.clear()
+        self.scene.release()

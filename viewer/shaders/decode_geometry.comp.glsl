@@ -1,0 +1,58 @@
+#version 430
+// Strand points from card coordinates (cghair_format.geometry.strand_points) and the segment
+// Gaussians' means, rotations and scales (cghair_format.gaussians.segment_frames).
+// One invocation per Gaussian g = s (P-1) + i, for segment p_i -> p_i+1 of strand s.
+layout(local_size_x = 256) in;
+#include "common.glsl"
+
+layout(std430, binding = 0) readonly buffer MeshPos { vec4 mesh_pos[]; };
+layout(std430, binding = 1) readonly buffer MeshNrm { vec4 mesh_nrm[]; };
+layout(std430, binding = 2) readonly buffer StrandCard { uint strand_card[]; };  // [S]
+layout(std430, binding = 3) readonly buffer Uvd { float uvd[]; };                // [S*P*3]
+layout(std430, binding = 4) readonly buffer Opacity { float opacity[]; };        // [G]
+layout(std430, binding = 5) writeonly buffer Means { vec4 means[]; };            // [G] xyz, opacity
+layout(std430, binding = 6) writeonly buffer Rotations { vec4 rotations[]; };    // [G] wxyz
+layout(std430, binding = 7) writeonly buffer Scales { vec4 scales[]; };          // [G] xyz
+layout(std430, binding = 8) writeonly buffer Points { vec4 points[]; };          // [S*P] xyz
+
+uniform uint u_count;       // G
+uniform uint u_points;      // P
+uniform uint u_segments;    // card segments M
+uniform float u_thickness;  // d
+
+vec3 strand_point(uint s, uint j) {
+    uint o = 3u * (s * u_points + j);
+    float u = uvd[o], v = uvd[o + 1u], delta = uvd[o + 2u];
+    float m = float(u_segments);
+    float sv = u * m;
+    float k = clamp(floor(sv), 0.0, m - 1.0);
+    float f = sv - k;
+    uint base = strand_card[s] * 2u * (u_segments + 1u) + 2u * uint(k);  // L_k; R_k = +1, L_k+1 = +2
+    uint i0, i1, i2;
+    vec3 bary;
+    if (f + v > 1.0) { i0 = base + 1u; i1 = base + 3u; i2 = base + 2u; bary = vec3(1.0 - f, f + v - 1.0, 1.0 - v); }
+    else { i0 = base; i1 = base + 1u; i2 = base + 2u; bary = vec3(1.0 - f - v, v, f); }
+    vec3 pos = bary.x * mesh_pos[i0].xyz + bary.y * mesh_pos[i1].xyz + bary.z * mesh_pos[i2].xyz;
+    vec3 nrm = bary.x * mesh_nrm[i0].xyz + bary.y * mesh_nrm[i1].xyz + bary.z * mesh_nrm[i2].xyz;
+    return pos + delta * nrm / max(length(nrm), 1e-30);
+}
+
+void main() {
+    uint g = global_index();
+    if (g >= u_count) return;
+    uint segs = u_points - 1u;
+    uint s = g / segs;
+    uint i = g % segs;
+    vec3 p0 = strand_point(s, i);
+    vec3 p1 = strand_point(s, i + 1u);
+    points[s * u_points + i] = vec4(p0, 1.0);
+    if (i == segs - 1u) points[s * u_points + i + 1u] = vec4(p1, 1.0);
+    vec3 seg = p1 - p0;
+    float len = length(seg);
+    vec3 d = len > 0.0 ? seg / max(len, 1e-30) : vec3(0.0, 0.0, 1.0);
+    float w = 1.0 + d.z;
+    vec4 q = w < 1e-12 ? vec4(0.0, 1.0, 0.0, 0.0) : vec4(w, -d.y, d.x, 0.0);
+    means[g] = vec4(0.5 * (p0 + p1), opacity[g]);
+    rotations[g] = q / length(q);
+    scales[g] = vec4(u_thickness, u_thickness, 0.5 * len, 0.0);
+}

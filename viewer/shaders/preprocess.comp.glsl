@@ -1,0 +1,141 @@
+#version 430
+// Per frame, per Gaussian (rendering contract steps 1-4): camera-space depth, EWA 2D covariance
+// with 0.3 px^2 dilation, its inverse (conic), the 3-sigma support radius, colour from SH in the
+// direction camera -> mean, and the depth sort key (culled Gaussians get the largest key).
+// Dispatched once per SH chunk: Gaussians [u_base, u_base + u_count).
+layout(local_size_x = 256) in;
+#include "common.glsl"
+
+layout(std430, binding = 0) readonly buffer Means { vec4 means[]; };          // xyz, opacity
+layout(std430, binding = 1) readonly buffer Rotations { vec4 rotations[]; };  // wxyz
+layout(std430, binding = 2) readonly buffer Scales { vec4 scales[]; };
+layout(std430, binding = 3) readonly buffer Sh { float sh[]; };              // this chunk: [n*C*3]
+layout(std430, binding = 4) writeonly buffer Center { vec4 center[]; };      // mx, my, z, radius
+layout(std430, binding = 5) writeonly buffer Conic { vec4 conic[]; };        // a, b, c, opacity
+layout(std430, binding = 6) writeonly buffer Color { vec4 color[]; };        // rgb, 1
+layout(std430, binding = 7) writeonly buffer Keys { uint keys[]; };
+layout(std430, binding = 8) writeonly buffer Values { uint values[]; };
+layout(std430, binding = 9) readonly buffer StrandCard { uint strand_card[]; };  // for group colours
+layout(std430, binding = 10) readonly buffer CardGroup { uint card_group[]; };
+layout(std430, binding = 11) writeonly buffer Axes { vec4 axes[]; };  // quad half-axes, see below
+
+uniform uint u_base;
+uniform uint u_count;
+uniform mat3 u_rot;          // world-to-camera rotation
+uniform vec3 u_trans;        // world-to-camera translation
+uniform vec3 u_cam_center;   // camera centre in world space
+uniform vec4 u_intrinsics;   // fx, fy, cx, cy
+uniform vec2 u_viewport;     // width, height in pixels
+uniform uint u_coeffs;       // stored SH coefficients per Gaussian, (deg+1)^2
+uniform int u_degree;        // SH degree to evaluate, <= stored degree
+uniform float u_scale;       // splat scale multiplier (1 = as stored)
+uniform int u_color_mode;    // 0: SH colour, 1: colour by card group
+uniform uint u_segments;     // Gaussians per strand, P - 1
+
+const float NEAR_PLANE = 0.01;
+const float DILATION = 0.3;
+const float SIGMA_SUPPORT = 3.0;
+const float ALPHA_MIN = 1.0 / 255.0;
+const float SH_C0 = 0.28209479177387814;
+const float SH_C1 = 0.4886025119029199;
+const float SH_C2[5] = float[](1.0925484305920792, -1.0925484305920792, 0.31539156525252005,
+                               -1.0925484305920792, 0.5462742152960396);
+const float SH_C3[7] = float[](-0.5900435899266435, 2.890611442640554, -0.4570457994644658,
+                               0.3731763325901154, -0.4570457994644658, 1.445305721320277,
+                               -0.5900435899266435);
+
+vec3 coeff(uint base, uint j) {
+    uint o = base + 3u * j;
+    return vec3(sh[o], sh[o + 1u], sh[o + 2u]);
+}
+
+vec3 eval_sh(uint base, vec3 dir) {
+    vec3 res = SH_C0 * coeff(base, 0u);
+    if (u_degree > 0) {
+        float x = dir.x, y = dir.y, z = dir.z;
+        res = res - SH_C1 * y * coeff(base, 1u) + SH_C1 * z * coeff(base, 2u) - SH_C1 * x * coeff(base, 3u);
+        if (u_degree > 1) {
+            float xx = x * x, yy = y * y, zz = z * z, xy = x * y, yz = y * z, xz = x * z;
+            res = res + SH_C2[0] * xy * coeff(base, 4u) + SH_C2[1] * yz * coeff(base, 5u)
+                + SH_C2[2] * (2.0 * zz - xx - yy) * coeff(base, 6u) + SH_C2[3] * xz * coeff(base, 7u)
+                + SH_C2[4] * (xx - yy) * coeff(base, 8u);
+            if (u_degree > 2) {
+                res = res + SH_C3[0] * y * (3.0 * xx - yy) * coeff(base, 9u)
+                    + SH_C3[1] * xy * z * coeff(base, 10u)
+                    + SH_C3[2] * y * (4.0 * zz - xx - yy) * coeff(base, 11u)
+                    + SH_C3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy) * coeff(base, 12u)
+                    + SH_C3[4] * x * (4.0 * zz - xx - yy) * coeff(base, 13u)
+                    + SH_C3[5] * z * (xx - yy) * coeff(base, 14u)
+                    + SH_C3[6] * x * (xx - 3.0 * yy) * coeff(base, 15u);
+            }
+        }
+    }
+    return max(res + 0.5, 0.0);
+}
+
+vec3 group_color(uint group) {
+    // a hash that spreads consecutive groups over distinct hues
+    uint h = group * 2654435761u;
+    return vec3(float((h >> 8) & 255u), float((h >> 16) & 255u), float((h >> 24) & 255u)) / 255.0 * 0.8 + 0.2;
+}
+
+mat3 quat_to_mat(vec4 q) {
+    q = q / max(length(q), 1e-12);
+    float w = q.x, x = q.y, y = q.z, z = q.w;
+    // GLSL matrices are column-major: each vec3 below is a column
+    return mat3(
+        1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y + w * z), 2.0 * (x * z - w * y),
+        2.0 * (x * y - w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z + w * x),
+        2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y));
+}
+
+void main() {
+    uint local = global_index();
+    if (local >= u_count) return;
+    uint g = u_base + local;
+    vec4 mo = means[g];
+    vec3 t = u_rot * mo.xyz + u_trans;
+    values[g] = g;
+    if (t.z <= NEAR_PLANE) {
+        keys[g] = 0xFFFFFFFFu;
+        center[g] = vec4(0.0);
+        return;
+    }
+    float fx = u_intrinsics.x, fy = u_intrinsics.y;
+    mat3 m = quat_to_mat(rotations[g]) * mat3(
+        scales[g].x * u_scale, 0.0, 0.0, 0.0, scales[g].y * u_scale, 0.0, 0.0, 0.0, scales[g].z * u_scale);
+    // J as a 3x2 (3 columns, 2 rows) matrix
+    mat3x2 jac = mat3x2(fx / t.z, 0.0, 0.0, fy / t.z, -fx * t.x / (t.z * t.z), -fy * t.y / (t.z * t.z));
+    mat3x2 a = jac * u_rot * m;
+    mat2 cov = a * transpose(a);
+    float ca = cov[0][0] + DILATION, cb = cov[0][1], cc = cov[1][1] + DILATION;
+    float det = ca * cc - cb * cb;
+    float mid = 0.5 * (ca + cc);
+    float lam = mid + sqrt(max(mid * mid - det, 0.0));
+    float radius = ceil(SIGMA_SUPPORT * sqrt(lam));
+    vec2 m2 = vec2(fx * t.x / t.z + u_intrinsics.z, fy * t.y / t.z + u_intrinsics.w);
+    bool offscreen = m2.x + radius < 0.0 || m2.x - radius > u_viewport.x
+        || m2.y + radius < 0.0 || m2.y - radius > u_viewport.y;
+    if (offscreen || !(det > 0.0) || mo.w < ALPHA_MIN) {
+        keys[g] = 0xFFFFFFFFu;
+        center[g] = vec4(0.0);
+        return;
+    }
+    keys[g] = floatBitsToUint(t.z);  // positive floats order like their bit patterns
+    center[g] = vec4(m2, t.z, radius);
+    conic[g] = vec4(cc / det, -cb / det, ca / det, mo.w);
+    // The quad to rasterise: alpha >= 1/255 only inside the ellipse q <= 2 ln(255 o), so a
+    // rectangle along the ellipse's axes suffices; thin hair splats cover far fewer pixels than
+    // the 3-sigma square. The fragment shader still applies the exact square and alpha tests.
+    float q = 2.0 * log(mo.w / ALPHA_MIN) * 1.0001 + 1e-4;
+    float lam2 = max(mid - sqrt(max(mid * mid - det, 0.0)), 0.0);
+    vec2 v1 = abs(cb) > 1e-12 * mid ? normalize(vec2(cb, lam - ca)) : (ca >= cc ? vec2(1.0, 0.0) : vec2(0.0, 1.0));
+    float e1 = sqrt(q * lam) + 0.01, e2 = sqrt(q * lam2) + 0.01;
+    float square = radius + 0.5;
+    if (e1 * e2 < square * square) axes[g] = vec4(v1 * e1, vec2(-v1.y, v1.x) * e2);
+    else axes[g] = vec4(square, 0.0, 0.0, square);
+    vec3 rgb;
+    if (u_color_mode == 1) rgb = group_color(card_group[strand_card[g / u_segments]]);
+    else rgb = eval_sh(local * u_coeffs * 3u, normalize(mo.xyz - u_cam_center));
+    color[g] = vec4(rgb, 1.0);
+}
