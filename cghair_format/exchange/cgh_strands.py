@@ -7,7 +7,6 @@ from pathlib import Path
 import numpy as np
 
 from ..asset import HairAsset
-from ..errors import CghError
 from ..strands import Strands
 
 
@@ -40,9 +39,12 @@ def strands_from_asset(asset: HairAsset, colors: bool = True) -> Strands:
 
 
 def load(path: str | Path) -> Strands:
-    import cghair_format
+    from ..codec import read
+    from ..errors import CghFormatError
+    from ._common import StrandFileError
 
-    read = getattr(cghair_format, "read", None)
-    if read is None:
-        raise CghError("reading .cgh files needs cghair_format.read (the codec), which this build lacks")
-    return strands_from_asset(read(path))
+    try:
+        asset = read(path)
+    except CghFormatError as exc:  # name the file; the codec's message says what and where
+        raise StrandFileError(path, f"{type(exc).__name__}: {exc}") from exc
+    return strands_from_asset(asset)

@@ -40,7 +40,7 @@ def load(path: str | Path) -> Strands:
     try:
         stage = Usd.Stage.Open(str(path))
     except Exception as exc:  # pxr raises Tf.ErrorException (a RuntimeError) with USD's own message
-        raise StrandFileError(path, f"USD cannot open the file: {str(exc).strip()[:300]}") from exc
+        raise StrandFileError(path, f"USD cannot open the file: {_usd_message(exc)}") from exc
     if stage is None:
         raise StrandFileError(path, "USD cannot open the file")
     time = Usd.TimeCode.EarliestTime()
@@ -63,6 +63,12 @@ def load(path: str | Path) -> Strands:
     if stage.HasAuthoredMetadata("upAxis"):
         kw["up_axis"] = str(UsdGeom.GetStageUpAxis(stage))
     return finish(path, Strands(points.astype(np.float32), offsets_from_counts(counts), colors, widths, **kw))
+
+
+def _usd_message(exc: Exception) -> str:
+    """The readable part of a Tf error: the quoted texts after each ``Error in '...' at line ... :``."""
+    msgs = [part.split(" : ", 1)[1].strip().strip("'") for part in str(exc).split("\n\tError in ") if " : " in part]
+    return "; ".join(m.strip() for m in msgs)[:400] or str(exc).strip()[:400]
 
 
 def _curves(path, curves, time):

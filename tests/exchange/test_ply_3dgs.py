@@ -1,0 +1,71 @@
+"""3DGS PLY: the INRIA layout (channel-major f_rest, logit opacity, log scales, wxyz rotation)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cghair_format.examples import example_asset
+from cghair_format.exchange import StrandFileError
+from cghair_format.exchange._ply import read_ply, write_ply
+from cghair_format.exchange.ply_3dgs import read_3dgs_ply, write_3dgs_ply
+from cghair_format.gaussians import Gaussians, decode_gaussians
+
+
+def _gaussians(n=6, deg=3, seed=0) -> Gaussians:
+    rng = np.random.default_rng(seed)
+    q = rng.normal(size=(n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    return Gaussians(rng.normal(size=(n, 3)).astype(np.float32), q.astype(np.float32),
+                     rng.uniform(0.01, 0.1, (n, 3)).astype(np.float32), rng.uniform(0.05, 0.95, n).astype(np.float32),
+                     rng.normal(size=(n, (deg + 1) ** 2, 3)).astype(np.float32))
+
+
+def test_layout_matches_the_inria_convention(tmp_path):
+    g = _gaussians()
+    path = tmp_path / "g.ply"
+    write_3dgs_ply(g, path)
+    v = read_ply(path).elements["vertex"].data
+    names = list(v)
+    assert names[:9] == ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
+    assert names[9:54] == [f"f_rest_{i}" for i in range(45)]
+    assert names[54:] == ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
+    # channel-major: f_rest_0..14 are red coefficients 1..15, f_rest_15.. green, f_rest_30.. blue
+    np.testing.assert_array_equal(v["f_rest_0"], g.sh[:, 1, 0])
+    np.testing.assert_array_equal(v["f_rest_14"], g.sh[:, 15, 0])
+    np.testing.assert_array_equal(v["f_rest_15"], g.sh[:, 1, 1])
+    np.testing.assert_array_equal(v["f_rest_30"], g.sh[:, 1, 2])
+    np.testing.assert_allclose(1 / (1 + np.exp(-v["opacity"])), g.opacities, rtol=1e-5)
+    np.testing.assert_allclose(np.exp(v["scale_1"]), g.scales[:, 1], rtol=1e-5)
+    np.testing.assert_array_equal(v["rot_0"], g.rotations[:, 0])  # w first
+
+
+def test_roundtrip_asset_gaussians(tmp_path):
+    g = decode_gaussians(example_asset(sh_degree=1))
+    path = tmp_path / "g.ply"
+    write_3dgs_ply(g, path)
+    back = read_3dgs_ply(path)
+    assert back.count == g.count and back.sh_degree == 3  # padded to degree 3 for viewers
+    np.testing.assert_array_equal(back.sh[:, :4], g.sh)
+    assert not back.sh[:, 4:].any()
+    np.testing.assert_array_equal(back.means, g.means)
+    np.testing.assert_allclose(back.scales, g.scales, rtol=1e-6)
+    np.testing.assert_allclose(back.opacities, g.opacities, atol=2e-6)
+    np.testing.assert_allclose(back.rotations, g.rotations, atol=1e-6)
+    write_3dgs_ply(g, path, pad_to_degree=0)
+    assert read_3dgs_ply(path).sh_degree == 1
+
+
+def test_rejects_non_3dgs_ply(tmp_path):
+    path = tmp_path / "p.ply"
+    write_ply(path, [("vertex", {"x": np.zeros(2, np.float32), "y": np.zeros(2, np.float32),
+                                 "z": np.zeros(2, np.float32)})])
+    with pytest.raises(StrandFileError, match="not a 3DGS PLY"):
+        read_3dgs_ply(path)
+    good = tmp_path / "g.ply"
+    write_3dgs_ply(_gaussians(), good)
+    data = good.read_bytes()
+    bad = tmp_path / "cut.ply"
+    bad.write_bytes(data[: len(data) - 10])
+    with pytest.raises(StrandFileError, match="truncated"):
+        read_3dgs_ply(bad)
