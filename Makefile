@@ -5,7 +5,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 TORCH  ?= torch==2.13.0
 
-.PHONY: demo test bench lint clean venv
+.PHONY: demo test bench lint clean venv blender
 
 venv: $(VENV)/.installed
 
@@ -16,15 +16,22 @@ $(VENV)/.installed: pyproject.toml
 	$(PY) -m pip install -q -e ".[cards,training,viewer,usd,dev]"
 	touch $@
 
-# Blender as a Python module (bpy 5.0, ~370 MB) for the DCC round-trip and Cycles tests.
-$(VENV)/.bpy: $(VENV)/.installed
-	$(PY) -m pip install -q "bpy==5.0.*"
+# Blender as a Python module (bpy 5.0, ~370 MB, Python 3.11) for the DCC round-trip and Cycles tests.
+# bpy pins numpy<2, so it gets its own environment inside .venv instead of downgrading the project's
+# numpy; tests run Blender in a subprocess with this interpreter (or CGH_BLENDER_PYTHON).
+BLENDER_VENV := $(VENV)/blender
+
+blender: $(BLENDER_VENV)/.installed
+
+$(BLENDER_VENV)/.installed: $(VENV)/.installed
+	$(PYTHON) -m venv $(BLENDER_VENV)
+	$(BLENDER_VENV)/bin/python -m pip install -q "bpy==5.0.*"
 	touch $@
 
 demo: venv
 	$(VENV)/bin/cgh demo -o demo_out
 
-test: venv $(VENV)/.bpy
+test: venv blender
 	$(PY) -m pytest -q
 
 bench: venv
