@@ -68,3 +68,17 @@ def create_window(width: int, height: int, title: str) -> tuple[Any, Any]:
     glfw.make_context_current(window)
     glfw.swap_interval(0)
     return window, moderngl.create_context(require=GL_REQUIRE)
+
+
+def park_framebuffer(ctx: Any) -> None:
+    """Bind a 1x1 framebuffer that lives as long as the context.
+
+    Call before releasing a bound framebuffer: moderngl otherwise re-binds the deleted one after
+    creating the next framebuffer, which is a GL_INVALID_OPERATION (a standalone context has no
+    default framebuffer to fall back to).
+    """
+    if not isinstance(ctx.extra, dict):
+        ctx.extra = {}
+    if "cghair_park_fbo" not in ctx.extra:
+        ctx.extra["cghair_park_fbo"] = ctx.framebuffer([ctx.renderbuffer((1, 1))])
+    ctx.extra["cghair_park_fbo"].use()

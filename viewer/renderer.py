@@ -18,7 +18,7 @@ import numpy as np
 from cghair_format import Gaussians, HairAsset
 from cghair_format.camera import Camera
 
-from .context import check_gl
+from .context import check_gl, park_framebuffer
 from .decode import GpuScene, upload_asset, upload_gaussians
 from .pipeline import Programs, bind, dispatch, set_uniforms
 from .sort import SORT_MODES, GpuRadixSort, cpu_sort
@@ -223,6 +223,8 @@ class Renderer:
             buf.release()
         if self.sorter is not None:
             self.sorter.release()
+        if self._targets:
+            park_framebuffer(self.ctx)
         for accum, accum_fbo, out, out_fbo in self._targets.values():
             for obj in (accum_fbo, accum, out_fbo, out):
                 obj.release()
