@@ -4,7 +4,9 @@ Header: ``"HAIR"``, u32 strand count, u32 point count, u32 array bits (1 segment
 4 thickness, 8 transparency, 16 colours), u32 default segments, f32 default thickness,
 f32 default transparency, f32x3 default colour, 88 bytes of text. Arrays follow in bit order:
 u16 segments per strand, f32x3 points, f32 thickness, f32 transparency, f32x3 colours.
-The format names no units or up axis.
+The format names no units or up axis. The header's default thickness and colour are not
+applied when their arrays are absent: writers fill them with placeholders (Bangs_100.hair
+says white and 1.0), so only stored per-point arrays become colours and widths.
 """
 
 from __future__ import annotations
@@ -25,8 +27,7 @@ BIT_SEGMENTS, BIT_POINTS, BIT_THICKNESS, BIT_TRANSPARENCY, BIT_COLORS = 1, 2, 4,
 def load(path: str | Path) -> Strands:
     data = read_bytes(path)
     need(path, data, HEADER.size, "the 128-byte header")
-    magic, n_strands, n_points, bits, d_seg, d_thick, _d_transp, *rest = HEADER.unpack_from(data)
-    d_color = rest[:3]
+    magic, n_strands, n_points, bits, d_seg, *_ = HEADER.unpack_from(data)
     if magic != MAGIC:
         raise StrandFileError(path, f"not a Cem Yuksel .hair file: magic is {magic!r}, expected b'HAIR'")
     if not bits & BIT_POINTS:
@@ -50,8 +51,6 @@ def load(path: str | Path) -> Strands:
         need(path, data, pos + 4 * n_points, "the thickness array")
         widths = np.frombuffer(data, "<f4", n_points, pos).astype(np.float32)
         pos += 4 * n_points
-    elif d_thick > 0:
-        widths = np.full(n_points, d_thick, np.float32)
     if bits & BIT_TRANSPARENCY:
         need(path, data, pos + 4 * n_points, "the transparency array")
         pos += 4 * n_points
@@ -60,8 +59,6 @@ def load(path: str | Path) -> Strands:
         need(path, data, pos + 12 * n_points, "the colours array")
         colors = np.frombuffer(data, "<f4", 3 * n_points, pos).reshape(-1, 3).astype(np.float32)
         colors = np.clip(colors, 0.0, 1.0)
-    elif any(c != 0 for c in d_color):
-        colors = np.tile(np.clip(np.asarray(d_color, np.float32), 0, 1), (n_points, 1))
     return finish(path, Strands(points, offsets_from_counts(counts), colors, widths))
 
 

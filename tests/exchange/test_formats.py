@@ -13,7 +13,7 @@ from cghair_format.exchange._ply import write_ply
 from cghair_format.strands import Strands
 
 
-def test_hair_default_segments_and_colour(tmp_path):
+def test_hair_default_segments_and_no_placeholder_attributes(tmp_path):
     # no segments array: every strand has the header's default segment count
     pts = np.arange(2 * 4 * 3, dtype=np.float32)
     header = struct.pack("<4sIIIIff3f88s", b"HAIR", 2, 8, 2, 3, 0.5, 0.0, 0.2, 0.4, 0.6, b"")
@@ -22,8 +22,7 @@ def test_hair_default_segments_and_colour(tmp_path):
     s = load_strands(path)
     assert s.count == 2 and list(s.point_counts) == [4, 4]
     np.testing.assert_array_equal(s.points.ravel(), pts)
-    np.testing.assert_allclose(s.colors[0], [0.2, 0.4, 0.6])
-    assert s.widths[0] == np.float32(0.5)
+    assert s.colors is None and s.widths is None  # header defaults are placeholders, not data
 
 
 def test_tressfx_ascii_and_binary_agree(tmp_path):
