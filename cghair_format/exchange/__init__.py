@@ -13,6 +13,9 @@ from pathlib import Path
 
 from ..strands import Strands
 from ._common import StrandFileError, UnsupportedFormatError
+from .cgh_strands import strands_from_asset
+from .ply_3dgs import read_3dgs_ply, write_3dgs_ply
+from .usd_export import export_gaussians_usd, export_usd
 
 # extension -> module (relative to this package) with load(path, **options) and optionally save(strands, path)
 FORMATS: dict[str, str] = {
@@ -31,8 +34,9 @@ FORMATS: dict[str, str] = {
 READ_ONLY: set[str] = {".cgh"}
 UP_AXES = ("Y", "Z")
 
-__all__ = ["FORMATS", "StrandFileError", "UnsupportedFormatError", "load_strands", "readable_extensions",
-           "save_strands", "writable_extensions"]
+__all__ = ["FORMATS", "StrandFileError", "UnsupportedFormatError", "export_gaussians_usd", "export_usd",
+           "load_strands", "read_3dgs_ply", "readable_extensions", "save_strands", "strands_from_asset",
+           "writable_extensions", "write_3dgs_ply"]
 
 
 def _module(path: str | Path, for_writing: bool):
@@ -64,7 +68,7 @@ def load_strands(path: str | Path, *, units: float | None = None, up: str | None
     p = Path(path)
     if not p.exists():
         raise FileNotFoundError(2, "No such file or directory", str(p))
-    if p.is_dir() and p.suffix.lower() != ".usd":
+    if p.is_dir():
         raise IsADirectoryError(21, "Is a directory", str(p))
     load: Callable = mod.load
     if mod.__name__.endswith("ply_strands"):

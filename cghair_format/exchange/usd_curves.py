@@ -5,7 +5,8 @@ applied), at the earliest authored time. Linear curves keep their vertices; cubi
 (bezier, bspline, catmullRom; nonperiodic, pinned or periodic wrap) are evaluated at
 ``CUBIC_SAMPLES`` points per segment. ``widths`` and ``primvars:displayColor`` (else
 ``primvars:groom_color``) are mapped to points from any interpolation (constant, uniform,
-varying, vertex, faceVarying). ``metersPerUnit`` and ``upAxis`` are taken where authored.
+varying, vertex, faceVarying); they are kept only when every curves prim has them.
+``metersPerUnit`` and ``upAxis`` are taken where authored.
 Writing produces one linear BasisCurves prim (see :mod:`.usd_export`).
 """
 

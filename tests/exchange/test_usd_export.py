@@ -87,3 +87,17 @@ def test_strands_export_and_options(tmp_path, small_strands):
         export_usd(tmp_path / "x.abc", strands=small_strands)
     with pytest.raises(CghError, match="nothing to export"):
         export_usd(tmp_path / "x.usda", asset=example_asset(), curves=False)
+
+
+def test_missing_usd_core_names_the_extra(tmp_path, monkeypatch, small_strands):
+    import sys
+
+    from cghair_format.errors import MissingDependencyError
+    from cghair_format.exchange import load_strands
+
+    monkeypatch.setitem(sys.modules, "pxr.Usd", None)  # import pxr.Usd now raises ImportError
+    with pytest.raises(MissingDependencyError, match=r"cghair\[usd\]"):
+        export_usd(tmp_path / "x.usda", strands=small_strands)
+    (tmp_path / "y.usda").write_text("#usda 1.0\n")
+    with pytest.raises(MissingDependencyError, match="usd-core"):
+        load_strands(tmp_path / "y.usda")
