@@ -6,7 +6,8 @@ Layout (``/Hair`` is the default prim, an Xform with Unreal's ``GroomAPI`` appli
 - ``/Hair/Strands``: linear BasisCurves with ``widths``, ``primvars:displayColor`` (the
   view-independent colour: SH band 0) and ``primvars:displayOpacity`` per vertex, plus the groom
   primvars Unreal's groom importer reads (``groom_color``, ``groom_width``, ``groom_group_id``
-  per curve, ``groom_guide``, ``groom_root_uv`` where the asset has root UVs).
+  per curve, ``groom_guide``, and per curve ``groom_id`` / ``groom_root_uv`` where the asset has
+  strand ids / root UVs). These follow Unreal's groom attribute names (its Alembic groom schema).
 - ``/Hair/Cards``: the card strips as a triangle Mesh with normals and ``primvars:st`` UVs.
 - ``/Hair/Gaussians``: ``UsdVol.ParticleField3DGaussianSplat`` (usd-core >= 26): positions,
   orientations, scales (standard deviations), opacities in [0, 1] and SH coefficients
@@ -59,10 +60,11 @@ def export_usd(path: str | Path, *, asset: HairAsset | None = None, strands: Str
                 s = strands_from_asset(asset)
                 opacity = _point_average(asset.opacity.astype(np.float32)[..., None])[..., 0].reshape(-1)
                 group = asset.cards.group.astype(np.int32)[asset.strand_card]
-                root_uv = getattr(asset, "root_uv", None)
+                root_uv, ids = asset.root_uv, asset.strand_ids
             else:
-                s, opacity, group, root_uv = strands, None, None, None
-            write_curves(stage, f"{ROOT}/Strands", s, opacity=opacity, group=group, root_uv=root_uv, groom=groom)
+                s, opacity, group, root_uv, ids = strands, None, None, None, None
+            write_curves(stage, f"{ROOT}/Strands", s, opacity=opacity, group=group, root_uv=root_uv,
+                         strand_ids=ids, groom=groom)
         if cards:
             write_cards(stage, f"{ROOT}/Cards", asset)
         if gaussians:
@@ -115,7 +117,8 @@ def _point_average(seg: np.ndarray) -> np.ndarray:
 
 
 def write_curves(stage, prim_path: str, strands: Strands, *, opacity: np.ndarray | None = None,
-                 group: np.ndarray | None = None, root_uv: np.ndarray | None = None, groom: bool = True):
+                 group: np.ndarray | None = None, root_uv: np.ndarray | None = None,
+                 strand_ids: np.ndarray | None = None, groom: bool = True):
     """Linear BasisCurves for ``strands`` with widths, displayColor/Opacity and groom primvars."""
     from pxr import Sdf, UsdGeom, Vt
 
@@ -147,6 +150,9 @@ def write_curves(stage, prim_path: str, strands: Strands, *, opacity: np.ndarray
         gid = np.zeros(strands.count, np.int32) if group is None else np.asarray(group, np.int32)
         api.CreatePrimvar("groom_group_id", Sdf.ValueTypeNames.IntArray, uniform).Set(Vt.IntArray.FromNumpy(gid))
         api.CreatePrimvar("groom_guide", Sdf.ValueTypeNames.Int, constant).Set(0)
+        if strand_ids is not None:
+            api.CreatePrimvar("groom_id", Sdf.ValueTypeNames.IntArray, uniform).Set(
+                Vt.IntArray.FromNumpy(np.asarray(strand_ids).astype(np.int32)))
         if root_uv is not None:
             api.CreatePrimvar("groom_root_uv", Sdf.ValueTypeNames.Float2Array, uniform).Set(
                 Vt.Vec2fArray.FromNumpy(np.ascontiguousarray(root_uv, np.float32)))

@@ -74,6 +74,18 @@ def test_asset_export_all(tmp_path, asset, ext):
     np.testing.assert_array_equal(sh, g.sh.reshape(-1, 3))
 
 
+def test_optional_strand_ids_and_root_uvs(tmp_path):
+    a = example_asset(seed=2)
+    a.root_uv = np.random.default_rng(0).random((a.n_strands, 2)).astype(np.float32)
+    a.strand_ids = np.arange(a.n_strands, dtype=np.uint32)[::-1].copy()
+    path = tmp_path / "a.usda"
+    export_usd(path, asset=a.validate())
+    pv = UsdGeom.PrimvarsAPI(Usd.Stage.Open(str(path)).GetPrimAtPath("/Hair/Strands"))
+    np.testing.assert_array_equal(np.asarray(pv.GetPrimvar("groom_root_uv").Get()), a.root_uv)
+    np.testing.assert_array_equal(np.asarray(pv.GetPrimvar("groom_id").Get()), a.strand_ids)
+    assert pv.GetPrimvar("groom_id").GetInterpolation() == "uniform"
+
+
 def test_strands_export_and_options(tmp_path, small_strands):
     path = tmp_path / "s.usda"
     export_usd(path, strands=small_strands, groom=False)
