@@ -74,30 +74,39 @@ def nerf_camera(path: str | Path, frame: int = 0, width: int | None = None, heig
     if not -len(frames) <= frame < len(frames):
         raise CameraFileError(f"{path} has {len(frames)} frames; frame {frame} does not exist")
     entry = frames[frame]
+    if not isinstance(entry, dict):
+        raise CameraFileError(f"frame {frame} of {path} is not a JSON object")
     try:
         matrix = np.asarray(entry["transform_matrix"], np.float64)
     except (KeyError, TypeError, ValueError) as exc:
         raise CameraFileError(f"frame {frame} of {path} has no numeric 'transform_matrix'") from exc
     if matrix.shape != (4, 4) or not np.isfinite(matrix).all():
         raise CameraFileError(f"frame {frame} of {path}: transform_matrix must be a finite 4x4 matrix")
-    w = _check_size("width", width or entry.get("w") or meta.get("w") or DEFAULT_SIZE)
-    h = _check_size("height", height or entry.get("h") or meta.get("h") or DEFAULT_SIZE)
-    if "camera_angle_x" in meta:
-        cam = Camera.from_nerf(matrix, float(meta["camera_angle_x"]), w, h)
-    elif "fl_x" in meta:
-        src_w = float(meta.get("w", w))
-        cam = Camera.from_nerf(matrix, 2 * math.atan(src_w / (2 * float(meta["fl_x"]))), w, h)
-    else:
-        raise CameraFileError(f"{path} gives neither 'camera_angle_x' nor 'fl_x'")
-    return cam
+    try:
+        w = _check_size("width", width if width is not None else entry.get("w") or meta.get("w") or DEFAULT_SIZE)
+        h = _check_size("height", height if height is not None else entry.get("h") or meta.get("h") or DEFAULT_SIZE)
+    except (TypeError, ValueError) as exc:
+        raise CameraFileError(f"{path}: image size 'w'/'h' must be integers: {exc}") from exc
+    try:
+        if "camera_angle_x" in meta:
+            fov_x = float(meta["camera_angle_x"])
+        elif "fl_x" in meta:
+            fov_x = 2 * math.atan(float(meta.get("w", w)) / (2 * float(meta["fl_x"])))
+        else:
+            raise CameraFileError(f"{path} gives neither 'camera_angle_x' nor 'fl_x'")
+    except (TypeError, ValueError, ZeroDivisionError) as exc:
+        raise CameraFileError(f"{path}: the field of view is not a number: {exc}") from exc
+    if not 0 < fov_x < math.pi:
+        raise CameraFileError(f"{path}: horizontal field of view {fov_x} rad is outside (0, pi)")
+    return Camera.from_nerf(matrix, fov_x, w, h)
 
 
 def job_cameras(job: RenderJob, bounds: tuple[np.ndarray, np.ndarray], up_axis: str) -> list[Camera]:
     """The cameras a job renders: one, or ``turntable`` evenly spaced azimuths."""
     if job.transforms:
         return [nerf_camera(job.transforms, job.frame, job.width, job.height)]
-    w = _check_size("width", job.width or DEFAULT_SIZE)
-    h = _check_size("height", job.height or DEFAULT_SIZE)
+    w = _check_size("width", DEFAULT_SIZE if job.width is None else job.width)
+    h = _check_size("height", DEFAULT_SIZE if job.height is None else job.height)
     if not 1.0 <= job.fov <= 170.0:
         raise CghError(f"--fov must be between 1 and 170 degrees, got {job.fov}")
     ctl = OrbitController.framing(*bounds, up_axis=up_axis, fov_y=job.fov)
