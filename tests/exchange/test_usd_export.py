@@ -80,7 +80,8 @@ def test_optional_strand_ids_and_root_uvs(tmp_path):
     a.strand_ids = np.arange(a.n_strands, dtype=np.uint32)[::-1].copy()
     path = tmp_path / "a.usda"
     export_usd(path, asset=a.validate())
-    pv = UsdGeom.PrimvarsAPI(Usd.Stage.Open(str(path)).GetPrimAtPath("/Hair/Strands"))
+    stage = Usd.Stage.Open(str(path))  # keep the stage alive while its prims are used
+    pv = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath("/Hair/Strands"))
     np.testing.assert_array_equal(np.asarray(pv.GetPrimvar("groom_root_uv").Get()), a.root_uv)
     np.testing.assert_array_equal(np.asarray(pv.GetPrimvar("groom_id").Get()), a.strand_ids)
     assert pv.GetPrimvar("groom_id").GetInterpolation() == "uniform"
