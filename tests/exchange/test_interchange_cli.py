@@ -44,7 +44,8 @@ def test_export_verbs(tmp_path):
     assert g.count == cghair_format.read(cgh).n_gaussians
     splats = tmp_path / "g.usda"
     assert main(["export", str(ply), "-o", str(splats)]) == 0
-    assert Usd.Stage.Open(str(splats)).GetPrimAtPath("/Hair/Gaussians").IsValid()
+    splat_stage = Usd.Stage.Open(str(splats))
+    assert splat_stage.GetPrimAtPath("/Hair/Gaussians").GetTypeName() == "ParticleField3DGaussianSplat"
     strands_usd = tmp_path / "s.usdc"
     assert main(["convert", str(cgh), str(tmp_path / "s.npz")]) == 0
     assert main(["export", str(tmp_path / "s.npz"), "-o", str(strands_usd)]) == 0
