@@ -110,6 +110,8 @@ def save(strands: Strands, path: str | Path) -> None:
         raise StrandFileError(path, "TressFX needs the same point count in every strand: resample first "
                                     "(cgh convert --points N, or cghair_format.strands.resample)")
     n_per = int(counts[0])
+    if not 2 <= n_per <= MAX_POINTS:
+        raise StrandFileError(path, f"TressFX strands need 2..{MAX_POINTS} points, got {n_per}")
     xyzw = np.ones((len(strands.points), 4), "<f4")
     xyzw[:, :3] = strands.points
     xyzw.reshape(strands.count, n_per, 4)[:, :2, 3] = 0.0  # roots are immovable (zero inverse mass)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from cghair_format.exchange import load_strands, save_strands, writable_extensions
 from cghair_format.strands import resample
@@ -50,3 +52,20 @@ def test_tfx_refuses_unequal_point_counts(tmp_path, small_strands):
 
     with pytest.raises(StrandFileError, match="resample first"):
         save_strands(small_strands, tmp_path / "x.tfx")
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(counts=st.lists(st.integers(1, 12), min_size=1, max_size=8), seed=st.integers(0, 2**16))
+def test_binary_formats_roundtrip_any_strand_lengths(tmp_path, counts, seed):
+    from cghair_format.strands import Strands
+
+    rng = np.random.default_rng(seed)
+    off = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    pts = (rng.normal(size=(off[-1], 3)) * 10 ** rng.uniform(-3, 3)).astype(np.float32)
+    s = Strands(pts, off)
+    for ext in (".hair", ".data", ".ply", ".npz"):
+        path = tmp_path / f"h{ext}"
+        save_strands(s, path)
+        back = load_strands(path)
+        np.testing.assert_array_equal(back.offsets, off)
+        np.testing.assert_array_equal(back.points, pts)
