@@ -106,8 +106,9 @@ def _curves(path, curves, time):
             break
     colors = None
     if color_pv is not None:
-        colors = _per_point(path, prim_path, np.asarray(color_pv.ComputeFlattened(time), np.float64)
-                            .reshape(-1, 3), color_pv.GetInterpolation(), cnt, plan, ctype)
+        raw = np.asarray(color_pv.ComputeFlattened(time), np.float64)
+        raw = raw.reshape(len(raw), -1)[:, :3]  # color3f, or color4f (Blender writes groom_color as RGBA)
+        colors = _per_point(path, prim_path, raw, color_pv.GetInterpolation(), cnt, plan, ctype)
         colors = np.clip(colors, 0, 1).astype(np.float32)
     widths = None
     wattr = curves.GetWidthsAttr()
