@@ -124,3 +124,15 @@ def test_npz_equal_length_array(tmp_path):
 def test_strands_validate_catches_bad_offsets():
     with pytest.raises(Exception, match="offsets"):
         Strands(np.zeros((3, 3), np.float32), np.array([0, 2], np.int64)).validate()
+
+
+def test_strand_ply_opens_in_an_independent_reader(tmp_path, small_strands):
+    """trimesh reads our hapPLY-layout file as a 3D path with one entity per strand."""
+    trimesh = pytest.importorskip("trimesh")
+    path = tmp_path / "s.ply"
+    save_strands(small_strands, path)
+    loaded = trimesh.load(path, process=False)
+    np.testing.assert_array_equal(np.asarray(loaded.vertices, np.float32), small_strands.points)
+    raw = loaded.metadata["_ply_raw"]
+    np.testing.assert_array_equal(raw["strand"]["data"]["nsegs"], small_strands.point_counts - 1)
+    assert len(raw["edge"]["data"]) == len(small_strands.points) - small_strands.count

@@ -69,3 +69,16 @@ def test_rejects_non_3dgs_ply(tmp_path):
     bad.write_bytes(data[: len(data) - 10])
     with pytest.raises(StrandFileError, match="truncated"):
         read_3dgs_ply(bad)
+
+
+def test_an_independent_ply_reader_opens_it(tmp_path):
+    """trimesh's PLY reader (not ours) sees every Gaussian and every 3DGS property."""
+    trimesh = pytest.importorskip("trimesh")
+    g = _gaussians(n=50, deg=3, seed=4)
+    path = tmp_path / "g.ply"
+    write_3dgs_ply(g, path)
+    cloud = trimesh.load(path)
+    np.testing.assert_array_equal(np.asarray(cloud.vertices, np.float32), g.means)
+    raw = cloud.metadata["_ply_raw"]["vertex"]["data"]
+    np.testing.assert_array_equal(raw["f_rest_44"], g.sh[:, 15, 2])
+    np.testing.assert_array_equal(raw["rot_3"], g.rotations[:, 3])
