@@ -16,6 +16,8 @@ def test_style_shape(style):
     assert (s.meters_per_unit, s.up_axis) == (1.0, "Y")
     a = s.to_array()
     assert not inside_head(s.points).any(), "a strand enters the head"
+    for f in (0.25, 0.5, 0.75):  # nor do the segments between points cut through it
+        assert not inside_head(a[:, :-1] * (1 - f) + a[:, 1:] * f).any()
     # roots sit on the scalp: just outside the head, in its upper/back part
     rel = np.linalg.norm(a[:, 0] / HEAD_RADII, axis=1)
     assert (rel < 1.05).all()
