@@ -98,8 +98,7 @@ def _arclength_resample(points: np.ndarray, offsets: np.ndarray, n: int,
     hi = np.searchsorted(key, qkey, side="left")
     start = np.repeat(offsets[:-1], n)
     end = np.repeat(offsets[1:] - 1, n)
-    hi = np.clip(hi, start + 1, end) if n else hi
-    hi = np.minimum(hi, end)
+    hi = np.minimum(np.maximum(hi, start + 1), end)  # a one-point strand gets hi == lo == its point
     lo = np.maximum(hi - 1, start)
     span = key[hi] - key[lo]
     w = np.where(span > 0, (qkey - key[lo]) / np.where(span > 0, span, 1), 0.0)[:, None]
