@@ -1,0 +1,59 @@
+"""Image losses and metrics: L1, SSIM / D-SSIM, alpha loss, opacity smoothness, PSNR."""
+
+from __future__ import annotations
+
+import math
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+
+SSIM_WINDOW = 11
+SSIM_SIGMA = 1.5
+SSIM_C1 = 0.01 ** 2
+SSIM_C2 = 0.03 ** 2
+
+
+def _gaussian_window(dtype: torch.dtype, device: torch.device) -> Tensor:
+    x = torch.arange(SSIM_WINDOW, dtype=dtype, device=device) - SSIM_WINDOW // 2
+    g = torch.exp(-(x * x) / (2 * SSIM_SIGMA ** 2))
+    g = g / g.sum()
+    return (g[:, None] * g[None, :]).expand(3, 1, SSIM_WINDOW, SSIM_WINDOW).contiguous()
+
+
+def ssim(a: Tensor, b: Tensor) -> Tensor:
+    """Mean SSIM of two images ``[H, W, 3]`` in [0, 1] (11x11 Gaussian window, sigma 1.5, as 3DGS)."""
+    x = a.permute(2, 0, 1)[None]
+    y = b.permute(2, 0, 1)[None]
+    w = _gaussian_window(a.dtype, a.device)
+    pad = SSIM_WINDOW // 2
+
+    def blur(t: Tensor) -> Tensor:
+        return F.conv2d(t, w, padding=pad, groups=3)
+
+    mx, my = blur(x), blur(y)
+    sxx = blur(x * x) - mx * mx
+    syy = blur(y * y) - my * my
+    sxy = blur(x * y) - mx * my
+    num = (2 * mx * my + SSIM_C1) * (2 * sxy + SSIM_C2)
+    den = (mx * mx + my * my + SSIM_C1) * (sxx + syy + SSIM_C2)
+    return (num / den).mean()
+
+
+def l1(a: Tensor, b: Tensor) -> Tensor:
+    return (a - b).abs().mean()
+
+
+def psnr(a: Tensor, b: Tensor) -> float:
+    mse = float(((a.detach() - b.detach()) ** 2).mean())
+    return float("inf") if mse == 0 else -10.0 * math.log10(mse)
+
+
+def opacity_smoothness(opacity: Tensor) -> Tensor:
+    """Mean absolute change of opacity between neighbouring segments of a strand ``[S, P-1]``."""
+    return (opacity[:, 1:] - opacity[:, :-1]).abs().mean()
+
+
+def image_loss(rgb: Tensor, target: Tensor, lambda_dssim: float) -> Tensor:
+    """``(1 - lambda) L1 + lambda (1 - SSIM)``, the 3DGS photometric loss."""
+    return (1 - lambda_dssim) * l1(rgb, target) + lambda_dssim * (1 - ssim(rgb, target))

@@ -1,0 +1,290 @@
+"""The training loop: dataset + cards -> trained model -> .cgh, with checkpoints and resume."""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from cghair_format.asset import HairAsset
+from cghair_format.errors import CghError
+from cghair_format.strands import Strands
+
+from . import losses
+from .config import TrainConfig
+from .dataset import Dataset, View, read_dataset
+from .model import HairModel, tau_at
+from .splatter import render
+
+CHECKPOINT_VERSION = 1
+EXPORT_PROBE_VIEWS = 4  # training views used to choose hard or soft weights at export
+STAGES = ("model", "render", "loss", "backward", "step")
+
+
+class TrainError(CghError, ValueError):
+    """Training cannot start or resume with these inputs."""
+
+
+@dataclass
+class TrainResult:
+    model: HairModel
+    base: HairAsset  # the card-built asset the model started from
+    config: TrainConfig
+    asset: HairAsset | None = None  # the exported asset (None for variants without a .cgh encoding)
+    weight_mode: str | None = None  # "soft" or "hard", chosen by measurement
+    export_psnr: dict = field(default_factory=dict)  # weight mode -> PSNR on the probe views
+    history: list[dict] = field(default_factory=list)  # iteration, loss, psnr
+    seconds: float = 0.0
+    stage_seconds: dict = field(default_factory=dict)
+    iterations_run: int = 0
+    out_path: Path | None = None
+
+
+def base_asset(config: TrainConfig, strands: Strands | str | Path | None = None,
+               cards: HairAsset | str | Path | None = None, progress: bool = True) -> HairAsset:
+    """The untrained asset: ``cards`` as given (a .cgh path or HairAsset), else cards built from
+    ``strands`` (a Strands or any file :func:`cghair_format.exchange.load_strands` reads)."""
+    if cards is not None:
+        if isinstance(cards, HairAsset):
+            return cards.validate()
+        from cghair_format import read
+
+        return read(cards)
+    if strands is None:
+        raise TrainError("training needs strands (to build cards from) or a .cgh with cards")
+    if not isinstance(strands, Strands):
+        path = Path(strands)
+        if path.suffix.lower() == ".cgh":
+            return base_asset(config, cards=path, progress=progress)
+        from cghair_format.exchange import load_strands
+
+        strands = load_strands(path)
+    from cghair_format.cards import build_cards
+
+    build = build_cards(strands, n_cards=config.n_cards, n_groups=config.n_groups,
+                        segments=config.card_segments, points=config.points_per_strand, seed=config.seed,
+                        progress=progress, sh_degree=config.sh_degree, log=None)
+    return build.asset
+
+
+def _targets(views: list[View], background) -> tuple[torch.Tensor, torch.Tensor]:
+    rgb = np.stack([v.premultiplied(background) for v in views]).astype(np.float32)
+    mask = np.stack([v.image[..., 3] for v in views]).astype(np.float32)
+    return torch.as_tensor(rgb), torch.as_tensor(mask)
+
+
+def mean_hair_colour(views: list[View]) -> tuple[float, float, float]:
+    img = np.stack([v.image for v in views])
+    a = img[..., 3:4]
+    total = float(a.sum())
+    if total <= 0:
+        return (0.3, 0.2, 0.12)
+    return tuple(float(x) for x in (img[..., :3] * a).sum((0, 1, 2)) / total)
+
+
+def _scene_scale(asset: HairAsset) -> float:
+    spine = asset.cards.spine.reshape(-1, 3)
+    return float(np.linalg.norm(spine.max(0) - spine.min(0))) or 1.0
+
+
+def _lr_factor(config: TrainConfig, iteration: int) -> float:
+    frac = min(1.0, iteration / max(1, config.iterations))
+    return config.lr_final_factor ** frac
+
+
+def save_checkpoint(path: Path, *, model: HairModel, optimizer: torch.optim.Optimizer, config: TrainConfig,
+                    base: HairAsset, iteration: int, history: list[dict], dataset: str) -> None:
+    from cghair_format import encode
+
+    state = {
+        "version": CHECKPOINT_VERSION, "iteration": iteration, "config": config.to_dict(),
+        "model": model.state_dict(), "optimizer": optimizer.state_dict(),
+        "base_cgh": encode(base, "lossless")[0], "history": history, "dataset": dataset,
+        "rng": torch.get_rng_state(),
+    }
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    torch.save(state, tmp)
+    tmp.replace(path)
+
+
+def load_checkpoint(path: str | Path) -> dict:
+    path = Path(path)
+    if not path.is_file():
+        raise TrainError(f"checkpoint {path} does not exist")
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # torch raises several unrelated types for a bad file
+        raise TrainError(f"{path} is not a readable training checkpoint ({type(exc).__name__}: {exc})") from exc
+    if not isinstance(state, dict) or state.get("version") != CHECKPOINT_VERSION:
+        got = state.get("version") if isinstance(state, dict) else "?"
+        raise TrainError(f"{path}: unsupported checkpoint version {got}"
+                         f" (this trainer reads version {CHECKPOINT_VERSION})")
+    return state
+
+
+def render_model(model: HairModel, camera, mode: str, tau: float, background) -> torch.Tensor:
+    with torch.no_grad():
+        return render(*model(mode, tau), camera, tuple(background)).rgb
+
+
+def choose_export(model: HairModel, base: HairAsset, views: list[View], config: TrainConfig,
+                  profile: str) -> tuple[HairAsset | None, str | None, dict]:
+    """Export with hard and with soft weights, decode each through the codec with ``profile``, and
+    keep the one with the higher PSNR on a few training views."""
+    from cghair_format import decode, decode_gaussians, encode
+
+    from .splatter import render_gaussians
+
+    if model.variant in ("unique", "single-sh"):
+        return None, None, {}
+    tau = tau_at(config, config.iterations)
+    probe = views[:: max(1, len(views) // EXPORT_PROBE_VIEWS)][:EXPORT_PROBE_VIEWS]
+    target, _ = _targets(probe, config.background)
+    scores, assets = {}, {}
+    for mode in ("hard", "soft"):
+        asset = model.to_asset(base, mode, tau)
+        g = decode_gaussians(decode(encode(asset, profile)[0]))
+        rgbs = [render_gaussians(g, v.camera, tuple(config.background))["rgb"] for v in probe]
+        scores[mode] = losses.psnr(torch.as_tensor(np.stack(rgbs)), target)
+        assets[mode] = asset
+    best = max(scores, key=scores.get)
+    return assets[best], best, scores
+
+
+def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None = None,
+          cards: HairAsset | str | Path | None = None, out: str | Path | None = None,
+          config: TrainConfig | None = None, resume: str | Path | None = None,
+          checkpoint: str | Path | None = None, profile: str = "compact", progress: bool = True,
+          log=None, threads: int | None = None) -> TrainResult:
+    """Fit the model to the dataset's training views and write ``out`` (.cgh) if given.
+
+    ``checkpoint`` (default ``<out>.ckpt.pt``) is written every ``config.checkpoint_every``
+    iterations and at the end; ``resume`` continues from one (its config wins, except
+    ``iterations`` when ``config`` is given). The config and final figures are saved in
+    ``asset.metadata["training"]`` and as ``<out>.train.json``.
+    """
+    log = log if log is not None else sys.stderr
+    if threads:
+        torch.set_num_threads(threads)
+    ds = dataset if isinstance(dataset, Dataset) else read_dataset(dataset)
+    dataset_name = str(dataset) if not isinstance(dataset, Dataset) else "<in memory>"
+    state = None
+    if resume is not None:
+        state = load_checkpoint(resume)
+        cfg = TrainConfig.from_dict(state["config"])
+        if config is not None:
+            cfg.iterations = config.iterations
+        config = cfg
+        from cghair_format import decode
+
+        base = decode(state["base_cgh"])
+    else:
+        config = (config or TrainConfig()).validate()
+        base = base_asset(config, strands, cards, progress)
+    torch.manual_seed(config.seed)
+    model = HairModel(base, config, mean_hair_colour(ds.train))
+    optimizer = torch.optim.Adam(model.param_groups(config, _scene_scale(base)), eps=1e-15)
+    base_lr = {g["name"]: g["lr"] for g in optimizer.param_groups}
+    history: list[dict] = []
+    start = 0
+    if state is not None:
+        model.load_state_dict(state["model"])
+        optimizer.load_state_dict(state["optimizer"])
+        history = list(state["history"])
+        start = int(state["iteration"])
+        torch.set_rng_state(state["rng"])
+    out_path = Path(out) if out is not None else None
+    ckpt_path = Path(checkpoint) if checkpoint else (out_path.with_suffix(".ckpt.pt") if out_path else None)
+
+    targets, masks = _targets(ds.train, config.background)
+    n_views = len(ds.train)
+    gen = np.random.default_rng(config.seed + start)
+    order = gen.permutation(n_views)
+    stage = dict.fromkeys(STAGES, 0.0)
+    t_start = time.perf_counter()
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=config.iterations, initial=start, desc=f"train {config.variant}", unit="it", file=log)
+    running_loss, running_psnr = [], []
+    it = start
+    for it in range(start, config.iterations):
+        geometry_on = it >= config.geometry_frozen_iters
+        model.set_geometry_trainable(geometry_on)
+        factor = _lr_factor(config, it)
+        for g in optimizer.param_groups:
+            decays = g["name"] in ("mlp", "codebook", "sh")
+            g["lr"] = base_lr[g["name"]] * (factor if decays else 1.0)
+            if g["name"] in ("uv", "delta") and not geometry_on:
+                g["lr"] = 0.0
+        v = int(order[it % n_views])
+        if it % n_views == n_views - 1:
+            order = gen.permutation(n_views)
+        tau = tau_at(config, it)
+
+        t0 = time.perf_counter()
+        gauss = model("gumbel", tau)
+        t1 = time.perf_counter()
+        out_img = render(*gauss, ds.train[v].camera, tuple(config.background))
+        t2 = time.perf_counter()
+        loss = (losses.image_loss(out_img.rgb, targets[v], config.lambda_dssim)
+                + config.lambda_alpha * losses.l1(out_img.alpha, masks[v])
+                + config.lambda_opacity_smooth * losses.opacity_smoothness(model.opacities()))
+        t3 = time.perf_counter()
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        t4 = time.perf_counter()
+        optimizer.step()
+        t5 = time.perf_counter()
+        for name, dt in zip(STAGES, (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4), strict=True):
+            stage[name] += dt
+        if not torch.isfinite(loss.detach()):
+            raise TrainError(f"the loss became {float(loss.detach())} at iteration {it}; lower the learning rates")
+        running_loss.append(float(loss.detach()))
+        running_psnr.append(losses.psnr(out_img.rgb, targets[v]))
+        if (it + 1) % config.log_every == 0 or it + 1 == config.iterations:
+            rec = {"iteration": it + 1, "loss": float(np.mean(running_loss)), "psnr": float(np.mean(running_psnr)),
+                   "tau": tau}
+            history.append(rec)
+            running_loss, running_psnr = [], []
+            if bar is not None:
+                bar.set_postfix(loss=f"{rec['loss']:.4f}", psnr=f"{rec['psnr']:.2f}")
+        if bar is not None:
+            bar.update(1)
+        if ckpt_path is not None and (it + 1) % config.checkpoint_every == 0:
+            save_checkpoint(ckpt_path, model=model, optimizer=optimizer, config=config, base=base,
+                            iteration=it + 1, history=history, dataset=dataset_name)
+    if bar is not None:
+        bar.close()
+    seconds = time.perf_counter() - t_start
+    iterations_run = max(0, config.iterations - start)
+    if ckpt_path is not None:
+        save_checkpoint(ckpt_path, model=model, optimizer=optimizer, config=config, base=base,
+                        iteration=max(start, config.iterations), history=history, dataset=dataset_name)
+
+    result = TrainResult(model, base, config, history=history, seconds=seconds, stage_seconds=stage,
+                         iterations_run=iterations_run, out_path=out_path)
+    asset, mode, scores = choose_export(model, base, ds.train, config, profile)
+    result.asset, result.weight_mode, result.export_psnr = asset, mode, scores
+    summary = {
+        "config": config.to_dict(), "dataset": dataset_name, "iterations_run": iterations_run,
+        "seconds": round(seconds, 3), "stage_seconds": {k: round(v, 3) for k, v in stage.items()},
+        "final": history[-1] if history else None, "weight_mode": mode, "export_psnr": scores,
+        "appearance_parameters": model.appearance_parameters(), "gaussians": model.n_strands * (model.n_points - 1),
+    }
+    if asset is not None:
+        asset.metadata["training"] = summary
+    if out_path is not None:
+        out_path.parent.mkdir(parents=True, exist_ok=True)
+        out_path.with_suffix(".train.json").write_text(json.dumps(summary, indent=2) + "\n")
+        if asset is not None:
+            from cghair_format import write
+
+            write(asset, out_path, profile)
+    return result
