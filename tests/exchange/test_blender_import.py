@@ -8,24 +8,21 @@ FAILS (CI installs bpy; deselect locally with ``-m "not blender"``).
 
 from __future__ import annotations
 
-import importlib.util
 import json
-import os
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from cghair_format.examples import example_asset
+from cghair_format.exchange.blender import BlenderNotFoundError, find_blender_python
 from cghair_format.exchange.cgh_strands import strand_colors
 from cghair_format.exchange.usd_export import export_usd
 from cghair_format.gaussians import decode_points
 from cghair_format.geometry import card_mesh
 from cghair_format.synth import synthesize
 
-REPO = Path(__file__).resolve().parents[2]
 RTOL = 1e-5  # positions must agree to 1e-5 of the model's bounding-box diagonal
 
 BLENDER_SCRIPT = r"""
@@ -68,15 +65,10 @@ print("CGH_REPORT " + json.dumps(report))
 
 
 def blender_python() -> str:
-    candidates = [os.environ.get("CGH_BLENDER_PYTHON"), str(REPO / ".venv" / "blender" / "bin" / "python")]
-    for c in candidates:
-        if c and Path(c).exists():
-            return c
-    if importlib.util.find_spec("bpy") is not None:
-        return sys.executable
-    pytest.fail("bpy (Blender 5.0 as a Python module) is not installed: run `make blender` (creates "
-                ".venv/blender with bpy==5.0.*) or set CGH_BLENDER_PYTHON to a Python that has bpy. "
-                "Deselect this test with -m 'not blender'.")
+    try:
+        return find_blender_python()
+    except BlenderNotFoundError as exc:
+        pytest.fail(f"{exc}. Deselect this test with -m 'not blender'.")
 
 
 def run_blender(jobs: list[tuple[Path, Path]]) -> dict:
@@ -183,3 +175,9 @@ def test_curves_blender_writes_load_back(tmp_path, kind, step):
     np.testing.assert_allclose(back.points[at_points], strands.points @ Y_UP_TO_Z_UP.T, rtol=0, atol=RTOL * scale)
     np.testing.assert_allclose(back.colors[at_points], strands.colors, atol=1e-6)
     np.testing.assert_allclose(back.widths[at_points], strands.widths, rtol=1e-6)
+
+
+def test_missing_blender_is_a_clear_error(monkeypatch, tmp_path):
+    monkeypatch.setenv("CGH_BLENDER_PYTHON", str(tmp_path / "no-python"))
+    with pytest.raises(BlenderNotFoundError, match="does not exist"):
+        find_blender_python()
