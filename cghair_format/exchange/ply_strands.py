@@ -30,6 +30,9 @@ def load(path: str | Path, points_per_strand: int | None = None) -> Strands:
     if vertex is None or not {"x", "y", "z"} <= set(vertex.data):
         raise StrandFileError(path, "PLY file has no 'vertex' element with x, y, z")
     v = vertex.data
+    if "f_dc_0" in v and "strand" not in ply.elements:
+        raise StrandFileError(path, "this is a 3D Gaussian splat PLY, not strands: read it with "
+                                    "read_3dgs_ply, or convert it with cgh export FILE -o out.usda")
     points = np.stack([v["x"], v["y"], v["z"]], 1).astype(np.float32)
     n = len(points)
     counts = _strand_counts(path, ply, v, n, points_per_strand)

@@ -112,6 +112,9 @@ def save(strands: Strands, path: str | Path) -> None:
     n_per = int(counts[0])
     if not 2 <= n_per <= MAX_POINTS:
         raise StrandFileError(path, f"TressFX strands need 2..{MAX_POINTS} points, got {n_per}")
+    if n_per < 4 or n_per > 64 or n_per & (n_per - 1):
+        warnings.warn(f"{path}: TressFX runtimes expect 4, 8, 16, 32 or 64 points per strand, writing {n_per}; "
+                      "resample with cgh convert --points", stacklevel=3)
     xyzw = np.ones((len(strands.points), 4), "<f4")
     xyzw[:, :3] = strands.points
     xyzw.reshape(strands.count, n_per, 4)[:, :2, 3] = 0.0  # roots are immovable (zero inverse mass)

@@ -40,6 +40,8 @@ def test_tressfx_version_3_binary(tmp_path, small_strands):
     s = resample(small_strands, 4)
     path = tmp_path / "v3.tfx"
     save_strands(s, path)
+    with pytest.warns(UserWarning, match="4, 8, 16, 32 or 64"):
+        save_strands(resample(small_strands, 5), tmp_path / "odd.tfx")
     raw = bytearray(path.read_bytes())
     raw[0:4] = struct.pack("<f", 3.0)
     path.write_bytes(bytes(raw))

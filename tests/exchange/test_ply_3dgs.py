@@ -82,3 +82,12 @@ def test_an_independent_ply_reader_opens_it(tmp_path):
     raw = cloud.metadata["_ply_raw"]["vertex"]["data"]
     np.testing.assert_array_equal(raw["f_rest_44"], g.sh[:, 15, 2])
     np.testing.assert_array_equal(raw["rot_3"], g.rotations[:, 3])
+
+
+def test_strand_loader_names_a_splat_file(tmp_path):
+    from cghair_format.exchange import load_strands
+
+    path = tmp_path / "g.ply"
+    write_3dgs_ply(_gaussians(), path)
+    with pytest.raises(StrandFileError, match="Gaussian splat PLY, not strands"):
+        load_strands(path)
