@@ -5,7 +5,9 @@ hapPLY (CT2Hair, hairutil): ``vertex`` (x, y, z, optional red/green/blue, option
 (vertex1, vertex2; redundant with ``strand``). Files with only ``edge`` are split where
 consecutive vertices are not joined by an edge. Vertex-only files (GaussianHaircut) hold strands
 of one fixed point count: given by ``points_per_strand``, else a ``comment points_per_strand N``
-header line, else 100 (GaussianHaircut's count) when it divides the vertex count.
+header line, else 100 when it divides the vertex count (GaussianHaircut's
+``src/preprocessing/export_curves.py`` writes ``L = 100`` points per strand as float
+``x y z nx ny nz`` with zero normals).
 PLY names no units or up axis.
 """
 

@@ -72,7 +72,8 @@ def _vertex_cols(points: np.ndarray) -> dict:
 def test_ply_vertex_only_fixed_count(tmp_path):
     pts = np.random.default_rng(0).normal(size=(5 * 100, 3)).astype(np.float32)
     path = tmp_path / "gh.ply"
-    write_ply(path, [("vertex", _vertex_cols(pts))])
+    zeros = np.zeros(len(pts), np.float32)  # GaussianHaircut's layout: x y z nx ny nz, 100 points a strand
+    write_ply(path, [("vertex", _vertex_cols(pts) | {"nx": zeros, "ny": zeros, "nz": zeros})])
     s = load_strands(path)  # GaussianHaircut's 100 points per strand
     assert s.count == 5 and set(s.point_counts) == {100}
     s = load_strands(path, points_per_strand=50)
