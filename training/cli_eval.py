@@ -1,0 +1,34 @@
+"""``cgh eval FILE.cgh DIR``: PSNR and SSIM (and LPIPS when its weights load offline) on the
+dataset's held-out views, with side-by-side PNGs (ground truth | render | 4 x difference)."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("file", metavar="FILE.cgh", help="trained .cgh file")
+    p.add_argument("dataset", metavar="DIR", help="NeRF-synthetic dataset folder")
+    p.add_argument("--split", choices=("test", "train"), default="test", help="views to evaluate (default: test)")
+    p.add_argument("--out", default=None, help="folder for side-by-side PNGs and metrics.json "
+                   "(default: FILE.eval next to the file)")
+    p.add_argument("--no-lpips", action="store_true", help="do not try LPIPS")
+    p.add_argument("--threads", type=int, default=None, help="torch CPU threads")
+
+
+def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from .evaluate import evaluate
+
+    if args.threads:
+        import torch
+
+        torch.set_num_threads(args.threads)
+    out = Path(args.out) if args.out else Path(args.file).with_suffix(".eval")
+    result = evaluate(args.file, args.dataset, out, split=args.split, use_lpips=not args.no_lpips)
+    print(f"{args.file} on {args.dataset} ({args.split}): {result.summary()}")
+    for rec in result.per_view:
+        print(f"  {rec['view']}: PSNR {rec['psnr']:.2f} dB, SSIM {rec['ssim']:.4f}")
+    print(f"side-by-side images and metrics.json in {out}")
+    return 0

@@ -1,0 +1,124 @@
+"""Evaluation on held-out views: PSNR, SSIM, LPIPS when its weights are available offline, and
+side-by-side images (ground truth | render | 4 x absolute difference)."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from cghair_format.asset import HairAsset
+
+from . import losses
+from .dataset import Dataset, View, read_dataset
+
+DIFF_GAIN = 4.0
+
+
+@dataclass
+class EvalResult:
+    psnr: float  # mean over views
+    ssim: float
+    lpips: float | None
+    lpips_note: str  # why LPIPS is missing, or which network
+    per_view: list[dict] = field(default_factory=list)
+    images: list[Path] = field(default_factory=list)
+
+    def summary(self) -> str:
+        lp = f"{self.lpips:.4f}" if self.lpips is not None else f"skipped ({self.lpips_note})"
+        return (f"{len(self.per_view)} views: PSNR {self.psnr:.2f} dB, SSIM {self.ssim:.4f}, LPIPS {lp}")
+
+    def to_dict(self) -> dict:
+        return {"psnr": self.psnr, "ssim": self.ssim, "lpips": self.lpips, "lpips_note": self.lpips_note,
+                "per_view": self.per_view, "images": [str(p) for p in self.images]}
+
+
+def _lpips_model() -> tuple[Callable | None, str]:
+    """An LPIPS network if the ``lpips`` package and its weights can be loaded without a download."""
+    try:
+        import lpips  # noqa: F401
+    except ImportError:
+        return None, "the 'lpips' package is not installed"
+    try:
+        import lpips
+
+        net = lpips.LPIPS(net="alex", verbose=False, pretrained=True)
+    except Exception as exc:  # no network: torchvision cannot fetch the backbone weights
+        return None, f"its weights cannot be loaded offline ({type(exc).__name__})"
+    return net, "alex"
+
+
+def _side_by_side(gt: np.ndarray, pred: np.ndarray) -> np.ndarray:
+    diff = np.clip(np.abs(gt - pred) * DIFF_GAIN, 0, 1)
+    return (np.concatenate([gt, np.clip(pred, 0, 1), diff], axis=1) * 255 + 0.5).astype(np.uint8)
+
+
+def evaluate_renders(render_fn: Callable[[View], np.ndarray], views: list[View], out_dir: str | Path | None = None,
+                     background=(0.0, 0.0, 0.0), use_lpips: bool = True) -> EvalResult:
+    """Metrics of ``render_fn(view) -> rgb [H, W, 3]`` against each view composited on ``background``."""
+    from PIL import Image
+
+    net, note = _lpips_model() if use_lpips else (None, "disabled")
+    out = Path(out_dir) if out_dir is not None else None
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+    per_view, images = [], []
+    for i, view in enumerate(views):
+        gt = view.premultiplied(background).astype(np.float32)
+        pred = np.asarray(render_fn(view), np.float32)
+        a, b = torch.as_tensor(pred), torch.as_tensor(gt)
+        rec = {"view": view.name or str(i), "psnr": losses.psnr(a.clamp(0, 1), b),
+               "ssim": float(losses.ssim(a.clamp(0, 1), b))}
+        if net is not None:
+            with torch.no_grad():
+                x = a.clamp(0, 1).permute(2, 0, 1)[None] * 2 - 1
+                y = b.permute(2, 0, 1)[None] * 2 - 1
+                rec["lpips"] = float(net(x, y))
+        per_view.append(rec)
+        if out is not None:
+            path = out / f"{view.name or f'view_{i:03d}'}_gt_render_diff.png"
+            Image.fromarray(_side_by_side(gt, pred)).save(path)
+            images.append(path)
+    if not per_view:
+        raise ValueError("no views to evaluate")
+    mean = {k: float(np.mean([r[k] for r in per_view])) for k in ("psnr", "ssim")}
+    lp = float(np.mean([r["lpips"] for r in per_view])) if net is not None else None
+    return EvalResult(mean["psnr"], mean["ssim"], lp, note, per_view, images)
+
+
+def evaluate(cgh: str | Path | HairAsset, dataset: str | Path | Dataset, out_dir: str | Path | None = None,
+             split: str = "test", background=(0.0, 0.0, 0.0), use_lpips: bool = True) -> EvalResult:
+    """Render a .cgh (decoded exactly as stored) at the dataset's ``split`` views and compare."""
+    from cghair_format import decode_gaussians, read
+
+    from .splatter import render_gaussians
+
+    asset = cgh if isinstance(cgh, HairAsset) else read(cgh)
+    ds = dataset if isinstance(dataset, Dataset) else read_dataset(dataset)
+    g = decode_gaussians(asset)
+    result = evaluate_renders(lambda v: render_gaussians(g, v.camera, tuple(background))["rgb"],
+                              ds.split(split), out_dir, background, use_lpips)
+    if out_dir is not None:
+        (Path(out_dir) / "metrics.json").write_text(json.dumps(result.to_dict(), indent=2) + "\n")
+    return result
+
+
+def evaluate_model(model, views: list[View], mode: str = "soft", tau: float = 0.1, background=(0.0, 0.0, 0.0),
+                   out_dir: str | Path | None = None, use_lpips: bool = False) -> EvalResult:
+    """Metrics of a torch :class:`training.model.HairModel` (for variants without a .cgh encoding)."""
+    from .splatter import render
+
+    if model.variant in ("unique", "single-sh"):
+        mode = "soft"  # no weights involved
+    with torch.no_grad():
+        gauss = model(mode, tau)
+
+    def fn(view: View) -> np.ndarray:
+        with torch.no_grad():
+            return render(*gauss, view.camera, tuple(background)).rgb.numpy()
+
+    return evaluate_renders(fn, views, out_dir, background, use_lpips)
