@@ -5,9 +5,10 @@ Layout (``/Hair`` is the default prim, an Xform with Unreal's ``GroomAPI`` appli
 
 - ``/Hair/Strands``: linear BasisCurves with ``widths``, ``primvars:displayColor`` (the
   view-independent colour: SH band 0) and ``primvars:displayOpacity`` per vertex, plus the groom
-  primvars Unreal's groom importer reads (``groom_color``, ``groom_width``, ``groom_group_id``
-  per curve, ``groom_guide``, and per curve ``groom_id`` / ``groom_root_uv`` where the asset has
-  strand ids / root UVs). These follow Unreal's groom attribute names (its Alembic groom schema).
+  primvars Unreal's groom importer reads: per vertex ``groom_color``, ``groom_width``; per curve
+  ``groom_group_id``, ``groom_guide`` (0: rendered strand), and ``groom_id`` / ``groom_root_uv``
+  where the asset has strand ids / root UVs; constant ``groom_version_major/minor`` (1, 5). The
+  names follow Unreal's groom attribute schema (documented for Alembic grooms).
 - ``/Hair/Cards``: the card strips as a triangle Mesh with normals and ``primvars:st`` UVs.
 - ``/Hair/Gaussians``: ``UsdVol.ParticleField3DGaussianSplat`` (usd-core >= 26): positions,
   orientations, scales (standard deviations), opacities in [0, 1] and SH coefficients
@@ -31,6 +32,7 @@ from ..strands import Strands
 
 EXTENSIONS = (".usd", ".usda", ".usdc", ".usdz")
 ROOT = "/Hair"
+GROOM_VERSION = (1, 5)  # Unreal's groom attribute schema version (groom_version_major/minor)
 
 
 def export_usd(path: str | Path, *, asset: HairAsset | None = None, strands: Strands | None = None,
@@ -149,7 +151,10 @@ def write_curves(stage, prim_path: str, strands: Strands, *, opacity: np.ndarray
                 Vt.FloatArray.FromNumpy(np.ascontiguousarray(strands.widths, np.float32)))
         gid = np.zeros(strands.count, np.int32) if group is None else np.asarray(group, np.int32)
         api.CreatePrimvar("groom_group_id", Sdf.ValueTypeNames.IntArray, uniform).Set(Vt.IntArray.FromNumpy(gid))
-        api.CreatePrimvar("groom_guide", Sdf.ValueTypeNames.Int, constant).Set(0)
+        api.CreatePrimvar("groom_guide", Sdf.ValueTypeNames.IntArray, uniform).Set(  # all rendered strands
+            Vt.IntArray.FromNumpy(np.zeros(strands.count, np.int32)))
+        for name, value in (("groom_version_major", GROOM_VERSION[0]), ("groom_version_minor", GROOM_VERSION[1])):
+            api.CreatePrimvar(name, Sdf.ValueTypeNames.Int, constant).Set(value)
         if strand_ids is not None:
             api.CreatePrimvar("groom_id", Sdf.ValueTypeNames.IntArray, uniform).Set(
                 Vt.IntArray.FromNumpy(np.asarray(strand_ids).astype(np.int32)))

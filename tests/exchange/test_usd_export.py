@@ -52,6 +52,8 @@ def test_asset_export_all(tmp_path, asset, ext):
     np.testing.assert_array_equal(np.asarray(pv.GetPrimvar("groom_color").Get()), color)
     groups = np.asarray(pv.GetPrimvar("groom_group_id").Get())
     np.testing.assert_array_equal(groups, asset.cards.group[asset.strand_card])
+    assert list(pv.GetPrimvar("groom_guide").Get()) == [0] * asset.n_strands
+    assert (pv.GetPrimvar("groom_version_major").Get(), pv.GetPrimvar("groom_version_minor").Get()) == (1, 5)
 
     mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/Hair/Cards"))
     m = card_mesh(asset.cards)
