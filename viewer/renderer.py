@@ -25,6 +25,8 @@ from .sort import SORT_MODES, GpuRadixSort, cpu_sort
 
 NEAR, FAR = 0.01, 1.0e4  # clip planes of the overlays (the splats use the contract's near plane)
 SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast")
+# splat primitives: one triangle per splat pulled by gl_VertexID, or an instanced quad
+PRIMITIVES = ("triangles", "quads")
 
 
 @dataclass
@@ -62,15 +64,23 @@ def _mat_bytes(m: np.ndarray) -> bytes:
 
 
 class Renderer:
-    """Draws one :class:`GpuScene` from any camera. ``sort`` is ``"gpu"``, ``"cpu"`` or ``"auto"``."""
+    """Draws one :class:`GpuScene` from any camera.
 
-    def __init__(self, ctx: Any, scene: GpuScene, sort: str = "auto", programs: Programs | None = None):
+    ``sort``: ``"gpu"``, ``"cpu"`` or ``"auto"``; ``primitive``: ``"triangles"`` (one triangle per
+    splat, fewer primitives: faster on llvmpipe at the paper's scale) or ``"quads"`` (instanced).
+    """
+
+    def __init__(self, ctx: Any, scene: GpuScene, sort: str = "auto", programs: Programs | None = None,
+                 primitive: str = "triangles"):
         if sort not in (*SORT_MODES, "auto"):
             raise ValueError(f"sort must be one of {(*SORT_MODES, 'auto')}, got {sort!r}")
+        if primitive not in PRIMITIVES:
+            raise ValueError(f"primitive must be one of {PRIMITIVES}, got {primitive!r}")
         self.ctx = ctx
         self.scene = scene
         self.programs = programs or Programs(ctx)
         self.sort_mode = default_sort_mode(ctx) if sort == "auto" else sort
+        self.triangles = primitive == "triangles"
         n = max(scene.count, 1)
         self.center = ctx.buffer(reserve=16 * n)
         self.conic = ctx.buffer(reserve=16 * n)
@@ -84,13 +94,14 @@ class Renderer:
         self._mesh_vao = None
 
     @classmethod
-    def from_asset(cls, ctx: Any, asset: HairAsset, sort: str = "auto") -> Renderer:
+    def from_asset(cls, ctx: Any, asset: HairAsset, sort: str = "auto", primitive: str = "triangles") -> Renderer:
         programs = Programs(ctx)
-        return cls(ctx, upload_asset(ctx, programs, asset), sort, programs)
+        return cls(ctx, upload_asset(ctx, programs, asset), sort, programs, primitive)
 
     @classmethod
-    def from_gaussians(cls, ctx: Any, gaussians: Gaussians, sort: str = "auto") -> Renderer:
-        return cls(ctx, upload_gaussians(ctx, gaussians), sort)
+    def from_gaussians(cls, ctx: Any, gaussians: Gaussians, sort: str = "auto",
+                       primitive: str = "triangles") -> Renderer:
+        return cls(ctx, upload_gaussians(ctx, gaussians), sort, primitive=primitive)
 
     # -- the three per-frame stages, separable for timing ------------------------------------------------
 
@@ -121,12 +132,13 @@ class Renderer:
         else:
             cpu_sort(self.keys, self.values, self.scene.count)
 
-    def draw(self, width: int, height: int, bare: bool = False) -> None:
+    def draw(self, width: int, height: int, bare: bool = False, triangles: bool | None = None) -> None:
         """Splat into the accumulation target of this size (cleared first).
 
         ``bare`` draws the same instanced quads with a constant-colour fragment shader: the
         benchmark's baseline.
         """
+        triangles = self.triangles if triangles is None else triangles
         accum_fbo = self._target(width, height)[1]
         accum_fbo.use()
         accum_fbo.clear(0.0, 0.0, 0.0, 0.0)
@@ -140,7 +152,11 @@ class Renderer:
             self.ctx.blend_func = self.ctx.SRC_ALPHA, self.ctx.ONE_MINUS_SRC_ALPHA
         else:
             self.ctx.blend_func = self.ctx.ONE_MINUS_DST_ALPHA, self.ctx.ONE
-        self._vao(prog).render(mode=self.ctx.TRIANGLE_STRIP, vertices=4, instances=self.scene.count)
+        set_uniforms(prog, u_triangles=triangles)
+        if triangles:
+            self._vao(prog).render(mode=self.ctx.TRIANGLES, vertices=3 * self.scene.count)
+        else:
+            self._vao(prog).render(mode=self.ctx.TRIANGLE_STRIP, vertices=4, instances=self.scene.count)
         self.ctx.blend_func = self.ctx.SRC_ALPHA, self.ctx.ONE_MINUS_SRC_ALPHA
 
     def composite(self, camera: Camera, settings: ViewSettings, target: Any = None,

@@ -96,3 +96,5 @@ def test_sort_mode_choice(gl_ctx):
     assert default_sort_mode(gl_ctx) in ("gpu", "cpu")
     with pytest.raises(ValueError, match="sort must be one of"):
         Renderer.from_gaussians(gl_ctx, decode_gaussians(example_asset()), sort="quick")
+    with pytest.raises(ValueError, match="primitive must be one of"):
+        Renderer.from_gaussians(gl_ctx, decode_gaussians(example_asset()), primitive="points")

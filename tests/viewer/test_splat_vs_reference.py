@@ -64,26 +64,28 @@ def _random_gaussians(n: int, seed: int) -> Gaussians:
 
 def test_random_gaussians_odd_camera(gl_ctx):
     """Anisotropic Gaussians, some behind or across the near plane or off-screen; fx != fy and
-    an off-centre principal point; both sorts."""
+    an off-centre principal point; both sorts, both primitives."""
     g = _random_gaussians(600, seed=7)
     w2c = np.eye(4)
     w2c[2, 3] = 0.6  # camera at z = -0.6 looking along +z: many Gaussians behind it
     cam = Camera(80, 56, fx=70.0, fy=85.0, cx=37.3, cy=30.1, world_to_camera=w2c)
-    for sort in ("gpu", "cpu"):
-        renderer = Renderer.from_gaussians(gl_ctx, g, sort=sort)
+    for sort, primitive in (("gpu", "triangles"), ("cpu", "triangles"), ("cpu", "quads")):
+        renderer = Renderer.from_gaussians(gl_ctx, g, sort=sort, primitive=primitive)
         _check(renderer, g, cam, background=(1.0, 1.0, 1.0))
         renderer.release()
 
 
-def test_sorts_give_the_same_image(gl_ctx):
+def test_sorts_and_primitives_give_the_same_image(gl_ctx):
     g = _random_gaussians(400, seed=3)
     cam = Camera.orbit((0, 0, 0), 1.8, 30.0, 20.0, 64, 48)
     images = []
-    for sort in ("gpu", "cpu"):
-        renderer = Renderer.from_gaussians(gl_ctx, g, sort=sort)
+    for sort, primitive in (("gpu", "triangles"), ("cpu", "triangles"), ("gpu", "quads")):
+        renderer = Renderer.from_gaussians(gl_ctx, g, sort=sort, primitive=primitive)
         images.append(renderer.render(cam))
         renderer.release()
-    np.testing.assert_array_equal(images[0], images[1])
+    np.testing.assert_array_equal(images[0], images[1])  # identical order: identical blending
+    # interpolation of the offsets over other primitives: float rounding only
+    np.testing.assert_allclose(images[0], images[2], atol=1e-4)
 
 
 def test_empty_view_is_background(gl_ctx):
