@@ -88,7 +88,7 @@ def orbit_cameras(points: np.ndarray, n: int, res: int, up_axis: str = "Y") -> l
 
 
 def split_indices(n: int, test_every: int = TEST_EVERY) -> tuple[list[int], list[int]]:
-    test = [i for i in range(n) if i % test_every == test_every - 1]
+    test = [i for i in range(n) if i % test_every == test_every - 1] or [n - 1]  # at least one
     return [i for i in range(n) if i not in set(test)], test
 
 

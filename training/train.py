@@ -92,6 +92,13 @@ def _scene_scale(asset: HairAsset) -> float:
     return float(np.linalg.norm(spine.max(0) - spine.min(0))) or 1.0
 
 
+def view_at(seed: int, iteration: int, n_views: int) -> int:
+    """The training view of an iteration: a fresh permutation of the views every epoch, derived
+    from the seed and the epoch alone so that a resumed run sees the same views."""
+    epoch, index = divmod(iteration, n_views)
+    return int(np.random.default_rng([seed, epoch]).permutation(n_views)[index])
+
+
 def _lr_factor(config: TrainConfig, iteration: int) -> float:
     frac = min(1.0, iteration / max(1, config.iterations))
     return config.lr_final_factor ** frac
@@ -160,13 +167,14 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
           cards: HairAsset | str | Path | None = None, out: str | Path | None = None,
           config: TrainConfig | None = None, resume: str | Path | None = None,
           checkpoint: str | Path | None = None, profile: str = "compact", progress: bool = True,
-          log=None, threads: int | None = None) -> TrainResult:
+          log=None, threads: int | None = None, stop_at: int | None = None) -> TrainResult:
     """Fit the model to the dataset's training views and write ``out`` (.cgh) if given.
 
     ``checkpoint`` (default ``<out>.ckpt.pt``) is written every ``config.checkpoint_every``
     iterations and at the end; ``resume`` continues from one (its config wins, except
     ``iterations`` when ``config`` is given). The config and final figures are saved in
-    ``asset.metadata["training"]`` and as ``<out>.train.json``.
+    ``asset.metadata["training"]`` and as ``<out>.train.json``. ``stop_at`` ends the run after
+    that iteration as if interrupted (checkpoint written, nothing exported); resume continues it.
     """
     log = log if log is not None else sys.stderr
     if threads:
@@ -203,8 +211,6 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
 
     targets, masks = _targets(ds.train, config.background)
     n_views = len(ds.train)
-    gen = np.random.default_rng(config.seed + start)
-    order = gen.permutation(n_views)
     stage = dict.fromkeys(STAGES, 0.0)
     t_start = time.perf_counter()
     bar = None
@@ -214,7 +220,8 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
         bar = tqdm(total=config.iterations, initial=start, desc=f"train {config.variant}", unit="it", file=log)
     running_loss, running_psnr = [], []
     it = start
-    for it in range(start, config.iterations):
+    end = config.iterations if stop_at is None else max(start, min(stop_at, config.iterations))
+    for it in range(start, end):
         geometry_on = it >= config.geometry_frozen_iters
         model.set_geometry_trainable(geometry_on)
         factor = _lr_factor(config, it)
@@ -223,9 +230,7 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
             g["lr"] = base_lr[g["name"]] * (factor if decays else 1.0)
             if g["name"] in ("uv", "delta") and not geometry_on:
                 g["lr"] = 0.0
-        v = int(order[it % n_views])
-        if it % n_views == n_views - 1:
-            order = gen.permutation(n_views)
+        v = view_at(config.seed, it, n_views)
         tau = tau_at(config, it)
 
         t0 = time.perf_counter()
@@ -263,13 +268,15 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
     if bar is not None:
         bar.close()
     seconds = time.perf_counter() - t_start
-    iterations_run = max(0, config.iterations - start)
+    iterations_run = end - start
     if ckpt_path is not None:
         save_checkpoint(ckpt_path, model=model, optimizer=optimizer, config=config, base=base,
-                        iteration=max(start, config.iterations), history=history, dataset=dataset_name)
+                        iteration=end, history=history, dataset=dataset_name)
 
     result = TrainResult(model, base, config, history=history, seconds=seconds, stage_seconds=stage,
                          iterations_run=iterations_run, out_path=out_path)
+    if end < config.iterations:
+        return result
     asset, mode, scores = choose_export(model, base, ds.train, config, profile)
     result.asset, result.weight_mode, result.export_psnr = asset, mode, scores
     summary = {

@@ -1,0 +1,84 @@
+"""The render-dataset, train and eval verbs end to end on a tiny scene, and their bad-input errors."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from cghair_format.cli import main
+from cghair_format.exchange import save_strands
+
+
+@pytest.fixture
+def strands_file(tmp_path, strands):
+    path = tmp_path / "cap.npz"
+    save_strands(strands, path)
+    return path
+
+
+def test_render_train_eval(tmp_path, strands_file, capsys):
+    ds = tmp_path / "ds"
+    assert main(["render-dataset", str(strands_file), "-o", str(ds), "--views", "8", "--res", "24",
+                 "--no-progress"]) == 0
+    assert "7 train + 1 test views" in capsys.readouterr().out
+    cfg = tmp_path / "cfg.json"
+    cfg.write_text(json.dumps({"codebook_size": 4, "latent_dim": 8, "mlp_hidden": [16], "sh_degree": 1,
+                               "card_segments": 4, "log_every": 5}))
+    out = tmp_path / "hair.cgh"
+    assert main(["train", str(ds), "--strands", str(strands_file), "-o", str(out), "--iters", "10",
+                 "--config", str(cfg), "--n-cards", "8", "--groups", "2", "--points", "6", "--no-progress",
+                 "--threads", "1"]) == 0
+    text = capsys.readouterr().out
+    assert "iteration 10" in text and f"wrote {out}" in text
+    assert out.is_file() and out.with_suffix(".ckpt.pt").is_file()
+    assert main(["train", str(ds), "--resume", str(out.with_suffix(".ckpt.pt")), "-o", str(out), "--iters", "15",
+                 "--no-progress", "--threads", "1"]) == 0
+    assert "5 iterations this run" in capsys.readouterr().out
+    assert main(["eval", str(out), str(ds), "--out", str(tmp_path / "ev"), "--threads", "1"]) == 0
+    text = capsys.readouterr().out
+    assert "PSNR" in text and "LPIPS" in text
+    assert (tmp_path / "ev" / "metrics.json").is_file()
+    assert len(list((tmp_path / "ev").glob("*_gt_render_diff.png"))) == 1
+
+
+def test_unique_variant_writes_no_cgh(tmp_path, strands_file, capsys):
+    ds = tmp_path / "ds"
+    assert main(["render-dataset", str(strands_file), "-o", str(ds), "--views", "4", "--res", "16",
+                 "--no-progress"]) == 0
+    out = tmp_path / "u.cgh"
+    assert main(["train", str(ds), "--strands", str(strands_file), "-o", str(out), "--iters", "3",
+                 "--variant", "unique", "--n-cards", "6", "--groups", "2", "--points", "5", "--no-progress"]) == 0
+    assert "has no .cgh encoding" in capsys.readouterr().err
+    assert not out.exists() and out.with_suffix(".train.json").is_file()
+
+
+@pytest.mark.parametrize("argv,message", [
+    (["train", "DS", "-o", "x.cgh"], "give --strands"),
+    (["train", "MISSING", "--strands", "S", "-o", "x.cgh"], "does not exist"),
+    (["eval", "NOTCGH", "DS"], "not a .cgh file"),
+    (["render-dataset", "S", "-o", "OUT", "--engine", "splat", "--views", "4", "--preset", "red",
+      "--thickness", "0.01", "--res", "8"], None),
+])
+def test_bad_inputs_give_clear_errors(tmp_path, strands_file, capsys, argv, message):
+    ds = tmp_path / "ds"
+    ds.mkdir()
+    (tmp_path / "notcgh").write_text("hello")
+    subst = {"DS": str(ds), "MISSING": str(tmp_path / "missing"), "S": str(strands_file),
+             "NOTCGH": str(tmp_path / "notcgh"), "OUT": str(tmp_path / "out"), "x.cgh": str(tmp_path / "x.cgh")}
+    code = main([subst.get(a, a) for a in argv])
+    if message is None:
+        assert code == 0
+    else:
+        assert code == 2 and message in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv", [["render-dataset", "s", "-o", "d", "--views", "1"],
+                                  ["render-dataset", "s", "-o", "d", "--engine", "mitsuba"],
+                                  ["train", "d", "-o", "x.cgh", "--variant", "bogus"],
+                                  ["train", "d", "-o", "x.cgh", "--iters", "0"],
+                                  ["train", "d", "--strands", "a", "--cards", "b", "-o", "x.cgh"]])
+def test_usage_errors(argv):
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
