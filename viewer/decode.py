@@ -130,6 +130,18 @@ def upload_asset(ctx: Any, programs: Programs, asset: HairAsset) -> GpuScene:
         n_strands=s)
 
 
+def _pad4(a: np.ndarray) -> np.ndarray:
+    """Pad the first axis to a multiple of 4 with zeros."""
+    pad = -len(a) % 4
+    return np.concatenate([a, np.zeros((pad, *a.shape[1:]), a.dtype)]) if pad else a
+
+
+def _weights_vec4(weight: np.ndarray) -> np.ndarray:
+    """``[out, in]`` weights as the shader's vec4 layout ``[in, ceil(out / 4), 4]``."""
+    w = _pad4(weight.astype(np.float32))  # [out4 * 4, in]
+    return np.ascontiguousarray(w.T.reshape(w.shape[1], -1, 4))
+
+
 def _decode_appearance(ctx: Any, programs: Programs, asset: HairAsset, strand_card: Any,
                        card_group: Any) -> list[ShChunk]:
     """Latents and MLP per chunk of strands; each chunk's output is its Gaussians' SH."""
@@ -142,9 +154,8 @@ def _decode_appearance(ctx: Any, programs: Programs, asset: HairAsset, strand_ca
     per_chunk = min(per_chunk, s)
     logits = _buffer(ctx, app.logits.astype(np.float32).reshape(-1))
     codebooks = _buffer(ctx, app.codebooks.astype(np.float32).reshape(-1))
-    layers = [(_buffer(ctx, layer.weight.astype(np.float32).reshape(-1)),
-               _buffer(ctx, layer.bias.astype(np.float32)), layer.activation == "relu",
-               layer.weight.shape[1], layer.weight.shape[0]) for layer in app.mlp]
+    layers = [(_buffer(ctx, _weights_vec4(layer.weight)), _buffer(ctx, _pad4(layer.bias.astype(np.float32))),
+               layer.activation == "relu", layer.weight.shape[1], layer.weight.shape[0]) for layer in app.mlp]
     hidden = [_buffer(ctx, nbytes=per_chunk * widest * 4) for _ in range(2)]
     latent_prog = programs.compute("latent")
     layer_prog = programs.compute("mlp_layer")
@@ -161,8 +172,11 @@ def _decode_appearance(ctx: Any, programs: Programs, asset: HairAsset, strand_ca
             last = i == len(layers) - 1
             out = _buffer(ctx, nbytes=n * out_width * 4) if last else hidden[1 - src]
             bind(hidden[src], w, b, out)
-            set_uniforms(layer_prog, u_count=n * n_out, u_in=n_in, u_out=n_out, u_relu=relu)
-            dispatch(ctx, layer_prog, n * n_out)
+            out4 = -(-n_out // 4)
+            count = -(-n // 4) * out4
+            set_uniforms(layer_prog, u_strands=n, u_count=count, u_in=n_in, u_out=n_out, u_out4=out4,
+                         u_relu=relu)
+            dispatch(ctx, layer_prog, count)
             src = 1 - src
         chunks.append(ShChunk(first * segs, n * segs, out))
     for buf in (logits, codebooks, *hidden):
