@@ -14,6 +14,7 @@ from ._argtypes import int_at_least
 
 VARIANTS = ("latents", "unique", "single-sh", "multi-sh", "no-card-clustering")
 PROFILE_NAMES = ("compact", "high", "lossless")
+FROZEN_FRACTION = 7_000 / 30_000
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -60,6 +61,9 @@ def _config(args: argparse.Namespace):
         value = getattr(args, flag)
         if value is not None:
             setattr(cfg, name, value)
+    if args.iters is not None and not args.config and cfg.geometry_frozen_iters >= args.iters:
+        # a short run keeps the paper's proportion (7k of 30k iterations) of frozen geometry
+        cfg.geometry_frozen_iters = round(FROZEN_FRACTION * args.iters)
     return cfg.validate()
 
 

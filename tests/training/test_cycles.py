@@ -1,0 +1,35 @@
+"""The Cycles engine: a clear error without bpy; a tiny render with it (marked blender)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cghair_format.errors import MissingDependencyError
+from training.cycles import bpy_available
+from training.dataset import read_dataset, render_dataset
+
+
+@pytest.mark.skipif(bpy_available(), reason="bpy is installed: the missing-dependency path cannot be exercised")
+def test_without_bpy_the_error_names_the_extra(tmp_path, strands):
+    with pytest.raises(MissingDependencyError, match=r"cghair\[blender\]"):
+        render_dataset(strands, tmp_path, views=2, res=8, engine="cycles")
+
+
+@pytest.mark.blender
+@pytest.mark.slow
+def test_cycles_renders_a_tiny_dataset(tmp_path, strands):
+    if not bpy_available():
+        pytest.skip("bpy (Blender as a Python module, the 'blender' extra) is not installed")
+    render_dataset(strands, tmp_path, views=3, res=24, engine="cycles", samples=4)
+    ds = read_dataset(tmp_path)
+    for v in ds.train + ds.test:
+        a = v.image[..., 3]
+        assert 0.03 < a.mean() < 0.9  # hair in frame on a transparent background
+        assert a[0].max() < 0.5  # nothing at the top border
+        lit = v.image[..., :3][a > 0.5]
+        assert lit.mean() > 0.02  # the light rig lights it
+    # the same framing as the splat engine: masks overlap well
+    splat = render_dataset(strands, tmp_path / "splat", views=3, res=24, engine="splat")
+    overlap = np.minimum(ds.train[0].image[..., 3], splat.train[0].image[..., 3]).sum()
+    assert overlap > 0.3 * splat.train[0].image[..., 3].sum()
