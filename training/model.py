@@ -203,9 +203,15 @@ class HairModel(nn.Module):
     def points(self) -> Tensor:
         return self.geometry.points(self.uv, self.delta)
 
-    def forward(self, mode: str = "gumbel", tau: float = 1.0) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor]:
-        """``(means, quats, scales, opacities, sh)`` of all Gaussians, ready for the splatter."""
-        means, quats, scales = segment_gaussians(self.points(), self.thickness)
+    def gaussian_geometry(self) -> tuple[Tensor, Tensor, Tensor]:
+        """Means, quaternions and scales of all Gaussians."""
+        return segment_gaussians(self.points(), self.thickness)
+
+    def forward(self, mode: str = "gumbel", tau: float = 1.0,
+                geometry: tuple[Tensor, Tensor, Tensor] | None = None) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor]:
+        """``(means, quats, scales, opacities, sh)`` of all Gaussians, ready for the splatter.
+        ``geometry`` reuses a :meth:`gaussian_geometry` computed earlier (while it is frozen)."""
+        means, quats, scales = geometry if geometry is not None else self.gaussian_geometry()
         return means, quats, scales, self.opacities().reshape(-1), self.strand_sh(mode, tau)
 
     def opacities(self) -> Tensor:

@@ -219,7 +219,7 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
 
         bar = tqdm(total=config.iterations, initial=start, desc=f"train {config.variant}", unit="it", file=log)
     running_loss, running_psnr = [], []
-    it = start
+    frozen = None
     end = config.iterations if stop_at is None else max(start, min(stop_at, config.iterations))
     for it in range(start, end):
         geometry_on = it >= config.geometry_frozen_iters
@@ -234,7 +234,12 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
         tau = tau_at(config, it)
 
         t0 = time.perf_counter()
-        gauss = model("gumbel", tau)
+        if geometry_on:
+            frozen = None
+        elif frozen is None:  # frozen geometry: the Gaussians' positions are computed once
+            with torch.no_grad():
+                frozen = model.gaussian_geometry()
+        gauss = model("gumbel", tau, frozen)
         t1 = time.perf_counter()
         out_img = render(*gauss, ds.train[v].camera, tuple(config.background))
         t2 = time.perf_counter()
