@@ -1,6 +1,7 @@
 """Ground truth rendered by Blender Cycles: strands as curves with the Principled Hair BSDF.
 
-Blender runs in a subprocess (``python training/cycles_worker.py JOB``) so that a crash or a hang
+Blender runs in a subprocess (``python training/_bpy_worker/render_cycles.py JOB``, with the interpreter that
+has bpy, usually ``.venv/blender``) so that a crash or a hang
 in bpy cannot take the caller down; the job (points, radii, colours, cameras, settings) goes
 through a temporary folder and the PNGs come back the same way.
 """
@@ -20,7 +21,9 @@ from cghair_format.camera import Camera
 from cghair_format.errors import CghError, MissingDependencyError
 from cghair_format.strands import Strands
 
-WORKER = Path(__file__).with_name("cycles_worker.py")
+# its own folder: the script folder goes on sys.path, and a module named like one of Blender's
+# add-ons (our cycles.py vs the "cycles" add-on) would shadow it
+WORKER = Path(__file__).with_name("_bpy_worker") / "render_cycles.py"
 SECONDS_PER_VIEW_LIMIT = 600  # a view that takes longer than this is treated as a hang
 STARTUP_SECONDS = 120
 
@@ -29,8 +32,20 @@ class CyclesError(CghError, RuntimeError):
     """Blender failed to render; the message carries the end of its output."""
 
 
+def blender_python() -> str | None:
+    """A Python interpreter with bpy (see :func:`cghair_format.exchange.blender.find_blender_python`)."""
+    try:
+        from cghair_format.exchange.blender import BlenderNotFoundError, find_blender_python
+    except ImportError:  # the interchange module predates the finder: only the running interpreter
+        return sys.executable if importlib.util.find_spec("bpy") is not None else None
+    try:
+        return find_blender_python()
+    except BlenderNotFoundError:
+        return None
+
+
 def bpy_available() -> bool:
-    return importlib.util.find_spec("bpy") is not None
+    return blender_python() is not None
 
 
 def render_cycles(strands: Strands, cameras: list[Camera], *, thickness: float, preset: str = "brown",
@@ -38,8 +53,9 @@ def render_cycles(strands: Strands, cameras: list[Camera], *, thickness: float, 
     """RGBA images ``[H, W, 4]`` (straight colour, alpha = coverage) of ``strands`` seen by ``cameras``."""
     from .dataset import PRESETS
 
-    if not bpy_available():
-        raise MissingDependencyError("bpy", "blender", "rendering with --engine cycles")
+    python = blender_python()
+    if python is None:
+        raise MissingDependencyError("bpy", "blender", "rendering with --engine cycles (or run `make blender`)")
     if not cameras:
         return []
     res = {(c.width, c.height) for c in cameras}
@@ -62,7 +78,7 @@ def render_cycles(strands: Strands, cameras: list[Camera], *, thickness: float, 
         (job / "job.json").write_text(json.dumps(settings))
         timeout = STARTUP_SECONDS + SECONDS_PER_VIEW_LIMIT * len(cameras)
         try:
-            proc = subprocess.run([sys.executable, str(WORKER), str(job)], capture_output=True, text=True,
+            proc = subprocess.run([python, str(WORKER), str(job)], capture_output=True, text=True,
                                   timeout=timeout)
         except subprocess.TimeoutExpired as exc:
             raise CyclesError(f"Blender did not finish {len(cameras)} views within {timeout} s") from exc

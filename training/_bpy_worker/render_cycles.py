@@ -1,4 +1,4 @@
-"""Blender worker: ``python cycles_worker.py JOB_DIR``. Reads JOB_DIR/job.npz and job.json, renders
+"""Blender worker: ``python render_cycles.py JOB_DIR``. Reads JOB_DIR/job.npz and job.json, renders
 every camera with Cycles (CPU), and writes JOB_DIR/r_000.png ... (RGBA, transparent background).
 
 Runs in its own process (see :mod:`training.cycles`); it imports only numpy and bpy.
@@ -123,5 +123,5 @@ def main(job: Path) -> None:
 
 if __name__ == "__main__":
     if len(sys.argv) != 2:
-        sys.exit("usage: cycles_worker.py JOB_DIR")
+        sys.exit("usage: render_cycles.py JOB_DIR")
     main(Path(sys.argv[1]))
