@@ -23,13 +23,13 @@ def cluster_strands(points: np.ndarray, n_clusters: int, seed: int = 0,
     """Cluster label ``[S]`` of each strand ``[S, P, 3]``, labels ``0..C-1`` with no empty cluster.
 
     Lloyd k-means with k-means++ seeding and a fixed seed (scikit-learn), so the result is
-    deterministic. ``n_clusters`` is capped at the strand count.
+    deterministic. ``n_clusters`` is capped at the number of distinct strands.
     """
     cluster = require("sklearn.cluster", "cards", "card clustering", package="scikit-learn")
-    n = min(int(n_clusters), len(points))
+    feats = cluster_features(points, cluster_points)
+    n = min(int(n_clusters), len(np.unique(feats, axis=0)))  # no more clusters than distinct strands
     if n <= 1:
         return np.zeros(len(points), np.int32)
-    feats = cluster_features(points, cluster_points)
     km = cluster.KMeans(n_clusters=n, init="k-means++", n_init=1, max_iter=MAX_ITER,
                         random_state=seed, algorithm="lloyd")
     labels = km.fit_predict(feats)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import require
-from ._util import normalize
+from ._util import normalize, project_to_spines
 
 DENSE_PER_SEGMENT = 8  # spline samples per card segment for the arc-length resampling
 END_MARGIN = 0.01  # extra length at each end, as a fraction of the guide's length
@@ -47,10 +47,25 @@ def smoothing_spline(centroids: np.ndarray, segments: int, samples: int) -> np.n
     return np.einsum("qk,ckd->cqd", dense, coef)
 
 
-def guide_spines(points: np.ndarray, labels: np.ndarray, n_clusters: int, segments: int) -> np.ndarray:
+def _resample(dense, arc, t0, t1, before, after, segments: int) -> np.ndarray:
+    """Spines ``[C, M+1, 3]`` at equal arc-length steps along the dense curves, extended straight
+    along the end tangents by ``before`` / ``after`` (scene units)."""
+    length = arc[:, -1]
+    spines = np.empty((len(dense), segments + 1, 3))
+    for c in range(len(dense)):
+        target = np.linspace(-before[c], length[c] + after[c], segments + 1)
+        inside = np.clip(target, 0.0, length[c])
+        pts = np.stack([np.interp(inside, arc[c], dense[c, :, d]) for d in range(3)], axis=-1)
+        pts += np.minimum(target, 0.0)[:, None] * t0[c] + np.maximum(target - length[c], 0.0)[:, None] * t1[c]
+        spines[c] = pts
+    return spines
+
+
+def guide_spines(points: np.ndarray, labels: np.ndarray, n_clusters: int, segments: int,
+                 show_progress: bool = False) -> np.ndarray:
     """Card spines ``[C, M+1, 3]``: each cluster's smoothed centroid at ``M + 1`` equal arc-length steps.
 
-    Each guide is extended straight along its end tangents so that the cluster's roots and tips
+    Each guide is extended straight along its end tangents so that all of the cluster's points
     project inside it (a strand longer than the mean would otherwise leave its card's strip).
     """
     centroids = cluster_centroids(points, labels, n_clusters)
@@ -60,21 +75,21 @@ def guide_spines(points: np.ndarray, labels: np.ndarray, n_clusters: int, segmen
     arc = np.concatenate([np.zeros((n_clusters, 1)),
                           np.cumsum(np.linalg.norm(np.diff(dense, axis=1), axis=-1), axis=1)], axis=1)
     length = arc[:, -1]
-    root_proj = np.einsum("sd,sd->s", points[:, 0] - dense[labels, 0], t0[labels])
-    tip_proj = np.einsum("sd,sd->s", points[:, -1] - dense[labels, -1], t1[labels])
-    before = np.zeros(n_clusters)
-    after = np.zeros(n_clusters)
-    np.minimum.at(before, labels, root_proj)
-    np.maximum.at(after, labels, tip_proj)
-    before = -before + END_MARGIN * length
-    after = after + END_MARGIN * length
-    spines = np.empty((n_clusters, segments + 1, 3))
-    for c in range(n_clusters):
-        target = np.linspace(-before[c], length[c] + after[c], segments + 1)
-        inside = np.clip(target, 0.0, length[c])
-        pts = np.stack([np.interp(inside, arc[c], dense[c, :, d]) for d in range(3)], axis=-1)
-        pts += np.minimum(target - 0.0, 0.0)[:, None] * t0[c] + np.maximum(target - length[c], 0.0)[:, None] * t1[c]
-        spines[c] = pts
+    zero = np.zeros(n_clusters)
+    spines = _resample(dense, arc, t0, t1, zero, zero, segments)
+    # how far the cluster's points reach beyond each end, along the end segments (strands longer
+    # than the mean, and strands that loop back past their root, would leave the strip)
+    s = project_to_spines(spines, np.repeat(labels, points.shape[1]), points.reshape(-1, 3),
+                          show_progress=show_progress)
+    point_card = np.repeat(labels, points.shape[1])
+    s_min = np.zeros(n_clusters)
+    s_max = np.full(n_clusters, float(segments))
+    np.minimum.at(s_min, point_card, s)
+    np.maximum.at(s_max, point_card, s)
+    seg_len = length / segments
+    before = -s_min * seg_len + END_MARGIN * length
+    after = (s_max - segments) * seg_len + END_MARGIN * length
+    spines = _resample(dense, arc, t0, t1, before, after, segments)
     if (length <= 0).any():  # a cluster of zero-length strands: give its card a tiny length
         tiny = 1e-6 * max(float(np.ptp(points.reshape(-1, 3), axis=0).max()), 1e-12)
         for c in np.flatnonzero(length <= 0):

@@ -30,7 +30,8 @@ OUTSIDE_PENALTY = 4.0  # cost of leaving the strip, per unit of strip width, vs 
 STRIP_TOLERANCE = 1e-3  # v in [-tol, 1 + tol] counts as inside the strip
 WIDEN_MARGIN = 1.02
 MAX_WIDEN = 4.0  # per round: a card widens at most 4x ...
-MAX_EXTEND = 1.0  # ... and each end segment grows by at most its own length
+MAX_EXTEND = 1.0  # ... and each end segment grows by at most its own length ...
+MAX_END_SEGMENT = 3.0  # ... up to this many times the card's mean segment length
 ROUNDS = 6
 
 
@@ -199,7 +200,10 @@ def fit_strip(cards: Cards, points: np.ndarray, card: np.ndarray, s: np.ndarray,
                 (np.minimum if end == 0 else np.maximum).at(beyond, card[sel], fu)
                 inner = 1 if end == 0 else m - 1
                 seg = spine[:, end] - spine[:, inner]
-                spine[:, end] += np.minimum(np.abs(beyond) * WIDEN_MARGIN, MAX_EXTEND)[:, None] * seg
+                seg_len = np.linalg.norm(seg, axis=-1)
+                mean_len = np.linalg.norm(np.diff(spine, axis=1), axis=-1).mean(1)
+                room = np.maximum(MAX_END_SEGMENT * mean_len / np.maximum(seg_len, 1e-30) - 1, 0.0)
+                spine[:, end] += np.minimum(np.abs(beyond) * WIDEN_MARGIN, np.minimum(MAX_EXTEND, room))[:, None] * seg
                 changed[card[sel]] = True
             normal = consistent_signs(orthonormalize(normal, spine))
         current = Cards(spine.astype(np.float32), normal.astype(np.float32), half.astype(np.float32),

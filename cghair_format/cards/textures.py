@@ -66,10 +66,11 @@ def texture_features(textures: np.ndarray, size: int = FEATURE_SIZE) -> np.ndarr
 def card_groups(textures: np.ndarray, n_groups: int, seed: int = 0) -> np.ndarray:
     """Card group ``[C]`` in ``0..N_T-1`` (no empty group): k-means on the texture features."""
     cluster = require("sklearn.cluster", "cards", "card grouping", package="scikit-learn")
-    n = min(int(n_groups), len(textures))
+    feats = texture_features(textures).astype(np.float64)
+    n = min(int(n_groups), len(np.unique(feats, axis=0)))  # no more groups than distinct textures
     if n <= 1:
         return np.zeros(len(textures), np.int32)
     km = cluster.KMeans(n_clusters=n, init="k-means++", n_init=4, random_state=seed)
-    labels = km.fit_predict(texture_features(textures).astype(np.float64))
+    labels = km.fit_predict(feats)
     _, first, inverse = np.unique(labels, return_index=True, return_inverse=True)
     return np.argsort(np.argsort(first))[inverse].astype(np.int32)

@@ -1,0 +1,108 @@
+import io
+
+import numpy as np
+import pytest
+from cards_helpers import MAX_TARGET, MEAN_TARGET, STRIP_TOLERANCE, synth
+
+from cghair_format.asset import HairAsset
+from cghair_format.cards import CardBuildError, build_cards
+from cghair_format.cards.build import STAGES
+from cghair_format.gaussians import decode_gaussians, decode_points
+from cghair_format.geometry import spine_tangents
+from cghair_format.strands import Strands
+
+
+def _check_geometry(build):
+    a = build.asset
+    assert isinstance(a, HairAsset)
+    a.validate()
+    n = a.cards.normal.astype(np.float64)
+    np.testing.assert_allclose(np.linalg.norm(n, axis=-1), 1.0, atol=1e-5)
+    assert np.abs((n * spine_tangents(a.cards.spine.astype(np.float64))).sum(-1)).max() < 1e-3
+    v = a.uvd[..., 1]
+    assert v.min() >= -STRIP_TOLERANCE and v.max() <= 1 + STRIP_TOLERANCE  # inside the card's width
+    assert build.error.mean_rel <= MEAN_TARGET and build.error.max_rel <= MAX_TARGET
+    # the report is honest: it matches an independent decode
+    err = np.linalg.norm(decode_points(a).astype(np.float64) - build.points, axis=-1)
+    assert abs(err.max() - build.error.max_abs) <= 1e-6 * build.error.bbox_diagonal
+
+
+def test_wavy_build(wavy_build):
+    b = wavy_build
+    _check_geometry(b)
+    assert b.info == {"cards": 30, "groups": 6, "strands": 300, "points": 40}
+    assert b.asset.cards.spine.shape == (30, 13, 3) and b.asset.uvd.shape == (300, 40, 3)
+    assert set(b.timings) == set(STAGES) and all(t >= 0 for t in b.timings.values())
+    assert "total" in b.timing_table()
+    g = decode_gaussians(b.asset)
+    assert g.count == 300 * 39 and np.isfinite(g.sh).all()
+
+
+@pytest.mark.parametrize("style", ["curly", "coily", "ponytail"])
+def test_harder_styles(style):
+    b = build_cards(synth(style, 250, 48, seed=5), n_cards=25, n_groups=5, segments=16, points=48, progress=False)
+    _check_geometry(b)
+
+
+def test_deterministic_for_a_seed():
+    strands = synth("curly", 120, 24, seed=9)
+    a = build_cards(strands, n_cards=12, n_groups=3, segments=8, points=24, seed=2, progress=False).asset
+    b = build_cards(strands, n_cards=12, n_groups=3, segments=8, points=24, seed=2, progress=False).asset
+    for name in ("spine", "normal", "half_width", "group"):
+        np.testing.assert_array_equal(getattr(a.cards, name), getattr(b.cards, name))
+    np.testing.assert_array_equal(a.uvd, b.uvd)
+    np.testing.assert_array_equal(a.strand_card, b.strand_card)
+    np.testing.assert_array_equal(a.appearance.logits, b.appearance.logits)
+
+
+def test_quantized_error_is_reported(wavy_build):
+    err, size = wavy_build.quantized_error("compact")
+    assert size > 0 and err.max_rel <= 2.5e-4  # compact profile: 2e-4 of the diagonal, + decode rounding
+    assert err.max_abs > wavy_build.error.max_abs  # quantization does add error
+
+
+def test_progress_lines_go_to_the_log():
+    log = io.StringIO()
+    build_cards(synth("straight", 40, 12), n_cards=4, n_groups=2, segments=4, points=12, progress=False, log=log)
+    lines = log.getvalue().splitlines()
+    assert [ln.split()[1] for ln in lines] == list(STAGES)
+
+
+def test_single_strand_and_duplicates():
+    one = Strands.from_array(np.stack([np.zeros(10), np.linspace(0, 1, 10), np.zeros(10)], -1)[None])
+    b = build_cards(one, n_cards=5, n_groups=5, segments=4, points=10, progress=False)
+    assert b.info["cards"] == 1 and b.error.max_rel <= MAX_TARGET
+    dup = Strands.from_array(np.repeat(one.to_array(), 6, axis=0))
+    b = build_cards(dup, n_cards=4, n_groups=2, segments=4, points=10, progress=False)
+    assert b.info["cards"] == 1 and b.error.max_rel <= MAX_TARGET
+
+
+def test_strands_of_varying_length_and_colours_are_resampled():
+    pts = np.concatenate([np.stack([np.full(n, i * 0.1), np.linspace(0, 1, n), np.zeros(n)], -1)
+                          for i, n in enumerate([3, 7, 20, 5])])
+    st = Strands(pts.astype(np.float32), np.array([0, 3, 10, 30, 35]), colors=np.full((35, 3), 0.7, np.float32))
+    b = build_cards(st, n_cards=2, n_groups=1, segments=6, points=16, progress=False)
+    assert b.asset.uvd.shape == (4, 16, 3) and b.error.max_rel <= MAX_TARGET
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"n_cards": 0}, "n_cards"), ({"n_groups": 0}, "n_groups"), ({"segments": 0}, "segments"),
+    ({"points": 3}, "points"), ({"n_cards": 2.5}, "n_cards"), ({"sh_degree": 4}, "sh_degree"),
+])
+def test_bad_options(kwargs, message):
+    with pytest.raises(CardBuildError, match=message):
+        build_cards(synth("straight", 10, 8), progress=False, **kwargs)
+
+
+def test_bad_strands():
+    with pytest.raises(CardBuildError, match="Strands"):
+        build_cards(np.zeros((3, 4, 3)), progress=False)
+    empty = Strands(np.zeros((0, 3), np.float32), np.zeros(1, np.int64))
+    with pytest.raises(CardBuildError, match="no strands"):
+        build_cards(empty, progress=False)
+    same = Strands.from_array(np.ones((3, 5, 3), np.float32))
+    with pytest.raises(CardBuildError, match="coincide"):
+        build_cards(same, progress=False)
+    bad = Strands.from_array(np.full((2, 5, 3), np.nan, np.float32))
+    with pytest.raises(Exception, match="NaN"):
+        build_cards(bad, progress=False)
