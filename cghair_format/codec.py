@@ -14,13 +14,15 @@ from pathlib import Path
 from typing import BinaryIO
 
 import numpy as np
+import zstandard
 
 from . import container
 from .asset import ACTIVATIONS, UP_AXES, WEIGHT_MODES, Appearance, Cards, HairAsset, MlpLayer
 from .errors import AssetError, InvalidContentError, LimitError
 from .geometry import card_mesh, strand_points
 from .profiles import Profile, get_profile
-from .quantize import hier_decode, hier_encode, oct_decode, oct_encode, rows_int8_decode, rows_int8_encode
+from .quantize import hier_decode, hier_encode, level_plan, oct_decode, oct_encode, rows_int8_decode, rows_int8_encode
+from .strand_coder import NEWTON_STEPS, decode_uvd, encode_uvd
 from .streams import StreamReader, StreamWriter
 
 REQUIRED_CHUNKS = ("META", "CARD", "STRD", "OPAC", "LOGT", "CBKS", "MLPW")
@@ -86,16 +88,14 @@ def encode(asset: HairAsset, profile: str | Profile = "compact") -> tuple[bytes,
     # start from the step whose worst case (half a step on each of u, v, delta) meets the bound
     step = None if prof.lossless else 0.9 * 2 * tol / math.sqrt(3)
     for _ in range(MAX_TIGHTENINGS):
-        chunks = _chunks(asset, prof, step, diag)
-        data = container.pack(chunks, level=prof.zstd_level)
-        decoded = decode(data)
-        err = float(np.abs(strand_points(decoded.cards, decoded.strand_card, decoded.uvd) - points)
-                    .max()) if step is not None else 0.0
+        chunks, decoded_points = _chunks(asset, prof, step, diag)
+        err = 0.0 if decoded_points is None else float(np.abs(decoded_points - points).max())
         if step is None or err <= tol:
             break
         step *= 0.8 * tol / err if err > 0 else 0.8
     else:
         raise AssetError(f"could not meet the position tolerance {tol:g} (error {err:g})")
+    data = container.pack(chunks, level=prof.zstd_level)
     _, infos = container.read_table(data)
     return data, EncodeReport(prof.name, step, err, diag, {i.type: i.stored for i in infos})
 
@@ -128,7 +128,8 @@ def _meta(asset: HairAsset, prof: Profile, step: float | None, diag: float) -> d
         "bbox_diagonal": diag, "profile": prof.name,
         "quant": {"lossless": True} if step is None else {
             "lossless": False, "step": step, "card_step": step * CARD_STEP_FRACTION,
-            "normal_bits": NORMAL_BITS, "base_stride": prof.base_stride, "opacity_scale": prof.opacity_scale,
+            "normal_bits": NORMAL_BITS, "base_stride": prof.base_stride, "newton_steps": NEWTON_STEPS,
+            "opacity_scale": prof.opacity_scale,
             "logit_step": prof.logit_step, "logit_floor": prof.logit_floor, "half_bias": prof.half_bias},
     }
 
@@ -178,13 +179,17 @@ def _parse_meta(raw: bytes) -> dict:
         need("logit_floor", (int, float), -1e6, 0, src=quant)
         need("normal_bits", int, 8, 24, src=quant)
         need("base_stride", int, 1, 256, src=quant)
+        need("newton_steps", int, 0, 8, src=quant)
         need("half_bias", bool, src=quant)
     return meta
 
 
 # --- chunks ---------------------------------------------------------------------------------------
 
-def _chunks(asset: HairAsset, prof: Profile, step: float | None, diag: float) -> list[container.Chunk]:
+def _chunks(asset: HairAsset, prof: Profile, step: float | None, diag: float
+            ) -> tuple[list[container.Chunk], np.ndarray | None]:
+    """The chunks of ``asset``, and (quantized profiles) the world points a decoder will get."""
+    decoded_points = None
     meta = _meta(asset, prof, step, diag)
     q = meta["quant"]
     cards_w, strd_w, opac_w, logt_w, cbks_w, mlp_w = (StreamWriter() for _ in range(6))
@@ -203,11 +208,14 @@ def _chunks(asset: HairAsset, prof: Profile, step: float | None, diag: float) ->
     else:
         cards = _encode_cards(asset.cards, q, cards_w)
         su, sv = _card_scales(cards, q["step"])
-        c = asset.strand_card
-        y = np.stack([asset.uvd[..., 0] * su[c, None], asset.uvd[..., 1] * sv[c, None], asset.uvd[..., 2]],
-                     axis=0) / q["step"]
-        for channel in y:
-            _put_hier(strd_w, channel, q["base_stride"])
+        scale = _uvd_scale(su, sv, asset.strand_card, q["step"])
+        y = asset.uvd * scale[:, None, :]
+        q["newton_steps"] = _choose_newton_steps(cards, asset.strand_card, y, scale, q["base_stride"])
+        base, levels, decoded_points = encode_uvd(cards, asset.strand_card, y, scale, q["base_stride"],
+                                                  q["newton_steps"])
+        for residuals in [base] + levels:
+            for ch in range(3):
+                strd_w.ints(residuals[..., ch])
         _put_hier(opac_w, asset.opacity * q["opacity_scale"], q["base_stride"])
         if app.weight_mode == "hard":
             logt_w.ints(np.argmax(app.logits, axis=1))
@@ -227,7 +235,23 @@ def _chunks(asset: HairAsset, prof: Profile, step: float | None, diag: float) ->
     chunks += [container.Chunk(t, w.getvalue()) for t, w in
                (("CARD", cards_w), ("STRD", strd_w), ("OPAC", opac_w), ("LOGT", logt_w), ("CBKS", cbks_w),
                 ("MLPW", mlp_w))]
-    return chunks + _optional_chunks(asset)
+    return chunks + _optional_chunks(asset), decoded_points
+
+
+def _choose_newton_steps(cards: Cards, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray,
+                         base_stride: int, sample: int = 512) -> int:
+    """World-guided prediction (NEWTON_STEPS) or plain card-space prediction (0), whichever codes an
+    evenly spaced sample of strands smaller. Strands smooth in the world (real hair) favour the
+    former; strands smooth on their card (procedural examples) the latter."""
+    pick = np.linspace(0, len(strand_card) - 1, min(sample, len(strand_card))).astype(np.int64)
+    sizes = {}
+    for steps in (NEWTON_STEPS, 0):
+        base, levels, _ = encode_uvd(cards, strand_card[pick], y[pick], scale[pick], base_stride, steps)
+        w = StreamWriter()
+        for r in [base] + levels:
+            w.ints(r)
+        sizes[steps] = len(zstandard.ZstdCompressor(level=9).compress(w.getvalue()))
+    return min(sizes, key=sizes.get)
 
 
 def _optional_chunks(asset: HairAsset) -> list[container.Chunk]:
@@ -257,8 +281,6 @@ def _put_hier(w: StreamWriter, y: np.ndarray, base_stride: int) -> None:
 
 
 def _get_hier(r: StreamReader, rows: int, n: int, base_stride: int, name: str) -> np.ndarray:
-    from .quantize import level_plan
-
     base_idx, plan = level_plan(n, base_stride)
     base = r.ints((rows, len(base_idx)), f"{name} base")
     levels = [r.ints((rows, len(idx)), f"{name} level {i}") for i, (idx, _, _) in enumerate(plan)]
@@ -285,6 +307,11 @@ def _decode_cards(r: StreamReader, c: int, m1: int, q: dict, group: np.ndarray |
     half_width = np.maximum(_get_hier(r, c, m1, s, "half_width") * cq, 0.0)
     return Cards(spine.astype(np.float32), normal.astype(np.float32), half_width.astype(np.float32),
                  group if group is not None else np.zeros(c, np.int32))
+
+
+def _uvd_scale(su: np.ndarray, sv: np.ndarray, strand_card: np.ndarray, step: float) -> np.ndarray:
+    """Per strand, the factors ``[S, 3]`` that turn ``(u, v, delta)`` into quantization steps."""
+    return np.stack([su[strand_card], sv[strand_card], np.ones(len(strand_card))], axis=-1) / step
 
 
 def _card_scales(cards: Cards, step: float) -> tuple[np.ndarray, np.ndarray]:
@@ -322,10 +349,12 @@ def _decode_chunks(meta: dict, payloads: dict[str, bytes]) -> HairAsset:
         stride, step = q["base_stride"], q["step"]
         cards = _decode_cards(rd["CARD"], c, m + 1, q)
         su, sv = _card_scales(cards, step)
-        uvd = np.stack([_get_hier(rd["STRD"], s, p, stride, name) for name in ("u", "v", "delta")], axis=-1)
-        uvd *= step
-        uvd[..., 0] /= su[strand_card, None]
-        uvd[..., 1] /= sv[strand_card, None]
+        base_idx, plan = level_plan(p, stride)
+        named = [("base", base_idx)] + [(f"level {i}", lv[0]) for i, lv in enumerate(plan)]
+        residuals = [np.stack([rd["STRD"].ints((s, len(idx)), f"{name} {ch}") for ch in "uvd"], axis=-1)
+                     for name, idx in named]
+        scale = _uvd_scale(su, sv, strand_card, step)
+        uvd = decode_uvd(cards, strand_card, residuals[0], residuals[1:], p, scale, stride, q["newton_steps"])
         opacity = np.clip(_get_hier(rd["OPAC"], s, p - 1, stride, "opacity") / q["opacity_scale"], 0, 1)
         if meta["weight_mode"] == "hard":
             idx = rd["LOGT"].ints((s,), "assignment")

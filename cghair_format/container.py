@@ -35,7 +35,7 @@ FLAG_REQUIRED = 1
 
 MAX_CHUNKS = 64
 MAX_RAW_CHUNK = 1 << 31  # 2 GiB decompressed per chunk (implementation and format limit)
-MAX_EXPANSION = 1 << 12  # a zstd chunk may not claim more than 4096 x its stored size
+MAX_EXPANSION = 1 << 16  # no zstd stream expands more: a 128 KiB RLE block takes at least 4 bytes
 
 
 @dataclass

@@ -87,16 +87,54 @@ def triangle_and_barycentrics(uv: np.ndarray, segments: int) -> tuple[np.ndarray
     return (2 * k + upper).astype(np.int64), bary
 
 
+class CardMap:
+    """The card-to-world mapping of section "Strand points", with its Jacobian, for many points."""
+
+    def __init__(self, cards: Cards) -> None:
+        mesh = card_mesh(cards)
+        self.segments = cards.segments
+        self.vertices = mesh.vertices.astype(np.float64)
+        self.normals = mesh.normals.astype(np.float64)
+        self.triangles = mesh.triangles.astype(np.int64)
+
+    def __call__(self, card: np.ndarray, uvd: np.ndarray, jacobian: bool = False):
+        """World points ``[N, 3]`` of card coordinates ``uvd [N, 3]`` on cards ``card [N]``; with
+        ``jacobian``, also ``d point / d (u, v, delta)`` as three ``[N, 3]`` columns (u, v, delta)."""
+        m = self.segments
+        uvd = np.asarray(uvd, np.float64)
+        tri_local, bary = triangle_and_barycentrics(uvd[:, :2], m)
+        corners = self.triangles[card.astype(np.int64) * 2 * m + tri_local]  # [N, 3]
+        v0, v1, v2 = (self.vertices[corners[:, j]] for j in range(3))
+        n0, n1, n2 = (self.normals[corners[:, j]] for j in range(3))
+        b0, b1, b2 = bary[:, 0:1], bary[:, 1:2], bary[:, 2:3]
+        n = b0 * n0 + b1 * n1 + b2 * n2
+        length = np.sqrt(np.sum(n * n, axis=1, keepdims=True))
+        np.maximum(length, 1e-30, out=length)
+        nh = n / length
+        delta = uvd[:, 2:3]
+        x = b0 * v0 + b1 * v1 + b2 * v2 + delta * nh
+        if not jacobian:
+            return x
+        # d bary / d f: lower (-1, 0, 1), upper (-1, 1, 0); d bary / d v: lower (-1, 1, 0), upper (0, 1, -1)
+        upper = (tri_local % 2 == 1)[:, None]
+        dv_f = np.where(upper, v1, v2) - v0
+        dv_v = np.where(upper, v1 - v2, v1 - v0)
+        dn_f = np.where(upper, n1, n2) - n0
+        dn_v = np.where(upper, n1 - n2, n1 - n0)
+
+        def d_normal(dn):
+            return (dn - nh * np.sum(nh * dn, axis=1, keepdims=True)) / length
+
+        ju = m * (dv_f + delta * d_normal(dn_f))
+        jv = dv_v + delta * d_normal(dn_v)
+        return x, (ju, jv, nh)
+
+
 def strand_points(cards: Cards, strand_card: np.ndarray, uvd: np.ndarray) -> np.ndarray:
     """World positions ``[S, P, 3]`` of strand points given by card coordinates ``uvd [S, P, 3]``.
 
     ``x = sum_j beta_j V_j + delta * normalize(sum_j beta_j N_j)`` over the point's card triangle.
     """
-    mesh = card_mesh(cards)
-    m = cards.segments
-    tri_local, bary = triangle_and_barycentrics(uvd[..., :2].astype(np.float64), m)
-    tri = strand_card.astype(np.int64)[:, None] * 2 * m + tri_local
-    corners = mesh.triangles[tri]  # [S, P, 3]
-    pos = np.einsum("spj,spjc->spc", bary, mesh.vertices[corners].astype(np.float64))
-    nrm = _normalize(np.einsum("spj,spjc->spc", bary, mesh.normals[corners].astype(np.float64)))
-    return (pos + uvd[..., 2:3] * nrm).astype(np.float32)
+    s, p = uvd.shape[:2]
+    card = np.repeat(strand_card.astype(np.int64), p)
+    return CardMap(cards)(card, uvd.reshape(-1, 3)).reshape(s, p, 3).astype(np.float32)

@@ -76,7 +76,7 @@ def hier_encode(y: np.ndarray, base_stride: int) -> tuple[np.ndarray, list[np.nd
     rec = np.zeros_like(y)
     base_res = np.zeros((y.shape[0], len(base)), np.int64)
     for j, i in enumerate(base):
-        pred = _base_pred(rec, base, j)
+        pred = base_prediction(rec, base, j)
         r = np.rint(y[:, i] - pred)
         base_res[:, j] = r
         rec[:, i] = pred + r
@@ -96,13 +96,13 @@ def hier_decode(base_res: np.ndarray, level_res: list[np.ndarray], n: int, base_
         raise ValueError("residual streams do not match the level plan")
     rec = np.zeros((base_res.shape[0], n), np.float64)
     for j, i in enumerate(base):
-        rec[:, i] = _base_pred(rec, base, j) + base_res[:, j]
+        rec[:, i] = base_prediction(rec, base, j) + base_res[:, j]
     for (idx, nb, wt), r in zip(levels, level_res, strict=True):
         rec[:, idx] = _interp(rec, nb, wt) + r
     return rec
 
 
-def _base_pred(rec: np.ndarray, base: np.ndarray, j: int) -> np.ndarray | float:
+def base_prediction(rec: np.ndarray, base: np.ndarray, j: int) -> np.ndarray | float:
     if j == 0:
         return 0.0
     if j == 1:

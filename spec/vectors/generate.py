@@ -65,6 +65,17 @@ def main() -> None:
     _expected("optional_chunks", _rechunk(cgh.encode(extras, "compact")[0],
                                           lambda c: c + [container.Chunk("ZEXT", b"future data", required=False)]))
     _expected("newer_minor", _with_header(compact, 1, 9))
+    # real-looking hair: grown strands on built cards, whose card coordinates need the world-guided
+    # (Newton) prediction of spec section 4.3
+    from cghair_format.cards import build_cards
+    from cghair_format.synth import synthesize
+
+    built = build_cards(synthesize("curly", 48, 24, seed=1), n_cards=6, n_groups=2, segments=8, points=24,
+                        seed=0, progress=False, sh_degree=1).asset
+    data = cgh.encode(built, "compact")[0]
+    assert json.loads(container.unpack(data, {"META"} | set(cgh.codec.REQUIRED_CHUNKS) | set(
+        cgh.codec.OPTIONAL_CHUNKS))[2]["META"])["quant"]["newton_steps"] > 0
+    _expected("synth_cards_compact", data)
 
     reject = {}
 
