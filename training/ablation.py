@@ -37,7 +37,7 @@ def scaled_config(variant: str, iters: int, **overrides) -> TrainConfig:
 
 def run_ablation(strands_path: str, work: Path, iters: int, views: int, res: int, engine: str,
                  variants: list[str], samples: int, threads: int | None, n_cards: int, points: int,
-                 log=sys.stderr) -> list[dict]:
+                 dataset: Path | None = None, log=sys.stderr) -> list[dict]:
     import torch
 
     from cghair_format.exchange import load_strands
@@ -50,7 +50,7 @@ def run_ablation(strands_path: str, work: Path, iters: int, views: int, res: int
     if threads:
         torch.set_num_threads(threads)
     work.mkdir(parents=True, exist_ok=True)
-    ds_dir = work / f"dataset_{engine}"
+    ds_dir = dataset if dataset is not None else work / f"dataset_{engine}"
     strands = load_strands(strands_path)
     if not (ds_dir / "transforms_test.json").is_file():
         t = time.perf_counter()
@@ -107,6 +107,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--views", type=int, default=32)
     p.add_argument("--res", type=int, default=128)
     p.add_argument("--engine", choices=("cycles", "splat"), default="cycles")
+    p.add_argument("--dataset", default=None, help="use this rendered dataset instead of rendering one")
     p.add_argument("--samples", type=int, default=32)
     p.add_argument("--variants", default=",".join(VARIANTS))
     p.add_argument("--n-cards", type=int, default=800)
@@ -121,7 +122,8 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         rows = run_ablation(args.strands, Path(args.work), args.iters, args.views, args.res, args.engine,
-                            variants, args.samples, args.threads, args.n_cards, args.points)
+                            variants, args.samples, args.threads, args.n_cards, args.points,
+                            Path(args.dataset) if args.dataset else None)
     except CghError as exc:
         print(f"ablation: error: {exc}", file=sys.stderr)
         return 2

@@ -28,6 +28,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--n-cards", type=int, default=800)
     p.add_argument("--threads", type=int, default=None)
     p.add_argument("--engine", choices=("splat", "cycles"), default="splat")
+    p.add_argument("--dataset", default=None, help="use this rendered dataset instead of rendering one")
     args = p.parse_args(argv)
 
     import torch
@@ -42,7 +43,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.threads:
         torch.set_num_threads(args.threads)
     work = Path(args.work)
-    ds_dir = work / f"dataset_{args.engine}_{args.res}"
+    ds_dir = Path(args.dataset) if args.dataset else work / f"dataset_{args.engine}_{args.res}"
     strands = load_strands(args.strands)
     if not (ds_dir / "transforms_test.json").is_file():
         render_dataset(strands, ds_dir, views=args.views, res=args.res, engine=args.engine)

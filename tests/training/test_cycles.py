@@ -10,8 +10,14 @@ from training.cycles import bpy_available
 from training.dataset import read_dataset, render_dataset
 
 
-@pytest.mark.skipif(bpy_available(), reason="bpy is installed: the missing-dependency path cannot be exercised")
-def test_without_bpy_the_error_names_the_extra(tmp_path, strands):
+def test_without_bpy_the_error_names_the_extra(tmp_path, strands, monkeypatch):
+    import importlib.util
+
+    # point the Blender finder at nothing, and hide any bpy of the running interpreter
+    monkeypatch.setenv("CGH_BLENDER_PYTHON", str(tmp_path / "no-such-python"))
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "bpy" else real(name, *a))
+    assert not bpy_available()
     with pytest.raises(MissingDependencyError, match=r"cghair\[blender\]"):
         render_dataset(strands, tmp_path, views=2, res=8, engine="cycles")
 
