@@ -38,8 +38,13 @@ def _key_name(glfw: Any, key: int) -> str:
 
 
 def run_viewer(asset: HairAsset, *, title: str, file_size: int, width: int = 1280, height: int = 720,
-               sort: str = "auto", screenshot_dir: str | Path = ".") -> None:
-    """Open a window on ``asset`` and run until it is closed."""
+               sort: str = "auto", screenshot_dir: str | Path = ".", max_frames: int | None = None,
+               press: tuple[str, ...] = ()) -> int:
+    """Open a window on ``asset`` and run until it is closed; returns the number of frames drawn.
+
+    ``max_frames`` closes the window after that many frames and ``press`` replays key presses
+    before the first frame (scripted sessions and tests).
+    """
     import glfw
 
     window, ctx = create_window(width, height, title)
@@ -49,7 +54,9 @@ def run_viewer(asset: HairAsset, *, title: str, file_size: int, width: int = 128
         state = ViewerState(OrbitController.framing(lo, hi, asset.up_axis), max_sh_degree=asset.appearance.sh_degree)
         held: set[str] = set()
         mouse = {"pos": None, "buttons": set(), "shift": False}
-        pending: list[str] = []
+        pending: list[str] = list(press)
+        frames = 0
+        shot: Path | None = None
 
         def on_key(_w, key, _scancode, action, mods):
             name = _key_name(glfw, key)
@@ -82,7 +89,7 @@ def run_viewer(asset: HairAsset, *, title: str, file_size: int, width: int = 128
         print(HELP)
         last = time.perf_counter()
         fps = 0.0
-        while not glfw.window_should_close(window):
+        while not glfw.window_should_close(window) and (max_frames is None or frames < max_frames):
             glfw.poll_events()
             now = time.perf_counter()
             dt, last = now - last, now
@@ -97,9 +104,7 @@ def run_viewer(asset: HairAsset, *, title: str, file_size: int, width: int = 128
                 if action == "quit":
                     glfw.set_window_should_close(window, True)
                 elif action == "screenshot":
-                    path = Path(screenshot_dir) / f"cgh_view_{time.strftime('%Y%m%d_%H%M%S')}.png"
-                    save_png(renderer.render(camera, state.settings), path)
-                    print(f"screenshot: {path}")
+                    shot = Path(screenshot_dir) / f"cgh_view_{time.strftime('%Y%m%d_%H%M%S')}_{frames}.png"
             pending.clear()
             s = state.settings
             if not s.hide_splats:
@@ -108,10 +113,17 @@ def run_viewer(asset: HairAsset, *, title: str, file_size: int, width: int = 128
                 renderer.draw(fb_w, fb_h)
             ctx.screen.viewport = (0, 0, fb_w, fb_h)
             renderer.composite(camera, s, target=ctx.screen, flip_y=True)
+            if shot is not None:  # what the window shows, overlays included
+                raw = np.frombuffer(ctx.screen.read(viewport=(0, 0, fb_w, fb_h), components=3), np.uint8)
+                save_png(raw.reshape(fb_h, fb_w, 3)[::-1] / 255.0, shot)
+                print(f"screenshot: {shot}")
+                shot = None
             glfw.set_window_title(window, f"{title} | {fps:.1f} fps | {renderer.scene.count:,} Gaussians | "
                                           f"{file_size / 1e6:.2f} MB | {state.status()}")
             glfw.swap_buffers(window)
+            frames += 1
         renderer.release()
+        return frames
     finally:
         glfw.destroy_window(window)
         glfw.terminate()

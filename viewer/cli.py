@@ -12,6 +12,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sort", choices=("auto", "gpu", "cpu"), default="auto",
                         help="depth sort: GPU radix sort, numpy, or auto (GPU except on software renderers)")
     parser.add_argument("--screenshots", default=".", help="folder for screenshots (key P)")
+    parser.add_argument("--frames", type=int, default=None, help="close after this many frames (scripted runs)")
+    parser.add_argument("--press", default="", metavar="KEYS",
+                        help="key presses to replay before the first frame, e.g. 'LGP' (scripted runs)")
 
 
 def positive(parser_name: str, value: int) -> None:
@@ -25,12 +28,18 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     import cghair_format
+    from cghair_format.errors import CghError
 
     from .app import run_viewer
 
     positive("width", args.width)
     positive("height", args.height)
+    if args.frames is not None and args.frames < 1:
+        raise CghError(f"--frames must be >= 1, got {args.frames}")
+    if not Path(args.screenshots).is_dir():
+        raise CghError(f"screenshot folder {args.screenshots} does not exist")
     asset = cghair_format.read(args.file)
     run_viewer(asset, title=f"cgh view {Path(args.file).name}", file_size=Path(args.file).stat().st_size,
-               width=args.width, height=args.height, sort=args.sort, screenshot_dir=args.screenshots)
+               width=args.width, height=args.height, sort=args.sort, screenshot_dir=args.screenshots,
+               max_frames=args.frames, press=tuple(args.press))
     return 0

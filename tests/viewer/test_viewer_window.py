@@ -1,0 +1,71 @@
+"""The interactive window under a virtual X server (Xvfb): scripted frames, key presses and a
+screenshot that must equal the headless render of the same view. Skipped where Xvfb is absent."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from PIL import Image
+
+import cghair_format
+from cghair_format.examples import example_asset
+
+pytestmark = pytest.mark.gl
+
+
+@pytest.fixture(scope="module")
+def xvfb_display():
+    if shutil.which("Xvfb") is None:
+        pytest.skip("Xvfb is not installed (apt-get install xvfb): the window test needs a display")
+    read, write = os.pipe()
+    proc = subprocess.Popen(["Xvfb", "-displayfd", str(write), "-screen", "0", "640x480x24", "-nolisten", "tcp"],
+                            pass_fds=(write,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    os.close(write)
+    with os.fdopen(read) as f:
+        number = f.readline().strip()
+    if not number:
+        proc.kill()
+        pytest.skip("Xvfb did not start")
+    yield f":{number}"
+    proc.terminate()
+    proc.wait(timeout=10)
+
+
+def _view(display, *args, cwd):
+    env = dict(os.environ, DISPLAY=display)
+    cmd = [sys.executable, "-m", "cghair_format", "view", *map(str, args)]
+    return subprocess.run(cmd, env=env, cwd=cwd, capture_output=True, text=True, timeout=300)
+
+
+def test_window_screenshot_matches_headless_render(xvfb_display, tmp_path, capsys):
+    path = tmp_path / "hair.cgh"
+    cghair_format.write(example_asset(seed=8, strands=60, points=10, sh_degree=1), path)
+    done = _view(xvfb_display, path, "--width", 96, "--height", 72, "--frames", 3, "--press", "P",
+                 "--screenshots", tmp_path, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    shots = sorted(tmp_path.glob("cgh_view_*.png"))
+    assert len(shots) == 1
+    window = np.asarray(Image.open(shots[0])).astype(int)
+
+    from cghair_format.cli import main
+
+    assert main(["render", str(path), "-o", str(tmp_path / "headless.png"), "--width", "96", "--height", "72",
+                 "--elevation", "0"]) == 0
+    headless = np.asarray(Image.open(tmp_path / "headless.png")).astype(int)
+    assert headless.max() > 40
+    assert np.abs(window - headless).max() <= 1  # 8-bit rounding of the window's framebuffer
+
+
+def test_window_toggles_run(xvfb_display, tmp_path):
+    path = tmp_path / "hair.cgh"
+    cghair_format.write(example_asset(seed=9, strands=30, points=8, sh_degree=2), path)
+    done = _view(xvfb_display, path, "--width", 64, "--height", 48, "--frames", 4, "--press", "LCG0=-HRP",
+                 "--screenshots", tmp_path, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert "Traceback" not in done.stderr
+    assert len(list(tmp_path.glob("cgh_view_*.png"))) == 1
