@@ -3,6 +3,8 @@ every test that uses it, and small in-memory assets."""
 
 from __future__ import annotations
 
+import os
+
 import pytest
 
 pytest.importorskip("moderngl", reason="the viewer tests need moderngl (pip install 'cghair[viewer]')")
@@ -15,6 +17,8 @@ def _session_ctx():
     try:
         ctx = create_headless_context()
     except GLContextError as exc:
+        if os.environ.get("CI"):  # CI promises Mesa's EGL + llvmpipe: a missing context is a failure
+            pytest.fail(f"CI is set but no headless OpenGL 4.3 context could be created: {exc}")
         pytest.skip(f"no headless OpenGL 4.3 context on this machine: {exc}")
     yield ctx
     ctx.release()
