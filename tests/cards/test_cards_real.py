@@ -1,0 +1,57 @@
+"""The card builder on the real hair models in ../shared/data/hair (skipped when absent).
+
+The fast tests use the two 100-strand models; the slow test builds every model at its own size
+with the default options (800 cards, 64 groups, 32 segments, 100 points) and prints a table.
+"""
+
+import time
+
+import numpy as np
+import pytest
+from cards_helpers import MAX_TARGET, MEAN_TARGET, REAL_FILES, SMALL_REAL, STRIP_TOLERANCE, load_real
+
+from cghair_format.cards import build_cards
+from cghair_format.geometry import spine_tangents
+
+
+def _check(build):
+    a = build.asset
+    n = a.cards.normal.astype(np.float64)
+    assert np.abs(np.linalg.norm(n, axis=-1) - 1).max() < 1e-5
+    assert np.abs((n * spine_tangents(a.cards.spine.astype(np.float64))).sum(-1)).max() < 1e-3
+    v = a.uvd[..., 1]
+    assert v.min() >= -STRIP_TOLERANCE and v.max() <= 1 + STRIP_TOLERANCE
+    assert build.error.mean_rel <= MEAN_TARGET, build.error.line("error")
+    assert build.error.max_rel <= MAX_TARGET, build.error.line("error")
+
+
+@pytest.mark.parametrize("name", SMALL_REAL)
+def test_small_real_models(name):
+    strands = load_real(name)
+    _check(build_cards(strands, n_cards=10, n_groups=3, segments=16, points=50, progress=False))
+
+
+def test_real_colours_are_used():
+    strands = load_real("Bangs_100_binary.ply")
+    assert strands.colors is not None
+    b = build_cards(strands, n_cards=10, n_groups=3, segments=8, points=20, progress=False)
+    from cghair_format.gaussians import SH_C0
+
+    dc = b.asset.appearance.codebooks[..., :6] * SH_C0 + 0.5  # the stored root / tip colours
+    assert np.abs(dc.mean() - strands.colors.mean()) < 0.1
+
+
+@pytest.mark.slow
+def test_every_real_model_at_its_own_size():
+    rows = []
+    for name in REAL_FILES:
+        strands = load_real(name)
+        start = time.perf_counter()
+        build = build_cards(strands, progress=False)
+        seconds = time.perf_counter() - start
+        rows.append((name, build, seconds))
+        _check(build)
+    print("\nmodel                         strands  cards groups  mean rel   max rel    seconds")
+    for name, b, sec in rows:
+        print(f"{name:<29}{b.info['strands']:>8}{b.info['cards']:>7}{b.info['groups']:>7}  "
+              f"{b.error.mean_rel:.2e}  {b.error.max_rel:.2e}  {sec:8.1f}")
