@@ -23,7 +23,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     src.add_argument("--strands", help="strands to build cards from (any format cgh convert reads)")
     src.add_argument("--cards", help="a .cgh whose cards and strand coordinates to start from")
     p.add_argument("-o", "--output", required=True, help="output .cgh file")
-    p.add_argument("--iters", type=int_at_least(1), default=None, help="iterations (default: 30000, the paper's)")
+    p.add_argument("--iters", type=int_at_least(1), default=None,
+                   help="iterations (default: 30000, the paper's; a shorter run keeps the paper's proportion of "
+                        "frozen geometry, 7k of 30k)")
     p.add_argument("--variant", choices=VARIANTS, default=None,
                    help="appearance model (default: latents, the paper's); others are the ablation's")
     p.add_argument("--config", help="a JSON config (as saved in <out>.train.json's 'config'); flags override it")
