@@ -40,6 +40,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--profile", choices=PROFILE_NAMES, default="compact", help="precision of the written .cgh")
     p.add_argument("--threads", type=int_at_least(1), default=None,
                    help="torch CPU threads (default: torch's choice; 1 is faster on a busy machine)")
+    p.add_argument("--device", default="cpu", help="torch device, e.g. cpu or cuda (default: cpu)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -77,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     cfg = _config(args)
     result = train(args.dataset, strands=args.strands, cards=args.cards, out=args.output, config=cfg,
                    resume=args.resume, profile=args.profile, progress=not args.no_progress,
-                   threads=args.threads)
+                   threads=args.threads, device=args.device)
     final = result.history[-1] if result.history else None
     if final:
         print(f"iteration {final['iteration']}: loss {final['loss']:.4f}, train PSNR {final['psnr']:.2f} dB "

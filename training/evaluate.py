@@ -119,6 +119,6 @@ def evaluate_model(model, views: list[View], mode: str = "soft", tau: float = 0.
 
     def fn(view: View) -> np.ndarray:
         with torch.no_grad():
-            return render(*gauss, view.camera, tuple(background)).rgb.numpy()
+            return render(*gauss, view.camera, tuple(background)).rgb.cpu().numpy()
 
     return evaluate_renders(fn, views, out_dir, background, use_lpips)

@@ -167,16 +167,24 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
           cards: HairAsset | str | Path | None = None, out: str | Path | None = None,
           config: TrainConfig | None = None, resume: str | Path | None = None,
           checkpoint: str | Path | None = None, profile: str = "compact", progress: bool = True,
-          log=None, threads: int | None = None, stop_at: int | None = None) -> TrainResult:
+          log=None, threads: int | None = None, stop_at: int | None = None,
+          device: str = "cpu") -> TrainResult:
     """Fit the model to the dataset's training views and write ``out`` (.cgh) if given.
 
     ``checkpoint`` (default ``<out>.ckpt.pt``) is written every ``config.checkpoint_every``
     iterations and at the end; ``resume`` continues from one (its config wins, except
     ``iterations`` when ``config`` is given). The config and final figures are saved in
-    ``asset.metadata["training"]`` and as ``<out>.train.json``. ``stop_at`` ends the run after
+    ``asset.metadata["training"]`` and as ``<out>.train.json``. ``device`` is a torch device
+    ("cpu", "cuda"); the splatter follows it. ``stop_at`` ends the run after
     that iteration as if interrupted (checkpoint written, nothing exported); resume continues it.
     """
     log = log if log is not None else sys.stderr
+    try:
+        dev = torch.device(device)
+    except (RuntimeError, TypeError) as exc:
+        raise TrainError(f"unknown torch device {device!r} ({exc})") from exc
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        raise TrainError("--device cuda asked for, but this torch has no usable CUDA device")
     if threads:
         torch.set_num_threads(threads)
     ds = dataset if isinstance(dataset, Dataset) else read_dataset(dataset)
@@ -195,21 +203,21 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
         config = (config or TrainConfig()).validate()
         base = base_asset(config, strands, cards, progress)
     torch.manual_seed(config.seed)
-    model = HairModel(base, config, mean_hair_colour(ds.train))
+    model = HairModel(base, config, mean_hair_colour(ds.train)).to(device)
     optimizer = torch.optim.Adam(model.param_groups(config, _scene_scale(base)), eps=1e-15)
     base_lr = {g["name"]: g["lr"] for g in optimizer.param_groups}
     history: list[dict] = []
     start = 0
     if state is not None:
         model.load_state_dict(state["model"])
-        optimizer.load_state_dict(state["optimizer"])
+        optimizer.load_state_dict(state["optimizer"])  # moves the moments to the parameters' device
         history = list(state["history"])
         start = int(state["iteration"])
         torch.set_rng_state(state["rng"])
     out_path = Path(out) if out is not None else None
     ckpt_path = Path(checkpoint) if checkpoint else (out_path.with_suffix(".ckpt.pt") if out_path else None)
 
-    targets, masks = _targets(ds.train, config.background)
+    targets, masks = (t.to(device) for t in _targets(ds.train, config.background))
     n_views = len(ds.train)
     stage = dict.fromkeys(STAGES, 0.0)
     t_start = time.perf_counter()

@@ -92,3 +92,8 @@ def test_bad_inputs(tiny, tmp_path):
         train(root / "ds", resume=tmp_path / "bad.pt", progress=False)
     with pytest.raises(TrainError, match="does not exist"):
         load_checkpoint(tmp_path / "missing.pt")
+    with pytest.raises(TrainError, match="unknown torch device"):
+        train(root / "ds", strands=tiny[1], config=_tiny_config(), progress=False, device="gpu9")
+    if not torch.cuda.is_available():
+        with pytest.raises(TrainError, match="no usable CUDA"):
+            train(root / "ds", strands=tiny[1], config=_tiny_config(), progress=False, device="cuda")
