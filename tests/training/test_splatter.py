@@ -138,3 +138,13 @@ def test_bad_shapes_raise():
         splatter.render(means, quats[:2], scales, opac, sh, small_camera())
     with pytest.raises(ValueError, match="sh must be"):
         splatter.render(means, quats, scales, opac, sh[:, :, :2], small_camera())
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device: the device-follows-inputs path is CPU only here")
+def test_cuda_matches_cpu():
+    scene = [x.float() for x in random_scene(30, 2, seed=11)]
+    cam = small_camera()
+    cpu = splatter.render(*scene, cam)
+    gpu = splatter.render(*(x.cuda() for x in scene), cam)
+    assert gpu.rgb.is_cuda
+    assert torch.max(torch.abs(gpu.rgb.cpu() - cpu.rgb)) <= 1e-5

@@ -35,6 +35,15 @@ def test_render_train_eval(tmp_path, strands_file, capsys):
     assert main(["train", str(ds), "--resume", str(out.with_suffix(".ckpt.pt")), "-o", str(out), "--iters", "15",
                  "--no-progress", "--threads", "1"]) == 0
     assert "5 iterations this run" in capsys.readouterr().out
+    # a .cgh with cards is a valid starting point too (its cards and strand coordinates are kept)
+    out2 = tmp_path / "again.cgh"
+    assert main(["train", str(ds), "--cards", str(out), "-o", str(out2), "--iters", "3", "--config", str(cfg),
+                 "--no-progress", "--threads", "1"]) == 0
+    from cghair_format import read
+
+    first, second = read(out), read(out2)
+    assert second.cards.count == first.cards.count and second.uvd.shape == first.uvd.shape
+    capsys.readouterr()
     assert main(["eval", str(out), str(ds), "--out", str(tmp_path / "ev"), "--threads", "1"]) == 0
     text = capsys.readouterr().out
     assert "PSNR" in text and "LPIPS" in text
