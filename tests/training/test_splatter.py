@@ -140,7 +140,7 @@ def test_bad_shapes_raise():
         splatter.render(means, quats, scales, opac, sh[:, :, :2], small_camera())
 
 
-@pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device: the device-follows-inputs path is CPU only here")
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device here")
 def test_cuda_matches_cpu():
     scene = [x.float() for x in random_scene(30, 2, seed=11)]
     cam = small_camera()
