@@ -110,6 +110,7 @@ def run_viewer(asset: HairAsset, *, title: str, file_size: int, width: int = 128
             if not s.hide_splats:
                 renderer.preprocess(camera, s)
                 renderer.sort()
+                renderer.gather()
                 renderer.draw(fb_w, fb_h)
             ctx.screen.viewport = (0, 0, fb_w, fb_h)
             renderer.composite(camera, s, target=ctx.screen, flip_y=True)

@@ -2,10 +2,10 @@
 
 Stages are separated by ``glFinish`` so each time is the stage's own. Load = read (file to
 :class:`HairAsset`) + decode and upload (GPU decode of geometry and MLP). Per frame: preprocess
-(projection, SH colour, keys), sort, draw; the baseline draws the same quads with a
-constant-colour fragment shader, as instanced quads, with no sort or preprocess. The frame's
-splats are drawn as one pulled triangle each (faster on llvmpipe); the same splats drawn as
-instanced quads are timed too.
+(projection, SH colour, keys), sort, gather (draw records in sorted order) and draw, the splats
+drawn as one pulled triangle each (faster on llvmpipe; the same splats as instanced quads are
+timed too). The baseline draws instanced quads of the same positions and sizes with a
+constant-colour fragment shader, straight from the preprocess buffers, with no sort or gather.
 """
 
 from __future__ import annotations
@@ -60,7 +60,7 @@ def benchmark(path: str | None = None, synthetic: int | None = None, points: int
     ctl = OrbitController.framing(lo, hi, asset.up_axis)
     settings = ViewSettings()
     gpu_sorter = renderer.sorter or GpuRadixSort(ctx, renderer.programs, scene.count)
-    keys = ("preprocess", "sort", "draw", "sort_gpu", "sort_cpu", "bare", "draw_quads")
+    keys = ("preprocess", "sort", "gather", "draw", "sort_gpu", "sort_cpu", "bare", "draw_quads")
     rows: dict[str, list[float]] = {k: [] for k in keys}
     for i in range(frames):
         cam = Camera.orbit(ctl.target, ctl.distance, 360.0 * i / frames, 10.0, width, height, asset.up_axis)
@@ -74,15 +74,17 @@ def benchmark(path: str | None = None, synthetic: int | None = None, points: int
         rows["preprocess"].append(_timed(ctx, lambda c=cam: renderer.preprocess(c, settings)))
         rows["sort"].append(_timed(ctx, renderer.sort))
         rows["sort_" + renderer.sort_mode].append(rows["sort"][-1])
+        rows["gather"].append(_timed(ctx, renderer.gather))
         rows["draw"].append(_timed(ctx, lambda: renderer.draw(width, height)))
         rows["bare"].append(_timed(ctx, lambda: renderer.draw(width, height, bare=True, triangles=False)))
         rows["draw_quads"].append(_timed(ctx, lambda: renderer.draw(width, height, triangles=False)))
     med = {k: statistics.median(v) for k, v in rows.items() if v}
-    frame = med["preprocess"] + med["sort"] + med["draw"]
+    frame = med["preprocess"] + med["sort"] + med["gather"] + med["draw"]
     result = {
         "source": source, "file_bytes": file_bytes, "gaussians": scene.count, "width": width, "height": height,
         "frames": frames, "renderer": ctx.info.get("GL_RENDERER"), "sort_mode": renderer.sort_mode,
         "read_s": t_read, "decode_upload_s": t_upload, "preprocess_s": med["preprocess"], "sort_s": med["sort"],
+        "gather_s": med["gather"],
         "sort_gpu_s": med.get("sort_gpu"), "sort_cpu_s": med.get("sort_cpu"), "draw_s": med["draw"],
         "draw_instanced_quads_s": med["draw_quads"],
         "frame_s": frame, "bare_quads_s": med["bare"], "frame_over_bare": frame / med["bare"],
@@ -101,7 +103,8 @@ def format_report(r: dict) -> str:
         f"{r['renderer']}, median of {r['frames']} frames",
         f"load     read {ms(r['read_s'])}   decode+upload (GPU) {ms(r['decode_upload_s'])}",
         f"frame    preprocess {ms(r['preprocess_s'])}   sort ({r['sort_mode']}) {ms(r['sort_s'])}   "
-        f"draw {ms(r['draw_s'])}   total {ms(r['frame_s'])}  ({1 / r['frame_s']:.2f} fps)",
+        f"gather {ms(r['gather_s'])}   draw {ms(r['draw_s'])}",
+        f"         total {ms(r['frame_s'])}  ({1 / r['frame_s']:.2f} fps)",
         f"draw     as instanced quads instead of triangles {ms(r['draw_instanced_quads_s'])}",
         f"sorts    gpu radix {ms(r['sort_gpu_s'])}   cpu numpy {ms(r['sort_cpu_s'])}",
         f"baseline bare instanced quads {ms(r['bare_quads_s'])}   frame / bare = {r['frame_over_bare']:.2f}x",

@@ -19,7 +19,7 @@ from cghair_format import Gaussians, HairAsset
 from cghair_format.camera import Camera
 
 from .context import check_gl, park_framebuffer
-from .decode import GpuScene, upload_asset, upload_gaussians
+from .decode import GpuScene, block_limit, upload_asset, upload_gaussians
 from .pipeline import Programs, bind, dispatch, set_uniforms
 from .sort import SORT_MODES, GpuRadixSort, cpu_sort
 
@@ -27,6 +27,7 @@ NEAR, FAR = 0.01, 1.0e4  # clip planes of the overlays (the splats use the contr
 SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast")
 # splat primitives: one triangle per splat pulled by gl_VertexID, or an instanced quad
 PRIMITIVES = ("triangles", "quads")
+RECORD_BYTES = 64  # per sorted splat: 4 vec4s (splat_records.comp.glsl)
 
 
 @dataclass
@@ -86,6 +87,12 @@ class Renderer:
         self.conic = ctx.buffer(reserve=16 * n)
         self.color = ctx.buffer(reserve=16 * n)
         self.axes = ctx.buffer(reserve=16 * n)
+        self.visible_count = ctx.buffer(reserve=4)
+        self.visible = 0  # splats in front of the camera and on screen, after sort()
+        limit = block_limit(ctx)
+        self.records_per_chunk = max(1, min(n, limit // RECORD_BYTES))
+        self.records = [ctx.buffer(reserve=RECORD_BYTES * min(self.records_per_chunk, n - first))
+                        for first in range(0, n, self.records_per_chunk)]
         self.keys = ctx.buffer(reserve=4 * n)
         self.values = ctx.buffer(reserve=4 * n)
         self.sorter = GpuRadixSort(ctx, self.programs, n) if self.sort_mode == "gpu" else None
@@ -103,7 +110,7 @@ class Renderer:
                        primitive: str = "triangles") -> Renderer:
         return cls(ctx, upload_gaussians(ctx, gaussians), sort, primitive=primitive)
 
-    # -- the three per-frame stages, separable for timing ------------------------------------------------
+    # -- the per-frame stages, separable for timing ------------------------------------------------
 
     def preprocess(self, camera: Camera, settings: ViewSettings | None = None) -> None:
         """Project, colour and key every Gaussian for ``camera``."""
@@ -119,9 +126,11 @@ class Renderer:
                      u_degree=degree, u_scale=float(s.splat_scale), u_color_mode=int(s.color_by_group),
                      u_segments=scene.segments)
         prog["u_rot"].write(_mat_bytes(w2c[:3, :3]))
+        self.visible_count.clear()
         for chunk in scene.sh:
             bind(scene.means, scene.rotations, scene.scales, chunk.buffer, self.center, self.conic,
-                 self.color, self.keys, self.values, scene.strand_card, scene.card_group, self.axes)
+                 self.color, self.keys, self.values, scene.strand_card, scene.card_group, self.axes,
+                 self.visible_count)
             set_uniforms(prog, u_base=chunk.first, u_count=chunk.count)
             dispatch(self.ctx, prog, chunk.count)
 
@@ -132,11 +141,23 @@ class Renderer:
         else:
             cpu_sort(self.keys, self.values, self.scene.count)
 
-    def draw(self, width: int, height: int, bare: bool = False, triangles: bool | None = None) -> None:
-        """Splat into the accumulation target of this size (cleared first).
+    def gather(self) -> None:
+        """Write the visible splats' draw records in sorted order (after :meth:`sort`)."""
+        # culled splats carry the largest key, so the visible ones are the first slots
+        self.visible = int(np.frombuffer(self.visible_count.read(), np.uint32)[0])
+        prog = self.programs.compute("splat_records")
+        for k, records in enumerate(self.records):
+            first = k * self.records_per_chunk
+            count = max(0, min(self.records_per_chunk, self.visible - first))
+            bind(self.values, self.center, self.conic, self.color, self.axes, records)
+            set_uniforms(prog, u_first=first, u_count=count)
+            dispatch(self.ctx, prog, count)
 
-        ``bare`` draws the same instanced quads with a constant-colour fragment shader: the
-        benchmark's baseline.
+    def draw(self, width: int, height: int, bare: bool = False, triangles: bool | None = None) -> None:
+        """Splat the gathered records into the accumulation target of this size (cleared first).
+
+        ``bare`` draws instanced quads of the same positions and sizes with a constant-colour
+        fragment shader, straight from the preprocess buffers: the benchmark's baseline.
         """
         triangles = self.triangles if triangles is None else triangles
         accum_fbo = self._target(width, height)[1]
@@ -144,19 +165,26 @@ class Renderer:
         accum_fbo.clear(0.0, 0.0, 0.0, 0.0)
         if self.scene.count == 0:
             return
-        prog = self.programs.render("splat", "bare_quad" if bare else "splat")
-        set_uniforms(prog, u_viewport=(float(width), float(height)))
-        bind(self.values, self.center, self.conic, self.color, self.axes)
         self.ctx.enable_only(self.ctx.BLEND)
-        if bare:
+        if bare:  # the benchmark's baseline: instanced quads, constant colour, ordinary blending
+            prog = self.programs.render("bare_quad", "bare_quad")
+            set_uniforms(prog, u_viewport=(float(width), float(height)))
+            bind(self.values, self.center, None, None, self.axes)
             self.ctx.blend_func = self.ctx.SRC_ALPHA, self.ctx.ONE_MINUS_SRC_ALPHA
-        else:
-            self.ctx.blend_func = self.ctx.ONE_MINUS_DST_ALPHA, self.ctx.ONE
-        set_uniforms(prog, u_triangles=triangles)
-        if triangles:
-            self._vao(prog).render(mode=self.ctx.TRIANGLES, vertices=3 * self.scene.count)
-        else:
             self._vao(prog).render(mode=self.ctx.TRIANGLE_STRIP, vertices=4, instances=self.scene.count)
+            return
+        prog = self.programs.render("splat", "splat")
+        set_uniforms(prog, u_viewport=(float(width), float(height)), u_triangles=triangles)
+        self.ctx.blend_func = self.ctx.ONE_MINUS_DST_ALPHA, self.ctx.ONE
+        for k, records in enumerate(self.records):
+            count = min(self.records_per_chunk, self.visible - k * self.records_per_chunk)
+            if count <= 0:
+                break
+            bind(records)
+            if triangles:
+                self._vao(prog).render(mode=self.ctx.TRIANGLES, vertices=3 * count)
+            else:
+                self._vao(prog).render(mode=self.ctx.TRIANGLE_STRIP, vertices=4, instances=count)
         self.ctx.blend_func = self.ctx.SRC_ALPHA, self.ctx.ONE_MINUS_SRC_ALPHA
 
     def composite(self, camera: Camera, settings: ViewSettings, target: Any = None,
@@ -183,6 +211,7 @@ class Renderer:
         if not s.hide_splats:
             self.preprocess(camera, s)
             self.sort()
+            self.gather()
             self.draw(camera.width, camera.height)
         else:
             self._target(camera.width, camera.height)[1].clear(0.0, 0.0, 0.0, 0.0)
@@ -235,7 +264,8 @@ class Renderer:
             self._vao(prog).render(mode=self.ctx.LINES, vertices=2 * scene.count)
 
     def release(self) -> None:
-        for buf in (self.center, self.conic, self.color, self.axes, self.keys, self.values):
+        for buf in (self.center, self.conic, self.color, self.axes, self.keys, self.values, self.visible_count,
+                    *self.records):
             buf.release()
         if self.sorter is not None:
             self.sorter.release()

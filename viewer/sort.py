@@ -64,9 +64,11 @@ class GpuRadixSort:
 
 
 def cpu_sort(keys: Any, values: Any, count: int) -> None:
-    """The fallback: read the keys back, ``numpy.argsort`` them stably, upload the order."""
+    """The fallback: read the keys back, sort them stably with numpy, upload keys and values."""
     k = np.frombuffer(keys.read(size=4 * count), np.uint32)
     v = np.frombuffer(values.read(size=4 * count), np.uint32)
-    order = np.argsort(k, kind="stable")
+    # two stable 16-bit passes (numpy sorts 16-bit keys by radix): ~2x faster than one 32-bit argsort
+    low = np.argsort((k & 0xFFFF).astype(np.uint16), kind="stable")
+    order = low[np.argsort((k[low] >> 16).astype(np.uint16), kind="stable")]
     keys.write(k[order].tobytes())
     values.write(v[order].tobytes())

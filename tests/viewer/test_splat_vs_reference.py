@@ -96,3 +96,23 @@ def test_empty_view_is_background(gl_ctx):
     np.testing.assert_allclose(img[..., :3], np.broadcast_to([0.25, 0.5, 0.75], (24, 32, 3)), atol=1e-6)
     assert img[..., 3].max() == 0.0
     renderer.release()
+
+
+def test_record_chunks_and_culling(gl_ctx, monkeypatch):
+    """Draw records split over many buffers give the same image; culled splats are not drawn."""
+    from viewer import renderer as renderer_module
+
+    g = _random_gaussians(500, seed=11)
+    w2c = np.eye(4)
+    w2c[2, 3] = 0.5
+    cam = Camera(48, 40, fx=50.0, fy=50.0, cx=24.0, cy=20.0, world_to_camera=w2c)
+    whole = Renderer.from_gaussians(gl_ctx, g)
+    expected = whole.render(cam)
+    assert len(whole.records) == 1
+    assert 0 < whole.visible < g.count  # some Gaussians are behind the camera
+    whole.release()
+    monkeypatch.setattr(renderer_module, "block_limit", lambda ctx: 37 * renderer_module.RECORD_BYTES)
+    split = Renderer.from_gaussians(gl_ctx, g)
+    assert len(split.records) == 14  # ceil(500 / 37)
+    np.testing.assert_array_equal(split.render(cam), expected)
+    split.release()

@@ -18,6 +18,7 @@ layout(std430, binding = 8) writeonly buffer Values { uint values[]; };
 layout(std430, binding = 9) readonly buffer StrandCard { uint strand_card[]; };  // for group colours
 layout(std430, binding = 10) readonly buffer CardGroup { uint card_group[]; };
 layout(std430, binding = 11) writeonly buffer Axes { vec4 axes[]; };  // quad half-axes, see below
+layout(std430, binding = 12) buffer Visible { uint visible; };  // number of Gaussians not culled
 
 uniform uint u_base;
 uniform uint u_count;
@@ -122,6 +123,7 @@ void main() {
         return;
     }
     keys[g] = floatBitsToUint(t.z);  // positive floats order like their bit patterns
+    atomicAdd(visible, 1u);
     center[g] = vec4(m2, t.z, radius);
     conic[g] = vec4(cc / det, -cb / det, ca / det, mo.w);
     // The quad to rasterise: alpha >= 1/255 only inside the ellipse q <= 2 ln(255 o), so a

@@ -1,0 +1,40 @@
+#version 430
+// After sorting: gather each visible splat's draw data into a record in draw order, so the
+// vertex shader reads memory sequentially (random reads cost llvmpipe's vertex stage a third of
+// its time). Record of sorted slot i, 4 vec4s:
+//   [0] mean2d.xy, 1 / radius, opacity   [1] half-axes a1.xy, a2.xy (pixels)
+//   [2] the half-axes whitened by the conic, L a1, L a2 (L^T L = Sigma2^-1)   [3] rgb, 0
+// Dispatched per record chunk: sorted slots [u_first, u_first + u_count).
+layout(local_size_x = 256) in;
+#include "common.glsl"
+
+layout(std430, binding = 0) readonly buffer Order { uint order[]; };
+layout(std430, binding = 1) readonly buffer Center { vec4 center[]; };  // mx, my, z, radius
+layout(std430, binding = 2) readonly buffer Conic { vec4 conic[]; };    // a, b, c, opacity
+layout(std430, binding = 3) readonly buffer Color { vec4 color[]; };
+layout(std430, binding = 4) readonly buffer Axes { vec4 axes[]; };
+layout(std430, binding = 5) writeonly buffer Records { vec4 rec[]; };
+
+uniform uint u_first;
+uniform uint u_count;
+
+void main() {
+    uint i = global_index();
+    if (i >= u_count) return;
+    uint idx = order[u_first + i];
+    vec4 c = center[idx];
+    if (c.w <= 0.0) {  // culled (only reachable if the visible count was not used)
+        rec[4u * i] = vec4(0.0);
+        return;
+    }
+    vec4 con = conic[idx];
+    vec4 ax = axes[idx];
+    // Cholesky factor of the conic [[a, b], [b, c]] = L^T L, L = [[l11, l12], [0, l22]]
+    float l11 = sqrt(con.x);
+    float l12 = con.y / l11;
+    float l22 = sqrt(max(con.z - l12 * l12, 0.0));
+    rec[4u * i] = vec4(c.xy, 1.0 / c.w, con.w);
+    rec[4u * i + 1u] = ax;
+    rec[4u * i + 2u] = vec4(l11 * ax.x + l12 * ax.y, l22 * ax.y, l11 * ax.z + l12 * ax.w, l22 * ax.w);
+    rec[4u * i + 3u] = vec4(color[idx].rgb, 0.0);
+}
