@@ -153,11 +153,13 @@ class Renderer:
             set_uniforms(prog, u_first=first, u_count=count)
             dispatch(self.ctx, prog, count)
 
-    def draw(self, width: int, height: int, bare: bool = False, triangles: bool | None = None) -> None:
+    def draw(self, width: int, height: int, bare: str | None = None, triangles: bool | None = None) -> None:
         """Splat the gathered records into the accumulation target of this size (cleared first).
 
-        ``bare`` draws instanced quads of the same positions and sizes with a constant-colour
-        fragment shader, straight from the preprocess buffers: the benchmark's baseline.
+        ``bare`` draws the benchmark's baselines instead: instanced quads of the same positions and
+        sizes with a constant-colour fragment shader, either ``"sorted"`` (read through the sort
+        order from the preprocess buffers, no gather needed) or ``"records"`` (from the gathered
+        records, read sequentially: the cheapest instanced-quad draw of these splats).
         """
         triangles = self.triangles if triangles is None else triangles
         accum_fbo = self._target(width, height)[1]
@@ -166,16 +168,23 @@ class Renderer:
         if self.scene.count == 0:
             return
         self.ctx.enable_only(self.ctx.BLEND)
-        if bare:  # the benchmark's baseline: instanced quads, constant colour, ordinary blending
+        if bare not in (None, "sorted", "records"):
+            raise ValueError(f"bare must be None, 'sorted' or 'records', got {bare!r}")
+        if bare == "sorted":
             prog = self.programs.render("bare_quad", "bare_quad")
             set_uniforms(prog, u_viewport=(float(width), float(height)))
             bind(self.values, self.center, None, None, self.axes)
             self.ctx.blend_func = self.ctx.SRC_ALPHA, self.ctx.ONE_MINUS_SRC_ALPHA
             self._vao(prog).render(mode=self.ctx.TRIANGLE_STRIP, vertices=4, instances=self.scene.count)
             return
-        prog = self.programs.render("splat", "splat")
+        if bare == "records":
+            prog = self.programs.render("splat", "bare_quad")
+            triangles = False
+            self.ctx.blend_func = self.ctx.SRC_ALPHA, self.ctx.ONE_MINUS_SRC_ALPHA
+        else:
+            prog = self.programs.render("splat", "splat")
+            self.ctx.blend_func = self.ctx.ONE_MINUS_DST_ALPHA, self.ctx.ONE
         set_uniforms(prog, u_viewport=(float(width), float(height)), u_triangles=triangles)
-        self.ctx.blend_func = self.ctx.ONE_MINUS_DST_ALPHA, self.ctx.ONE
         for k, records in enumerate(self.records):
             count = min(self.records_per_chunk, self.visible - k * self.records_per_chunk)
             if count <= 0:

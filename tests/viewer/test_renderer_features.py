@@ -98,3 +98,18 @@ def test_sort_mode_choice(gl_ctx):
         Renderer.from_gaussians(gl_ctx, decode_gaussians(example_asset()), sort="quick")
     with pytest.raises(ValueError, match="primitive must be one of"):
         Renderer.from_gaussians(gl_ctx, decode_gaussians(example_asset()), primitive="points")
+
+
+def test_bare_baselines_cover_the_same_quads(scene, gl_ctx):
+    _, renderer, cam = scene
+    renderer.render(cam)  # preprocess, sort, gather
+    coverage = []
+    for bare in ("sorted", "records"):
+        renderer.draw(cam.width, cam.height, bare=bare)
+        accum = renderer._target(cam.width, cam.height)[0]
+        alpha = np.frombuffer(accum.read(), np.float32).reshape(cam.height, cam.width, 4)[..., 3]
+        coverage.append(alpha > 0)
+    assert coverage[0].sum() > 100
+    np.testing.assert_array_equal(coverage[0], coverage[1])  # same quads, two data paths
+    with pytest.raises(ValueError, match="bare must be"):
+        renderer.draw(cam.width, cam.height, bare="fancy")

@@ -135,8 +135,8 @@ def test_bench_viewer_small(gl_ctx, cgh_file, tmp_path, capsys):
     assert "decode+upload" in stdout and "bare instanced quads" in stdout and "frame / bare" in stdout
     figures = json.loads(out.read_text())
     assert figures["gaussians"] == 2000
-    for key in ("read_s", "decode_upload_s", "preprocess_s", "sort_s", "draw_s", "bare_quads_s",
-                "sort_gpu_s", "sort_cpu_s"):
+    for key in ("read_s", "decode_upload_s", "preprocess_s", "sort_s", "gather_s", "draw_s", "bare_quads_s",
+                "bare_quads_records_s", "sort_gpu_s", "sort_cpu_s", "draw_instanced_quads_s"):
         assert figures[key] > 0
     rc, stdout, _ = _run(capsys, "bench-viewer", cgh_file, "--width", 32, "--height", 32, "--frames", 1)
     assert rc == 0 and "hair.cgh" in stdout and "MB" in stdout
