@@ -19,7 +19,7 @@ def progress(iterable: Iterable, desc: str, enabled: bool, total: int | None = N
         from tqdm import tqdm
     except ImportError:
         return iterable
-    return tqdm(iterable, desc=desc, total=total, leave=False, unit="chunk")
+    return tqdm(iterable, desc=desc, total=total, leave=False)
 
 
 def chunks(n: int, size: int = CHUNK_POINTS) -> list[tuple[int, int]]:

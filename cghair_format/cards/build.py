@@ -166,7 +166,7 @@ def _build(strands: Strands, n_cards: int, n_groups: int, segments: int, points:
     point_card = np.repeat(labels, points)
     with timed(timings, "normals"):
         s = project_to_spines(spine, point_card, flat, show_progress=progress)
-        normal = card_normals(spine, flat, point_card, s, hair_centre=pts[:, 0].mean(0))
+        normal = card_normals(spine, flat, point_card, s, hair_centre=pts[:, 0].mean(0), show_progress=progress)
         half = card_half_widths(spine, normal, flat, point_card, s, diag)
         cards = Cards(spine.astype(np.float32), normal.astype(np.float32), half.astype(np.float32),
                       np.zeros(c, np.int32))

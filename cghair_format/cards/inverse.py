@@ -24,7 +24,7 @@ from ..geometry import card_mesh
 from ._util import chunks, progress
 from .normals import consistent_signs, orthonormalize
 
-NEIGHBOURS = 2  # segments tried on each side of the nearest one
+NEIGHBOURS = 1  # segments tried on each side of the nearest one (then all, for the few unsolved)
 EPS_F = 1e-9  # tolerance on the segment coordinate and the triangle test
 OUTSIDE_PENALTY = 4.0  # cost of leaving the strip, per unit of strip width, vs |delta|
 STRIP_TOLERANCE = 1e-3  # v in [-tol, 1 + tol] counts as inside the strip

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..errors import require
 from ..geometry import spine_tangents
-from ._util import any_perpendicular, normalize
+from ._util import any_perpendicular, normalize, progress
 
 GD_ITERATIONS = 60
 GD_FIRST_STEP = 0.3  # radians; the step decays geometrically to ~0.002 rad
@@ -49,7 +49,7 @@ def consistent_signs(normals: np.ndarray) -> np.ndarray:
 
 
 def card_normals(spine: np.ndarray, points: np.ndarray, card: np.ndarray, s: np.ndarray,
-                 hair_centre: np.ndarray) -> np.ndarray:
+                 hair_centre: np.ndarray, show_progress: bool = False) -> np.ndarray:
     """Unit normals ``[C, M+1, 3]`` orthogonal to the spine tangents (see the module docstring).
 
     ``points [N, 3]`` are all strand points, ``card [N]`` their card, ``s [N]`` their spine
@@ -79,7 +79,7 @@ def card_normals(spine: np.ndarray, points: np.ndarray, card: np.ndarray, s: np.
     n_flat = n.reshape(-1, 3)
     t_flat = t.reshape(-1, 3)
     step = GD_FIRST_STEP
-    for _ in range(GD_ITERATIONS):
+    for _ in progress(range(GD_ITERATIONS), "normals", show_progress):
         proj = (d * n_flat[flat]).sum(-1)
         g_point = (proj / np.sqrt(proj ** 2 + eps ** 2))[:, None] * d
         grad = _card_sums(g_point, flat, c * m1)
