@@ -27,6 +27,7 @@ NEAR, FAR = 0.01, 1.0e4  # clip planes of the overlays (the splats use the contr
 SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast")
 # splat primitives: one triangle per splat pulled by gl_VertexID, or an instanced quad
 PRIMITIVES = ("triangles", "quads")
+MAX_TARGET_SIZES = 2  # render target sizes kept allocated at once
 RECORD_BYTES = 64  # per sorted splat: 4 vec4s (splat_records.comp.glsl)
 
 
@@ -234,6 +235,10 @@ class Renderer:
 
     def _target(self, width: int, height: int) -> tuple[Any, Any, Any, Any]:
         key = (int(width), int(height))
+        if key not in self._targets and len(self._targets) >= MAX_TARGET_SIZES:  # e.g. a resized window
+            park_framebuffer(self.ctx)
+            for obj in self._targets.pop(next(iter(self._targets))):
+                obj.release()
         if key not in self._targets:
             accum = self.ctx.texture(key, 4, dtype="f4")
             out = self.ctx.texture(key, 4, dtype="f4")

@@ -134,3 +134,11 @@ def test_z_up_asset_renders_like_its_y_up_twin(gl_ctx, tmp_path):
         images.append(np.asarray(Image.open(tmp_path / name)).astype(int))
     assert images[0].max() > 40
     assert np.abs(images[0] - images[1]).max() <= 1
+
+
+def test_resizing_keeps_few_targets(scene):
+    _, renderer, cam = scene
+    for size in (16, 24, 32, 40):
+        small = Camera.orbit(renderer.scene.bounds[0], 0.5, 0.0, 0.0, size, size)
+        assert renderer.render(small).shape == (size, size, 4)
+    assert len(renderer._targets) <= 2
