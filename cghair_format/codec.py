@@ -30,7 +30,7 @@ OPTIONAL_CHUNKS = ("SIDS", "ROOT", "SCOL", "XMET")
 LIMITS = {"strands": 1 << 24, "points": 4096, "cards": 1 << 20, "segments": 1024, "groups": 1 << 16,
           "k": 256, "latent_dim": 4096, "mlp_layers": 16, "mlp_width": 1 << 20, "meta_bytes": 1 << 20}
 CARD_STEP_FRACTION = 1 / 8  # card geometry is quantized 8x finer than strand points
-NORMAL_BITS = 16
+MIN_NORMAL_BITS, MAX_NORMAL_BITS = 16, 24
 MAX_TIGHTENINGS = 8
 
 
@@ -128,10 +128,17 @@ def _meta(asset: HairAsset, prof: Profile, step: float | None, diag: float) -> d
         "bbox_diagonal": diag, "profile": prof.name,
         "quant": {"lossless": True} if step is None else {
             "lossless": False, "step": step, "card_step": step * CARD_STEP_FRACTION,
-            "normal_bits": NORMAL_BITS, "base_stride": prof.base_stride, "newton_steps": NEWTON_STEPS,
+            "normal_bits": _normal_bits(asset.uvd, step), "base_stride": prof.base_stride, "newton_steps": NEWTON_STEPS,
             "opacity_scale": prof.opacity_scale,
             "logit_step": prof.logit_step, "logit_floor": prof.logit_floor, "half_bias": prof.half_bias},
     }
+
+
+def _normal_bits(uvd: np.ndarray, step: float) -> int:
+    """Octahedral bits that keep ``|delta| * normal error`` (error about 2 / 2^(bits-1)) below a
+    quarter step for the point farthest from its card."""
+    need = 8 * float(np.abs(uvd[..., 2]).max()) / step + 1
+    return int(np.clip(math.ceil(math.log2(need)) + 1, MIN_NORMAL_BITS, MAX_NORMAL_BITS))
 
 
 def _parse_meta(raw: bytes) -> dict:

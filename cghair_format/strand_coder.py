@@ -16,6 +16,7 @@ from .geometry import CardMap
 from .quantize import base_prediction, level_plan
 
 NEWTON_STEPS = 2
+MAX_STEP_RATIO = 64.0
 
 
 def _run(cards: Cards, strand_card: np.ndarray, scale: np.ndarray, n: int, base_stride: int, newton: int,
@@ -68,7 +69,14 @@ def _newton(cmap: CardMap, strand_card: np.ndarray, start: np.ndarray, target: n
     goal = target.reshape(-1, 3)
     for _ in range(steps):
         x, (ju, jv, jd) = cmap(card, c, jacobian=True)
-        c = c + solve3(ju, jv, jd, goal - x)
+        miss = goal - x
+        delta = solve3(ju, jv, jd, miss) * sc
+        # keep a step only where it is finite and in proportion to the world-space miss (a step of
+        # one unit moves a point by at most one quantization step, so a sane step is not much longer
+        # than the miss in steps); near-singular Jacobians give neither
+        bound = MAX_STEP_RATIO * np.sqrt(np.sum(miss * miss, axis=1)) * sc[:, 2] + 1.0
+        ok = np.isfinite(delta).all(axis=1) & (np.abs(delta).max(axis=1) <= bound)
+        c = c + np.where(ok[:, None], delta, 0.0) / sc
     out = (c * sc).reshape(s, n, 3)
     return np.where(np.isfinite(out), out, start)
 

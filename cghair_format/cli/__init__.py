@@ -13,6 +13,7 @@ from ..errors import CghError
 
 # verb -> (module defining add_arguments(parser) and run(args) -> int, one-line help)
 VERBS: dict[str, tuple[str, str]] = {
+    "demo": ("cghair_format.cli.demo", "run the main job end to end on built-in data"),
     "info": ("cghair_format.cli.info", "show counts, chunk sizes and bits per Gaussian of a .cgh"),
     "validate": ("cghair_format.cli.validate", "check a .cgh file; exit 0 if valid, 1 with the reason"),
     "encode": ("cghair_format.cli.encode", "re-encode a .cgh with another precision profile"),

@@ -129,3 +129,18 @@ def test_info_reports_counts_and_bits():
     assert info["strands"] == a.n_strands and info["gaussians"] == a.n_gaussians
     assert info["bits_per_gaussian"] == pytest.approx(8 * len(data) / a.n_gaussians)
     assert sum(c["stored_bytes"] for c in info["chunks"]) < len(data)
+
+
+def test_points_far_from_their_card_get_finer_normals():
+    """A large displacement magnifies normal quantization; the writer adds octahedral bits."""
+    import json
+
+    from cghair_format import container
+
+    a = example_asset(12)
+    a.uvd[..., 2] *= 400  # points up to about 1 unit off their card, the hair is 0.3 units tall
+    data, report = cgh.encode(a, "compact")
+    meta = json.loads(container.unpack(data, {"META"} | set(cgh.codec.REQUIRED_CHUNKS))[2]["META"])
+    assert meta["quant"]["normal_bits"] > 16
+    b = cgh.decode(data)
+    assert np.abs(cgh.decode_points(b) - cgh.decode_points(a)).max() <= 2e-4 * report.bbox_diagonal

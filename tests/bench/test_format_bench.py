@@ -1,0 +1,67 @@
+"""The .cgh benchmark at the paper's scale (``make bench``): size per profile, bits per Gaussian,
+encode and decode times, and the same decoded Gaussians as a standard 3DGS PLY, in one table.
+
+Figures are printed (and kept in pytest-benchmark's JSON); nothing here asserts a time.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+import cghair_format as cgh
+from cghair_format.exchange import write_3dgs_ply
+
+from .paper_scale import paper_scale_asset
+
+MODELS = ["straight.hair", "harolongo.data"]
+pytestmark = pytest.mark.bench
+
+
+def _timed(fn, repeat=1):
+    best = float("inf")
+    for _ in range(repeat):
+        start = time.perf_counter()
+        out = fn()
+        best = min(best, time.perf_counter() - start)
+    return out, best
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_format_table(model, request, tmp_path, benchmark):
+    asset, build_timings = paper_scale_asset(model, request.config.cache.mkdir("cghair_paper_scale"))
+    gaussians = cgh.decode_gaussians(asset)
+    ply = tmp_path / "same_gaussians.ply"
+    write_3dgs_ply(gaussians, ply)
+    ply_bytes = ply.stat().st_size
+    points = cgh.decode_points(asset)
+    diag = float(np.linalg.norm(points.reshape(-1, 3).max(0) - points.reshape(-1, 3).min(0)))
+    rows = []
+    for profile in ("lossless", "high", "compact"):
+        (data, report), t_enc = _timed(lambda p=profile: cgh.encode(asset, p))
+        decoded, t_dec = _timed(lambda d=data: cgh.decode(d), repeat=2)
+        _, t_gauss = _timed(lambda a=decoded: cgh.decode_gaussians(a))
+        err = float(np.abs(cgh.decode_points(decoded) - points).max()) / diag
+        op_err = float(np.abs(decoded.opacity - asset.opacity).max())
+        chunks = {k: v for k, v in report.chunk_sizes.items()}
+        rows.append((profile, len(data), 8 * len(data) / asset.n_gaussians, t_enc, t_dec, t_gauss, err, op_err,
+                     ply_bytes / len(data), chunks))
+    compact = cgh.encode(asset, "compact")[0]
+    benchmark.pedantic(lambda: cgh.decode_gaussians(cgh.decode(compact)), rounds=2, iterations=1)
+    lines = [f"\n.cgh at the paper's scale from {model}: {asset.n_strands:,} strands x {asset.points_per_strand} "
+             f"points, {asset.n_gaussians:,} Gaussians, {asset.cards.count} cards, {asset.appearance.n_groups} "
+             f"groups, K={asset.appearance.k}, D={asset.appearance.latent_dim}, SH degree "
+             f"{asset.appearance.sh_degree} (stand-in appearance: see tests/bench/paper_scale.py)",
+             f"3DGS PLY of the same Gaussians (SH 3, INRIA layout): {ply_bytes:,} bytes",
+             "profile   bytes        bits/G  encode s  decode s  +Gaussians s  max pt err/diag  max opac err  PLY ratio"]
+    for r in rows:
+        lines.append(f"{r[0]:<9} {r[1]:>11,}  {r[2]:6.2f}  {r[3]:8.2f}  {r[4]:8.2f}  {r[5]:12.2f}  {r[6]:15.2e}  "
+                     f"{r[7]:12.5f}  {r[8]:9.0f}x")
+    for r in rows:
+        lines.append(f"  {r[0]} chunks: " + ", ".join(f"{k} {v:,}" for k, v in r[9].items()))
+    if build_timings:
+        lines.append("card build (s): " + ", ".join(f"{k} {v:.1f}" for k, v in build_timings.items()))
+    print("\n".join(lines))
+    benchmark.extra_info["table"] = lines
