@@ -62,7 +62,8 @@ def project_to_spines(spine: np.ndarray, card: np.ndarray, points: np.ndarray,
     seg_d = (spine[:, 1:] - spine[:, :-1]).astype(np.float64)
     seg_len2 = np.maximum((seg_d ** 2).sum(-1), 1e-30)  # [C, M]
     out = np.empty(len(points), np.float64)
-    for a, b in progress(chunks(len(points)), "project", show_progress):
+    size = max(1024, CHUNK_POINTS * 32 // max(m, 1))  # keep [n, M, 3] temporaries ~50 MB for any M
+    for a, b in progress(chunks(len(points), size), "project", show_progress):
         c = card[a:b]
         p = points[a:b].astype(np.float64)[:, None, :]  # [n, 1, 3]
         rel = p - seg_a[c]  # [n, M, 3]

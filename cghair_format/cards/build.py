@@ -14,7 +14,7 @@ from ..gaussians import decode_points
 from ..strands import Strands
 from ..strands import resample as resample_strands
 from . import appearance as app
-from ._util import project_to_spines, timed
+from ._util import timed
 from .cluster import cluster_strands
 from .guide import guide_spines
 from .inverse import STRIP_TOLERANCE, fit_strip
@@ -160,12 +160,11 @@ def _build(strands: Strands, n_cards: int, n_groups: int, segments: int, points:
     done("cluster")
 
     with timed(timings, "guide"):
-        spine = guide_spines(pts, labels, c, segments, show_progress=progress)
+        spine, s = guide_spines(pts, labels, c, segments, show_progress=progress)
     done("guide")
 
     point_card = np.repeat(labels, points)
     with timed(timings, "normals"):
-        s = project_to_spines(spine, point_card, flat, show_progress=progress)
         normal = card_normals(spine, flat, point_card, s, hair_centre=pts[:, 0].mean(0), show_progress=progress)
         half = card_half_widths(spine, normal, flat, point_card, s, diag)
         cards = Cards(spine.astype(np.float32), normal.astype(np.float32), half.astype(np.float32),

@@ -62,11 +62,13 @@ def _resample(dense, arc, t0, t1, before, after, segments: int) -> np.ndarray:
 
 
 def guide_spines(points: np.ndarray, labels: np.ndarray, n_clusters: int, segments: int,
-                 show_progress: bool = False) -> np.ndarray:
+                 show_progress: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Card spines ``[C, M+1, 3]``: each cluster's smoothed centroid at ``M + 1`` equal arc-length steps.
 
     Each guide is extended straight along its end tangents so that all of the cluster's points
     project inside it (a strand longer than the mean would otherwise leave its card's strip).
+    Also returns each point's spine parameter ``[S * P]`` on its extended spine (segment units):
+    its nearest-point projection, carried over by arc length.
     """
     centroids = cluster_centroids(points, labels, n_clusters)
     dense = smoothing_spline(centroids, segments, DENSE_PER_SEGMENT * segments + 1)  # [C, Q, 3]
@@ -90,8 +92,11 @@ def guide_spines(points: np.ndarray, labels: np.ndarray, n_clusters: int, segmen
     before = -s_min * seg_len + END_MARGIN * length
     after = (s_max - segments) * seg_len + END_MARGIN * length
     spines = _resample(dense, arc, t0, t1, before, after, segments)
+    # the same arc-length position on the extended spine (its nodes are equally spaced too)
+    total = length + before + after
+    s_ext = (s * seg_len[point_card] + before[point_card]) * segments / np.maximum(total[point_card], 1e-300)
     if (length <= 0).any():  # a cluster of zero-length strands: give its card a tiny length
         tiny = 1e-6 * max(float(np.ptp(points.reshape(-1, 3), axis=0).max()), 1e-12)
         for c in np.flatnonzero(length <= 0):
             spines[c] += np.linspace(0.0, tiny, segments + 1)[:, None] * np.array([0.0, 0.0, 1.0])
-    return spines
+    return spines, np.clip(s_ext, -1.0, segments + 1.0)

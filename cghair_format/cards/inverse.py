@@ -27,8 +27,10 @@ from .normals import consistent_signs, orthonormalize
 NEIGHBOURS = 1  # segments tried on each side of the nearest one (then all, for the few unsolved)
 EPS_F = 1e-9  # tolerance on the segment coordinate and the triangle test
 OUTSIDE_PENALTY = 4.0  # cost of leaving the strip, per unit of strip width, vs |delta|
+PLAUSIBLE_OUTSIDE = 1.0  # near the start guess, accept only solutions at most a strip width off the strip
 STRIP_TOLERANCE = 1e-3  # v in [-tol, 1 + tol] counts as inside the strip
 WIDEN_MARGIN = 1.02
+UNSOLVED_WIDEN = 1.5  # an unsolved point widens its card at least this much
 MAX_WIDEN = 4.0  # per round: a card widens at most 4x ...
 MAX_EXTEND = 1.0  # ... and each end segment grows by at most its own length ...
 MAX_END_SEGMENT = 3.0  # ... up to this many times the card's mean segment length
@@ -45,7 +47,7 @@ def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.einsum("...c,...c->...", a, b)
 
 
-def _solve_triangle(x, origin, a, e, n0, dn, upper: bool, k, m):
+def _solve_triangle(x, origin, a, e, n0, dn, upper: bool, k, m, plausible_only: bool):
     """Candidate ``(f, v, delta, cost)`` ``[n, J, 2]`` for one triangle type on segments ``k [n, J]``."""
     q = x - origin
     c0 = _cross(e, n0)
@@ -84,6 +86,8 @@ def _solve_triangle(x, origin, a, e, n0, dn, upper: bool, k, m):
     out_v = np.maximum(np.maximum(-v, v - 1), 0.0)
     out_f = np.maximum(np.maximum(-f, f - 1), 0.0)
     cost = np.abs(delta) + OUTSIDE_PENALTY * (out_v * width + out_f * length)
+    if plausible_only:
+        ok &= (out_v <= PLAUSIBLE_OUTSIDE) & (out_f <= PLAUSIBLE_OUTSIDE)
     cost = np.where(ok & np.isfinite(cost), cost, np.inf)
     return f, v, delta, cost
 
@@ -93,8 +97,9 @@ def solve_uvd(cards: Cards, points: np.ndarray, card: np.ndarray, s: np.ndarray,
     """Card coordinates ``[N, 3]`` (float64) of ``points [N, 3]`` on cards ``card [N]``, and a mask
     ``[N]`` of the points solved exactly. ``s [N]`` is each point's spine parameter (start guess).
 
-    Points with no exact solution near ``s`` are retried on every segment of their card; a point
-    still unsolved keeps its nearest-spine coordinates (a bounded error, reported by the caller).
+    Points with no plausible exact solution near ``s`` (none, or only ones more than a strip width
+    off the strip) are retried on every segment of their card, where the best valid solution wins;
+    a point still unsolved keeps its nearest-spine coordinates (an error the caller reports).
     """
     m = cards.segments
     mesh = card_mesh(cards)
@@ -108,9 +113,9 @@ def solve_uvd(cards: Cards, points: np.ndarray, card: np.ndarray, s: np.ndarray,
         c = card[a0:b0].astype(np.int64)[:, None]
         k0 = np.clip(np.floor(s[a0:b0]), 0, m - 1).astype(np.int64)
         k = np.clip(k0[:, None] + offsets[None, :], 0, m - 1)  # [n, J]
-        uvd[a0:b0], solved[a0:b0] = _solve_on(points[a0:b0], c, k, left, right, nrm, m)
+        uvd[a0:b0], solved[a0:b0] = _solve_on(points[a0:b0], c, k, left, right, nrm, m, plausible_only=True)
     retry = np.flatnonzero(~solved)
-    if len(retry) and neighbours < m:
+    if len(retry):
         k_all = np.broadcast_to(np.arange(m)[None, :], (len(retry), m))
         for a0, b0 in chunks(len(retry), max(1, 65536 // m)):
             idx = retry[a0:b0]
@@ -124,7 +129,7 @@ def solve_uvd(cards: Cards, points: np.ndarray, card: np.ndarray, s: np.ndarray,
     return uvd, solved
 
 
-def _solve_on(x, c, k, left, right, nrm, m):
+def _solve_on(x, c, k, left, right, nrm, m, plausible_only: bool = False):
     x = x.astype(np.float64)[:, None, :]
     best = []
     for upper in (False, True):
@@ -133,7 +138,7 @@ def _solve_on(x, c, k, left, right, nrm, m):
         else:
             origin, a, e = left[c, k], left[c, k + 1] - left[c, k], right[c, k] - left[c, k]
         n0, dn = nrm[c, k], nrm[c, k + 1] - nrm[c, k]
-        f, v, delta, cost = _solve_triangle(x, origin, a, e, n0, dn, upper, k, m)
+        f, v, delta, cost = _solve_triangle(x, origin, a, e, n0, dn, upper, k, m, plausible_only)
         u = (k[..., None] + f) / m
         best.append((np.stack([u, v, delta], -1).reshape(len(x), -1, 3), cost.reshape(len(x), -1)))
     cand = np.concatenate([b[0] for b in best], axis=1)
@@ -156,7 +161,7 @@ def _nearest_guess(cards: Cards, points, card, s):
     w = cards.half_width.astype(np.float64)[card, k]
     d = points - centre
     v = 0.5 + _dot(d, b) / np.maximum(2 * w, 1e-30)
-    return np.stack([sc / m, np.clip(v, 0, 1), _dot(d, cards.normal.astype(np.float64)[card, k])], -1)
+    return np.stack([sc / m, v, _dot(d, cards.normal.astype(np.float64)[card, k])], -1)
 
 
 def fit_strip(cards: Cards, points: np.ndarray, card: np.ndarray, s: np.ndarray,
@@ -175,7 +180,9 @@ def fit_strip(cards: Cards, points: np.ndarray, card: np.ndarray, s: np.ndarray,
     rounds = 0
     for rounds in range(1, ROUNDS + 1):  # noqa: B007 - the count is returned
         v, u = uvd[:, 1], uvd[:, 0]
-        out_v = (v < -STRIP_TOLERANCE) | (v > 1 + STRIP_TOLERANCE)
+        # unsolved points are widened for too: outside the strip the mapping jumps at segment ends
+        # (its extrapolated half-planes change direction there) and can leave gaps; inside it cannot
+        out_v = (v < -STRIP_TOLERANCE) | (v > 1 + STRIP_TOLERANCE) | ~solved
         out_u = (u < -STRIP_TOLERANCE / m) | (u > 1 + STRIP_TOLERANCE / m)
         if not (out_v.any() or out_u.any()):
             rounds -= 1
@@ -185,6 +192,7 @@ def fit_strip(cards: Cards, points: np.ndarray, card: np.ndarray, s: np.ndarray,
             idx = np.flatnonzero(out_v)
             kk = np.clip(np.floor(u[idx] * m), 0, m - 1).astype(np.int64)
             need = np.minimum(np.abs(2 * v[idx] - 1) * WIDEN_MARGIN, MAX_WIDEN)
+            need = np.where(solved[idx], need, np.clip(need, UNSOLVED_WIDEN, MAX_WIDEN))
             flat = card[idx].astype(np.int64) * (m + 1)
             factor = np.ones(current.count * (m + 1))
             np.maximum.at(factor, flat + kk, need)

@@ -75,14 +75,14 @@ def card_normals(spine: np.ndarray, points: np.ndarray, card: np.ndarray, s: np.
     # gradient descent of the (smoothed) L1 objective, each node on its circle of admissible normals
     scale = np.sqrt(np.bincount(card, weights=(d_perp ** 2).sum(-1), minlength=c)
                     / np.maximum(np.bincount(card, minlength=c), 1))
-    eps = np.maximum(L1_SMOOTHING * scale, 1e-12)[card]
+    eps2 = (np.maximum(L1_SMOOTHING * scale, 1e-12) ** 2)[card]
     n_flat = n.reshape(-1, 3)
     t_flat = t.reshape(-1, 3)
     step = GD_FIRST_STEP
     for _ in progress(range(GD_ITERATIONS), "normals", show_progress):
-        proj = (d * n_flat[flat]).sum(-1)
-        g_point = (proj / np.sqrt(proj ** 2 + eps ** 2))[:, None] * d
-        grad = _card_sums(g_point, flat, c * m1)
+        proj = np.einsum("nc,nc->n", d, n_flat[flat])
+        weight = proj / np.sqrt(proj * proj + eps2)
+        grad = np.stack([np.bincount(flat, weights=weight * d[:, j], minlength=c * m1) for j in range(3)], -1)
         grad -= (grad * n_flat).sum(-1, keepdims=True) * n_flat
         grad -= (grad * t_flat).sum(-1, keepdims=True) * t_flat
         gnorm = np.linalg.norm(grad, axis=-1, keepdims=True)

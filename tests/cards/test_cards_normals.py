@@ -13,7 +13,7 @@ from cghair_format.geometry import spine_tangents
 def _normals_of(pts, n_cards, segments=10):
     labels = cluster_strands(pts, n_cards, seed=0)
     c = int(labels.max()) + 1
-    spine = guide_spines(pts, labels, c, segments)
+    spine, _ = guide_spines(pts, labels, c, segments)
     card = np.repeat(labels, pts.shape[1])
     flat = pts.reshape(-1, 3)
     s = project_to_spines(spine, card, flat)
