@@ -8,5 +8,6 @@ import this package.
 """
 
 from .build import CardBuild, CardBuildError, ReconstructionError, build_cards
+from .debug import write_debug
 
-__all__ = ["CardBuild", "CardBuildError", "ReconstructionError", "build_cards"]
+__all__ = ["CardBuild", "CardBuildError", "ReconstructionError", "build_cards", "write_debug"]

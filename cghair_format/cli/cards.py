@@ -72,6 +72,9 @@ def run(args: argparse.Namespace) -> int:
         return 2
     if out.parent and not out.parent.exists():
         raise FileNotFoundError(2, "No such directory", str(out.parent))
+    if args.debug_dir and Path(args.debug_dir).exists() and not Path(args.debug_dir).is_dir():
+        print(f"cgh cards: error: --debug-dir {args.debug_dir} exists and is not a folder", file=sys.stderr)
+        return 2
     strands = load_strands(args.strands, units=args.units, up=args.up)
     build = build_cards(strands, n_cards=args.cards, n_groups=args.groups, segments=args.segments,
                         points=args.points, seed=args.seed, progress=not args.no_progress,
@@ -90,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"note: {build.unsolved_points} points had no exact card solution, "
               f"{build.outside_strip} lie outside their card's strip")
     if args.debug_dir:
-        from ..cards.debug import write_debug
+        from ..cards import write_debug
 
         paths = write_debug(build, args.debug_dir)
         print("debug: " + ", ".join(str(p) for p in paths))

@@ -53,7 +53,7 @@ def test_real_model_with_default_profile(tmp_path, capsys):
 
 @pytest.mark.parametrize("args, message", [
     (["missing.hair"], "No such file"),
-    (["{bad}"], "error"),
+    (["{bad}"], "truncated"),
 ])
 def test_bad_inputs_give_clear_errors(args, message, tmp_path, capsys):
     bad = tmp_path / "bad.hair"
@@ -63,6 +63,19 @@ def test_bad_inputs_give_clear_errors(args, message, tmp_path, capsys):
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err
     assert not (tmp_path / "o.cgh").exists()
+
+
+def test_debug_dir_must_be_a_folder(strand_file, tmp_path, capsys):
+    clash = tmp_path / "file.txt"
+    clash.write_text("x")
+    argv = ["cards", str(strand_file), "-o", str(tmp_path / "o.cgh"), "--debug-dir", str(clash), "--no-progress"]
+    assert main(argv) == 2
+    assert "not a folder" in capsys.readouterr().err
+
+
+def test_missing_output_folder(strand_file, tmp_path, capsys):
+    assert main(["cards", str(strand_file), "-o", str(tmp_path / "nope" / "o.cgh"), "--no-progress"]) == 2
+    assert "No such" in capsys.readouterr().err
 
 
 def test_output_must_be_cgh(strand_file, tmp_path, capsys):
