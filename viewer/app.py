@@ -13,7 +13,7 @@ from cghair_format import HairAsset
 
 from .camera_control import HELP, OrbitController, ViewerState
 from .context import create_window
-from .renderer import Renderer
+from .fallback import create_renderer
 
 
 def save_png(image: np.ndarray, path: str | Path) -> Path:
@@ -49,7 +49,7 @@ def run_viewer(asset: HairAsset, *, title: str, file_size: int, width: int = 128
 
     window, ctx = create_window(width, height, title)
     try:
-        renderer = Renderer.from_asset(ctx, asset, sort=sort)
+        renderer = create_renderer(ctx, asset, sort=sort)
         lo, hi = renderer.scene.bounds
         state = ViewerState(OrbitController.framing(lo, hi, asset.up_axis), max_sh_degree=asset.appearance.sh_degree)
         held: set[str] = set()

@@ -46,7 +46,14 @@ def benchmark(path: str | None = None, synthetic: int | None = None, points: int
         asset = synthetic_asset(synthetic, points=points)
         source, file_bytes = f"synthetic {synthetic} x {points}", None
     t_read = time.perf_counter() - t0
+    own_ctx = ctx is None
     ctx = ctx or create_headless_context()
+    ctx.__enter__()  # make it current: another context may have been created since
+    if ctx.version_code < 430:
+        from .context import GLContextError
+
+        raise GLContextError("bench-viewer measures the GPU pipeline, which needs OpenGL 4.3 compute shaders; "
+                             f"this context offers {ctx.version_code / 100:.1f}")
     renderer: Renderer | None = None
 
     def load():
@@ -95,6 +102,8 @@ def benchmark(path: str | None = None, synthetic: int | None = None, points: int
     if gpu_sorter is not renderer.sorter:
         gpu_sorter.release()
     renderer.release()
+    if own_ctx:
+        ctx.release()
     return result
 
 

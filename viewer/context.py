@@ -1,7 +1,8 @@
 """The one place that creates OpenGL contexts: a glfw window, or a headless EGL context.
 
-Both ask for OpenGL 4.3 core (compute shaders, storage buffers). Mesa's llvmpipe provides it
-without a GPU or a display, which is how tests and ``cgh render`` run on servers and in CI.
+Both ask for OpenGL 4.3 core (compute shaders, storage buffers) and settle for 3.3 core, which
+the compute-free fallback renderer needs. Mesa's llvmpipe provides 4.5 without a GPU or a
+display, which is how tests and ``cgh render`` run on servers and in CI.
 """
 
 from __future__ import annotations
@@ -12,7 +13,8 @@ from typing import Any
 
 from cghair_format.errors import CghError, require
 
-GL_REQUIRE = 430
+GL_REQUIRE = 430  # compute shaders and storage buffers: the GPU pipeline
+GL_FALLBACK = 330  # without them: numpy decode, projection and sort (viewer.fallback)
 
 
 class GLContextError(CghError):
@@ -34,11 +36,12 @@ def create_headless_context() -> Any:
     """A standalone OpenGL 4.3 context without a window (EGL, e.g. Mesa llvmpipe on a CPU)."""
     moderngl = require("moderngl", "viewer", "headless rendering")
     errors = []
-    for kwargs in ({"backend": "egl"}, {}):
-        try:
-            return moderngl.create_standalone_context(require=GL_REQUIRE, **kwargs)
-        except Exception as exc:  # moderngl raises plain Exception subclasses from its loaders
-            errors.append(f"{kwargs.get('backend', 'default')}: {exc}")
+    for version in (GL_REQUIRE, GL_FALLBACK):
+        for kwargs in ({"backend": "egl"}, {}):
+            try:
+                return moderngl.create_standalone_context(require=version, **kwargs)
+            except Exception as exc:  # moderngl raises plain Exception subclasses from its loaders
+                errors.append(f"GL {version / 100:.1f} {kwargs.get('backend', 'default')}: {exc}")
     raise GLContextError(
         "could not create a headless OpenGL 4.3 context (" + "; ".join(errors) + "). Install Mesa's "
         "EGL and software renderer (Debian/Ubuntu: apt-get install libegl1 libgl1-mesa-dri) or a GPU driver.")
@@ -56,18 +59,24 @@ def create_window(width: int, height: int, title: str) -> tuple[Any, Any]:
         hint = " (no DISPLAY or WAYLAND_DISPLAY is set)" if no_display else ""
         raise GLContextError(f"cannot open a window: glfw failed to initialise{hint}. Without a display, "
                              "use `cgh render FILE.cgh -o out.png` for pictures.")
-    glfw.window_hint(glfw.CONTEXT_VERSION_MAJOR, 4)
-    glfw.window_hint(glfw.CONTEXT_VERSION_MINOR, 3)
-    glfw.window_hint(glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE)
-    glfw.window_hint(glfw.OPENGL_FORWARD_COMPAT, True)
-    window = glfw.create_window(width, height, title, None, None)
+    window = None
+    for version in (GL_REQUIRE, GL_FALLBACK):  # 3.3 where 4.3 is missing (macOS): the numpy path
+        glfw.window_hint(glfw.CONTEXT_VERSION_MAJOR, version // 100)
+        glfw.window_hint(glfw.CONTEXT_VERSION_MINOR, version % 100 // 10)
+        glfw.window_hint(glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE)
+        glfw.window_hint(glfw.OPENGL_FORWARD_COMPAT, True)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            window = glfw.create_window(width, height, title, None, None)
+        if window:
+            break
     if not window:
         glfw.terminate()
-        raise GLContextError("cannot open an OpenGL 4.3 window (the driver may be too old). "
+        raise GLContextError("cannot open an OpenGL 3.3 or 4.3 window (the driver may be too old). "
                              "Use `cgh render FILE.cgh -o out.png` for pictures without a window.")
     glfw.make_context_current(window)
     glfw.swap_interval(0)
-    return window, moderngl.create_context(require=GL_REQUIRE)
+    return window, moderngl.create_context(require=GL_FALLBACK)
 
 
 def park_framebuffer(ctx: Any) -> None:

@@ -27,11 +27,23 @@ def shader_source(name: str) -> str:
     return _INCLUDE.sub(lambda m: shader_source(m.group(1)), text)
 
 
-class Programs:
-    """Compiled programs of one context, built on first use."""
+def versioned(source: str, version: str | None) -> str:
+    """``source`` with its ``#version`` line replaced (``None``: unchanged)."""
+    if version is None:
+        return source
+    return re.sub(r"^#version .*$", f"#version {version}", source, count=1, flags=re.MULTILINE)
 
-    def __init__(self, ctx: Any):
+
+class Programs:
+    """Compiled programs of one context, built on first use.
+
+    ``version`` overrides the render shaders' ``#version`` line: the compute-free fallback
+    compiles the shaders that need nothing from GLSL 4.30 as ``330 core``.
+    """
+
+    def __init__(self, ctx: Any, version: str | None = None):
         self.ctx = ctx
+        self.version = version
         self._cache: dict[tuple[str, ...], Any] = {}
 
     def compute(self, name: str) -> Any:
@@ -47,8 +59,9 @@ class Programs:
         key = (vertex, fragment)
         if key not in self._cache:
             try:
-                self._cache[key] = self.ctx.program(vertex_shader=shader_source(f"{vertex}.vert.glsl"),
-                                                    fragment_shader=shader_source(f"{fragment}.frag.glsl"))
+                self._cache[key] = self.ctx.program(
+                    vertex_shader=versioned(shader_source(f"{vertex}.vert.glsl"), self.version),
+                    fragment_shader=versioned(shader_source(f"{fragment}.frag.glsl"), self.version))
             except Exception as exc:
                 raise GLError(f"shader program {vertex}/{fragment} failed to compile: {exc}") from exc
         return self._cache[key]

@@ -18,7 +18,8 @@ from cghair_format.camera import Camera
 from cghair_format.errors import CghError, require
 
 from .camera_control import OrbitController
-from .renderer import Renderer, ViewSettings
+from .fallback import create_renderer
+from .renderer import ViewSettings
 
 DEFAULT_SIZE = 800
 MAX_SIZE = 16384
@@ -158,12 +159,18 @@ def render_job(asset: HairAsset, job: RenderJob, out: str | Path, ctx=None) -> P
         raise CghError(f"--fps must be positive, got {job.fps}")
     if not (job.splat_scale > 0 and math.isfinite(job.splat_scale)):
         raise CghError(f"--splat-scale must be positive, got {job.splat_scale}")
+    own = ctx is None
     ctx = ctx or create_headless_context()
-    renderer = Renderer.from_asset(ctx, asset, sort=job.sort)
+    ctx.__enter__()  # make it current: another context may have been created since
     try:
-        cameras = job_cameras(job, renderer.scene.bounds, asset.up_axis)
-        settings = job.settings()
-        frames = [renderer.render(cam, settings) for cam in cameras]
+        renderer = create_renderer(ctx, asset, sort=job.sort)
+        try:
+            cameras = job_cameras(job, renderer.scene.bounds, asset.up_axis)
+            settings = job.settings()
+            frames = [renderer.render(cam, settings) for cam in cameras]
+        finally:
+            renderer.release()
     finally:
-        renderer.release()
+        if own:
+            ctx.release()
     return write_images(frames, out, job.fps)

@@ -67,8 +67,14 @@ def cpu_sort(keys: Any, values: Any, count: int) -> None:
     """The fallback: read the keys back, sort them stably with numpy, upload keys and values."""
     k = np.frombuffer(keys.read(size=4 * count), np.uint32)
     v = np.frombuffer(values.read(size=4 * count), np.uint32)
-    # two stable 16-bit passes (numpy sorts 16-bit keys by radix): ~2x faster than one 32-bit argsort
-    low = np.argsort((k & 0xFFFF).astype(np.uint16), kind="stable")
-    order = low[np.argsort((k[low] >> 16).astype(np.uint16), kind="stable")]
+    order = stable_order(k)
     keys.write(k[order].tobytes())
     values.write(v[order].tobytes())
+
+
+def stable_order(keys: np.ndarray) -> np.ndarray:
+    """``numpy.argsort(keys, kind="stable")`` for uint32 keys, as two 16-bit radix passes (numpy
+    sorts 16-bit keys by radix: about twice as fast as one 32-bit stable argsort)."""
+    keys = np.asarray(keys, np.uint32)
+    low = np.argsort((keys & 0xFFFF).astype(np.uint16), kind="stable")
+    return low[np.argsort((keys[low] >> 16).astype(np.uint16), kind="stable")]

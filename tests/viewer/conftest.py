@@ -26,7 +26,8 @@ def _session_ctx():
 
 @pytest.fixture
 def gl_ctx(_session_ctx):
-    """The headless context; the test fails if it leaves an OpenGL error behind."""
+    """The headless context, made current; the test fails if it leaves an OpenGL error behind."""
+    _session_ctx.__enter__()  # a CLI run in between may have made its own context current
     assert _session_ctx.error == "GL_NO_ERROR"  # also clears a stale error flag
     yield _session_ctx
     assert _session_ctx.error == "GL_NO_ERROR"

@@ -59,3 +59,36 @@ def test_render_without_gl_is_a_clean_cli_error(monkeypatch, tmp_path, capsys):
     assert main(["render", str(path), "-o", str(tmp_path / "x.png")]) == 2
     err = capsys.readouterr().err
     assert "could not create a headless OpenGL 4.3 context" in err and "Traceback" not in err
+
+
+def test_context_falls_back_to_gl33(monkeypatch):
+    import moderngl
+
+    real = moderngl.create_standalone_context
+    asked = []
+
+    def only_33(require, **kwargs):
+        asked.append(require)
+        if require > 330:
+            raise RuntimeError("GL 4.3 not supported")
+        return real(require=require, **kwargs)
+
+    monkeypatch.setattr(moderngl, "create_standalone_context", only_33)
+    ctx = create_headless_context()
+    assert asked[-1] == 330 and 430 in asked
+    ctx.release()
+
+
+def test_renderer_choice_follows_the_gl_version(gl_ctx, monkeypatch):
+    from cghair_format.examples import example_asset
+    from viewer.fallback import FallbackRenderer, create_renderer
+    from viewer.renderer import Renderer
+
+    asset = example_asset(strands=10, points=5)
+    gpu = create_renderer(gl_ctx, asset)
+    assert type(gpu) is Renderer
+    gpu.release()
+    monkeypatch.setattr(gl_ctx, "version_code", 330)
+    cpu = create_renderer(gl_ctx, asset)
+    assert isinstance(cpu, FallbackRenderer) and cpu.sort_mode == "cpu"
+    cpu.release()

@@ -142,3 +142,17 @@ def test_resizing_keeps_few_targets(scene):
         small = Camera.orbit(renderer.scene.bounds[0], 0.5, 0.0, 0.0, size, size)
         assert renderer.render(small).shape == (size, size, 4)
     assert len(renderer._targets) <= 2
+
+
+def test_fallback_toggles_match_the_gpu_path(scene, gl_ctx):
+    from viewer.fallback import FallbackRenderer
+
+    asset, renderer, cam = scene
+    fallback = FallbackRenderer.from_asset(gl_ctx, asset)
+    for settings in (ViewSettings(color_by_group=True), ViewSettings(sh_degree=1),
+                     ViewSettings(splat_scale=2.0, background=(0.5, 0.5, 0.5))):
+        # numpy computes in float64, the GPU in float32
+        np.testing.assert_allclose(fallback.render(cam, settings), renderer.render(cam, settings), atol=2e-4)
+    with pytest.raises(ValueError, match="no benchmark baselines"):
+        fallback.draw(8, 8, bare="sorted")
+    fallback.release()

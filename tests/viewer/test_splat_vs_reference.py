@@ -20,7 +20,10 @@ from viewer.renderer import Renderer, ViewSettings
 splatter = pytest.importorskip("training.splatter", reason="the reference splatter needs torch")
 
 pytestmark = pytest.mark.gl
-MIN_PSNR = 35.0
+MIN_PSNR = 35.0  # the issue's requirement
+# Both renderers evaluate the same float32 formulas; measured agreement is 125-145 dB. Missing or
+# extra pixels (a primitive too small for its support, a wrong cull) drop it far below this.
+AGREEMENT_PSNR = 90.0
 
 
 def psnr(a: np.ndarray, b: np.ndarray) -> float:
@@ -35,6 +38,7 @@ def _check(renderer: Renderer, g: Gaussians, camera: Camera, background=(0.0, 0.
     assert want["alpha"].max() > 0.2, "the reference image is empty: the test would prove nothing"
     p_rgb, p_alpha = psnr(got[..., :3], want["rgb"]), psnr(got[..., 3], want["alpha"])
     assert p_rgb >= MIN_PSNR and p_alpha >= MIN_PSNR, f"PSNR rgb {p_rgb:.1f} dB, alpha {p_alpha:.1f} dB"
+    assert min(p_rgb, p_alpha) >= AGREEMENT_PSNR, f"PSNR rgb {p_rgb:.1f} dB, alpha {p_alpha:.1f} dB"
     return p_rgb
 
 
@@ -83,9 +87,9 @@ def test_sorts_and_primitives_give_the_same_image(gl_ctx):
         renderer = Renderer.from_gaussians(gl_ctx, g, sort=sort, primitive=primitive)
         images.append(renderer.render(cam))
         renderer.release()
-    np.testing.assert_array_equal(images[0], images[1])  # identical order: identical blending
-    # interpolation of the offsets over other primitives: float rounding only
-    np.testing.assert_allclose(images[0], images[2], atol=1e-4)
+    # same order and the same per-pixel formula: identical images whatever covers the pixels
+    np.testing.assert_array_equal(images[0], images[1])
+    np.testing.assert_array_equal(images[0], images[2])
 
 
 def test_empty_view_is_background(gl_ctx):
@@ -116,3 +120,24 @@ def test_record_chunks_and_culling(gl_ctx, monkeypatch):
     assert len(split.records) == 14  # ceil(500 / 37)
     np.testing.assert_array_equal(split.render(cam), expected)
     split.release()
+
+
+@pytest.mark.parametrize("scene", ["asset", "random"])
+def test_fallback_without_compute_matches_reference(gl_ctx, scene):
+    """The OpenGL 3.3 path (numpy projection and sort, instanced attributes) gives the same image."""
+    from viewer.fallback import FallbackRenderer
+
+    if scene == "asset":
+        asset = example_asset(seed=1, strands=96, points=12, sh_degree=3)
+        g = decode_gaussians(asset)
+        renderer = FallbackRenderer.from_asset(gl_ctx, asset)
+        lo, hi = renderer.scene.bounds
+        cam = Camera.orbit((lo + hi) / 2, 0.45, 60.0, 15.0, 96, 72)
+    else:
+        g = _random_gaussians(600, seed=7)
+        renderer = FallbackRenderer.from_gaussians(gl_ctx, g)
+        w2c = np.eye(4)
+        w2c[2, 3] = 0.6
+        cam = Camera(80, 56, fx=70.0, fy=85.0, cx=37.3, cy=30.1, world_to_camera=w2c)
+    _check(renderer, g, cam, background=(0.1, 0.2, 0.3))
+    renderer.release()

@@ -126,16 +126,21 @@ void main() {
     atomicAdd(visible, 1u);
     center[g] = vec4(m2, t.z, radius);
     conic[g] = vec4(cc / det, -cb / det, ca / det, mo.w);
-    // The quad to rasterise: alpha >= 1/255 only inside the ellipse q <= 2 ln(255 o), so a
-    // rectangle along the ellipse's axes suffices; thin hair splats cover far fewer pixels than
-    // the 3-sigma square. The fragment shader still applies the exact square and alpha tests.
+    // The primitive's half-axes (a triangle circumscribes the unit disc in these units; a quad
+    // is the unit square): alpha >= 1/255 only inside the ellipse q <= 2 ln(255 o), whose
+    // half-axes are sqrt(q lambda) along the eigenvectors; thin hair splats cover far fewer
+    // pixels than the 3-sigma square. Otherwise the disc around the support square (half-axes
+    // sqrt(2) (r + 1/2)). The fragment shader applies the exact square and alpha tests.
+    // Cancellation-free forms: lambda1 - lambda2 from (ca - cc, cb), lambda2 = det / lambda1.
     float q = 2.0 * log(mo.w / ALPHA_MIN) * 1.0001 + 1e-4;
-    float lam2 = max(mid - sqrt(max(mid * mid - det, 0.0)), 0.0);
-    vec2 v1 = abs(cb) > 1e-12 * mid ? normalize(vec2(cb, lam - ca)) : (ca >= cc ? vec2(1.0, 0.0) : vec2(0.0, 1.0));
-    float e1 = sqrt(q * lam) + 0.01, e2 = sqrt(q * lam2) + 0.01;
-    float square = radius + 0.5;
-    if (e1 * e2 < square * square) axes[g] = vec4(v1 * e1, vec2(-v1.y, v1.x) * e2);
-    else axes[g] = vec4(square, 0.0, 0.0, square);
+    float lam1 = mid + sqrt(0.25 * (ca - cc) * (ca - cc) + cb * cb);
+    float lam2 = det / lam1;
+    vec2 v1 = ca >= cc ? vec2(lam1 - cc, cb) : vec2(cb, lam1 - ca);
+    v1 = dot(v1, v1) > 0.0 ? normalize(v1) : vec2(1.0, 0.0);
+    float e1 = sqrt(q * lam1) * 1.0001 + 0.01, e2 = sqrt(q * lam2) * 1.0001 + 0.01;
+    float disc = 1.41421357 * (radius + 0.5);
+    if (e1 * e2 < disc * disc) axes[g] = vec4(v1 * e1, vec2(-v1.y, v1.x) * e2);
+    else axes[g] = vec4(disc, 0.0, 0.0, disc);
     vec3 rgb;
     if (u_color_mode == 1) rgb = group_color(card_group[strand_card[g / u_segments]]);
     else rgb = eval_sh(local * u_coeffs * 3u, normalize(mo.xyz - u_cam_center));

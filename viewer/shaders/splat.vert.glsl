@@ -13,11 +13,12 @@ uniform bool u_triangles;  // true: one pulled triangle per splat; false: instan
 // A triangle circumscribing the unit disc (in half-axis units): area 1.3x the quad's.
 const vec2 TRIANGLE[3] = vec2[](vec2(0.0, 2.0), vec2(-1.7320508, -1.0), vec2(1.7320508, -1.0));
 
-// xy: the offset from the mean whitened by the conic (power = -|xy|^2 / 2); zw: the offset in
-// units of the support radius (inside the support iff both |z|, |w| <= 1). Both are affine in
-// the pixel position, so interpolating them is exact.
-out vec4 v_offset;
-flat out vec4 v_color;  // rgb, opacity
+// The fragment shader evaluates the Gaussian at gl_FragCoord (exact pixel centres) with the
+// reference's own formula; interpolating offsets instead loses accuracy on llvmpipe for large,
+// clipped primitives.
+flat out vec4 v_center;  // mean2d.xy, 1 / radius, opacity
+flat out vec3 v_conic;
+flat out vec3 v_color;
 
 void main() {
     uint slot = u_triangles ? uint(gl_VertexID) / 3u : uint(gl_InstanceID);
@@ -29,9 +30,8 @@ void main() {
     vec2 corner = u_triangles ? TRIANGLE[uint(gl_VertexID) % 3u]
                               : vec2(float(gl_VertexID & 1), float(gl_VertexID >> 1)) * 2.0 - 1.0;
     vec4 ax = rec[4u * slot + 1u];
-    vec4 white = rec[4u * slot + 2u];
-    vec2 d = corner.x * ax.xy + corner.y * ax.zw;
-    v_offset = vec4(corner.x * white.xy + corner.y * white.zw, d * r0.z);
-    v_color = vec4(rec[4u * slot + 3u].rgb, r0.w);
-    gl_Position = vec4(2.0 * (r0.xy + d) / u_viewport - 1.0, 0.0, 1.0);
+    v_center = r0;
+    v_conic = rec[4u * slot + 2u].xyz;
+    v_color = rec[4u * slot + 3u].rgb;
+    gl_Position = vec4(2.0 * (r0.xy + corner.x * ax.xy + corner.y * ax.zw) / u_viewport - 1.0, 0.0, 1.0);
 }

@@ -3,7 +3,7 @@
 // vertex shader reads memory sequentially (random reads cost llvmpipe's vertex stage a third of
 // its time). Record of sorted slot i, 4 vec4s:
 //   [0] mean2d.xy, 1 / radius, opacity   [1] half-axes a1.xy, a2.xy (pixels)
-//   [2] the half-axes whitened by the conic, L a1, L a2 (L^T L = Sigma2^-1)   [3] rgb, 0
+//   [2] conic a, b, c (Sigma2^-1 = [[a, b], [b, c]]), 0   [3] rgb, 0
 // Dispatched per record chunk: sorted slots [u_first, u_first + u_count).
 layout(local_size_x = 256) in;
 #include "common.glsl"
@@ -28,13 +28,8 @@ void main() {
         return;
     }
     vec4 con = conic[idx];
-    vec4 ax = axes[idx];
-    // Cholesky factor of the conic [[a, b], [b, c]] = L^T L, L = [[l11, l12], [0, l22]]
-    float l11 = sqrt(con.x);
-    float l12 = con.y / l11;
-    float l22 = sqrt(max(con.z - l12 * l12, 0.0));
     rec[4u * i] = vec4(c.xy, 1.0 / c.w, con.w);
-    rec[4u * i + 1u] = ax;
-    rec[4u * i + 2u] = vec4(l11 * ax.x + l12 * ax.y, l22 * ax.y, l11 * ax.z + l12 * ax.w, l22 * ax.w);
+    rec[4u * i + 1u] = axes[idx];
+    rec[4u * i + 2u] = vec4(con.xyz, 0.0);
     rec[4u * i + 3u] = vec4(color[idx].rgb, 0.0);
 }
