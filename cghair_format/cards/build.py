@@ -70,6 +70,7 @@ class CardBuild:
     error: ReconstructionError  # decoded (float, before quantization) vs resampled input
     points: np.ndarray  # [S, P, 3] float32, the resampled input the error refers to
     textures: np.ndarray  # [C, T, T] float32 strand coverage images, rows along u
+    colors: np.ndarray | None = None  # [S, P, 3] float32 resampled input colours, if the input has them
     strip_rounds: int = 0  # widen / extend rounds used by the inverse UV mapping
     unsolved_points: int = 0  # points without an exact card solution (kept at nearest-spine coords)
     outside_strip: int = 0  # points with v outside [0, 1] (beyond the tolerance)
@@ -202,6 +203,7 @@ def _build(strands: Strands, n_cards: int, n_groups: int, segments: int, points:
         outside = int(((v < -STRIP_TOLERANCE) | (v > 1 + STRIP_TOLERANCE)).sum())
     done("verify")
     return CardBuild(asset=asset, timings=timings, error=error, points=pts.astype(np.float32),
-                     textures=textures, strip_rounds=rounds, unsolved_points=int((~solved).sum()),
+                     textures=textures, colors=None if colors is None else colors.astype(np.float32),
+                     strip_rounds=rounds, unsolved_points=int((~solved).sum()),
                      outside_strip=outside,
                      info={"cards": c, "groups": n_t, "strands": s_count, "points": points})

@@ -13,7 +13,8 @@ import numpy as np
 from ..errors import require
 
 TEXTURE_SIZE = 32  # texels along u and across v
-SAMPLES_PER_POINT = 4  # dense samples per strand point
+SAMPLES_PER_POINT = 2  # dense samples per strand point ...
+SAMPLES_PER_ROW = 8  # ... and at least this many per texel row (even deposits along a strand)
 FEATURE_SIZE = 16  # the feature is the texture box-filtered to FEATURE_SIZE x FEATURE_SIZE
 SPLINE_COEFFICIENTS = 12
 
@@ -37,7 +38,7 @@ def strand_textures(uv: np.ndarray, strand_card: np.ndarray, n_cards: int,
 
     A strand crossing a texel row adds ~1 to the row's texels, split bilinearly between neighbours.
     """
-    samples = SAMPLES_PER_POINT * uv.shape[1]
+    samples = max(SAMPLES_PER_POINT * uv.shape[1], SAMPLES_PER_ROW * size)
     curves = np.clip(uv_splines(uv.astype(np.float64), samples), 0.0, 1.0)  # [S, Q, 2]
     y = curves[..., 0] * (size - 1)
     x = curves[..., 1] * (size - 1)

@@ -35,6 +35,7 @@ def test_real_colours_are_used():
     strands = load_real("Bangs_100_binary.ply")
     assert strands.colors is not None
     b = build_cards(strands, n_cards=10, n_groups=3, segments=8, points=20, progress=False)
+    assert b.colors is not None and b.colors.shape == (100, 20, 3)
     from cghair_format.gaussians import SH_C0
 
     dc = b.asset.appearance.codebooks[..., :6] * SH_C0 + 0.5  # the stored root / tip colours
