@@ -9,7 +9,7 @@ in chunks of whole strands, each in its own buffer.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -48,7 +48,6 @@ class GpuScene:
     mesh_triangles: Any | None = None  # index buffer of the strips
     card_vertices: int = 0  # 2(M+1)
     n_strands: int = 0
-    extra: dict = field(default_factory=dict)
 
     @property
     def sh_degree(self) -> int:

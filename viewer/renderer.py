@@ -1,11 +1,13 @@
-"""The splatting renderer: per-frame preprocess, depth sort and instanced splats (headless or window).
+"""The splatting renderer: per-frame preprocess, depth sort, gather and splat draw (headless or window).
 
 Image model: the rendering contract shared with ``training/splatter.py``. Per frame a compute
-shader projects every Gaussian (EWA 2D covariance, conic, 3-sigma radius, SH colour, depth key);
-the keys are sorted (GPU radix sort, or numpy); one instanced quad per Gaussian is drawn front to
-back into an RGBA32F target with the "under" operator (``dst += (1 - dst.a) * (c a, a)``), which
-gives ``C = sum c_i a_i T_i`` and ``alpha = 1 - T``; a last pass adds the background.
-Framebuffer row ``j`` holds image row ``j`` (image y points down), so reads need no flip.
+shader projects every Gaussian (EWA 2D covariance, conic, 3-sigma radius, SH colour, depth key,
+the primitive's half-axes) and counts the visible ones; the keys are sorted (GPU radix sort, or
+numpy); a gather pass writes the visible splats' draw records in sorted order; one triangle (or
+instanced quad) per splat is drawn front to back into an RGBA32F target with the "under"
+operator (``dst += (1 - dst.a) * (c a, a)``), giving ``C = sum c_i a_i T_i`` and
+``alpha = 1 - T``; a last pass adds the background and the overlays. Framebuffer row ``j`` holds
+image row ``j`` (image y points down), so reads need no flip.
 """
 
 from __future__ import annotations
