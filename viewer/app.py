@@ -27,7 +27,8 @@ def save_png(image: np.ndarray, path: str | Path) -> Path:
 
 def _key_name(glfw: Any, key: int) -> str:
     special = {glfw.KEY_ESCAPE: "ESCAPE", glfw.KEY_F12: "F12", glfw.KEY_EQUAL: "=", glfw.KEY_MINUS: "-",
-               glfw.KEY_KP_ADD: "+", glfw.KEY_KP_SUBTRACT: "-"}
+               glfw.KEY_KP_ADD: "+", glfw.KEY_KP_SUBTRACT: "-", glfw.KEY_LEFT_BRACKET: "[",
+               glfw.KEY_RIGHT_BRACKET: "]"}
     if key in special:
         return special[key]
     if glfw.KEY_0 <= key <= glfw.KEY_9:

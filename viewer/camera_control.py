@@ -88,7 +88,8 @@ class OrbitController:
 KEYMAP: dict[str, tuple[str, object]] = {
     "C": ("toggle", "show_cards"), "L": ("toggle", "show_strands"), "G": ("toggle", "color_by_group"),
     "H": ("toggle", "hide_splats"), "0": ("sh_degree", 0), "1": ("sh_degree", 1), "2": ("sh_degree", 2),
-    "3": ("sh_degree", 3), "=": ("scale", 1.25), "+": ("scale", 1.25), "-": ("scale", 0.8),
+    "3": ("sh_degree", 3), "=": ("scale", 1.25), "+": ("scale", 1.25), "]": ("scale", 1.25),
+    "-": ("scale", 0.8), "[": ("scale", 0.8),
     "R": ("reset", None), "P": ("screenshot", None), "F12": ("screenshot", None), "ESCAPE": ("quit", None),
 }
 # held keys -> (forward, right, up) flight direction
@@ -96,7 +97,7 @@ FLY_KEYS: dict[str, tuple[float, float, float]] = {
     "W": (1, 0, 0), "S": (-1, 0, 0), "D": (0, 1, 0), "A": (0, -1, 0), "E": (0, 0, 1), "Q": (0, 0, -1),
 }
 HELP = ("drag: orbit | right/middle drag or shift-drag: pan | scroll: zoom | WASD QE: fly | R: reset | "
-        "C: cards | L: strands | G: group colours | H: hide splats | 0-3: SH degree | +/-: splat scale | "
+        "C: cards | L: strands | G: group colours | H: hide splats | 0-3: SH degree | [/] or -/+: splat scale | "
         "P: screenshot | Esc: quit")
 
 

@@ -111,6 +111,9 @@ def test_keys_toggle_settings_and_return_actions():
     assert state.settings.splat_scale == pytest.approx(1.5625)
     state.press("-")
     assert state.settings.splat_scale == pytest.approx(1.25)
+    state.press("[")
+    state.press("]")
+    assert state.settings.splat_scale == pytest.approx(1.25)
     assert state.press("P") == "screenshot"
     assert state.press("ESCAPE") == "quit"
     assert state.press("F7") is None  # unmapped keys do nothing
