@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from cghair_format import Gaussians, HairAsset
+from cghair_format.errors import CghError
 
 from .pipeline import Programs, bind, dispatch, set_uniforms
 
@@ -69,6 +70,19 @@ def block_limit(ctx: Any) -> int:
     return int(min(limit, 1 << 31))
 
 
+class SceneTooLargeError(CghError):
+    """The asset has more Gaussians than one storage block of this OpenGL can address."""
+
+
+def check_capacity(ctx: Any, gaussians: int) -> None:
+    """Per-Gaussian vec4 buffers must fit one storage block (128 MiB on llvmpipe: 8.4 M Gaussians)."""
+    most = block_limit(ctx) // 16
+    if gaussians > most:
+        raise SceneTooLargeError(
+            f"the asset has {gaussians:,} Gaussians; this OpenGL driver addresses at most {most:,} per "
+            "storage block (GL_MAX_SHADER_STORAGE_BLOCK_SIZE). Use fewer strands or points per strand.")
+
+
 def _vec4(a: np.ndarray, w: float = 0.0) -> np.ndarray:
     out = np.full((len(a), 4), w, np.float32)
     out[:, :a.shape[1]] = a
@@ -86,6 +100,7 @@ def _buffer(ctx: Any, data: np.ndarray | None = None, nbytes: int = 0) -> Any:
 def upload_asset(ctx: Any, programs: Programs, asset: HairAsset) -> GpuScene:
     """Upload an asset's compact data and decode it on the GPU."""
     asset.validate()
+    check_capacity(ctx, asset.n_gaussians)
     cards, app = asset.cards, asset.appearance
     c, m1 = cards.spine.shape[:2]
     s, p = asset.n_strands, asset.points_per_strand
@@ -189,6 +204,7 @@ def _decode_appearance(ctx: Any, programs: Programs, asset: HairAsset, strand_ca
 def upload_gaussians(ctx: Any, gaussians: Gaussians) -> GpuScene:
     """Upload a plain Gaussian set (no strands or cards: overlays and group colours unavailable)."""
     g = gaussians.count
+    check_capacity(ctx, g)
     coeffs = gaussians.sh.shape[1]
     per_chunk = max(1, block_limit(ctx) // (coeffs * 3 * 4))
     sh = gaussians.sh.astype(np.float32).reshape(g, -1)

@@ -72,3 +72,12 @@ def test_upload_gaussians_roundtrip(gl_ctx):
             read_points(scene)
     finally:
         scene.release()
+
+
+def test_too_many_gaussians_is_a_clear_error(gl_ctx, monkeypatch):
+    asset = example_asset(strands=20, points=6)  # 100 Gaussians
+    monkeypatch.setattr(decode, "block_limit", lambda ctx: 16 * 99)
+    with pytest.raises(decode.SceneTooLargeError, match="100 Gaussians.*at most 99"):
+        upload_asset(gl_ctx, Programs(gl_ctx), asset)
+    with pytest.raises(decode.SceneTooLargeError):
+        upload_gaussians(gl_ctx, decode_gaussians(asset))
