@@ -70,6 +70,11 @@ def block_limit(ctx: Any) -> int:
     return int(min(limit, 1 << 31))
 
 
+def sh_chunk_bytes(ctx: Any) -> int:
+    """Size limit of one SH (and MLP activation) chunk buffer."""
+    return block_limit(ctx)
+
+
 class SceneTooLargeError(CghError):
     """The asset has more Gaussians than one storage block of this OpenGL can address."""
 
@@ -164,7 +169,7 @@ def _decode_appearance(ctx: Any, programs: Programs, asset: HairAsset, strand_ca
     widths = [layer.weight.shape[0] for layer in app.mlp]
     out_width = widths[-1]
     widest = max([app.latent_dim, *widths])
-    per_chunk = max(1, block_limit(ctx) // (4 * widest))
+    per_chunk = max(1, sh_chunk_bytes(ctx) // (4 * widest))
     per_chunk = min(per_chunk, s)
     logits = _buffer(ctx, app.logits.astype(np.float32).reshape(-1))
     codebooks = _buffer(ctx, app.codebooks.astype(np.float32).reshape(-1))
@@ -206,7 +211,7 @@ def upload_gaussians(ctx: Any, gaussians: Gaussians) -> GpuScene:
     g = gaussians.count
     check_capacity(ctx, g)
     coeffs = gaussians.sh.shape[1]
-    per_chunk = max(1, block_limit(ctx) // (coeffs * 3 * 4))
+    per_chunk = max(1, sh_chunk_bytes(ctx) // (coeffs * 3 * 4))
     sh = gaussians.sh.astype(np.float32).reshape(g, -1)
     chunks = [ShChunk(first, min(per_chunk, g - first), _buffer(ctx, sh[first:first + per_chunk]))
               for first in range(0, g, per_chunk)]

@@ -51,7 +51,7 @@ def test_sh_split_into_chunks(gl_ctx, monkeypatch):
     """A tiny storage-block limit forces many SH chunks; the result must not change."""
     asset = example_asset(seed=2, strands=50, points=8, sh_degree=2)
     out_bytes = 4 * (asset.points_per_strand - 1) * 9 * 3
-    monkeypatch.setattr(decode, "block_limit", lambda ctx: 3 * out_bytes)
+    monkeypatch.setattr(decode, "sh_chunk_bytes", lambda ctx: 3 * out_bytes)
     scene = upload_asset(gl_ctx, Programs(gl_ctx), asset)
     try:
         assert len(scene.sh) == 17  # ceil(50 / 3)
