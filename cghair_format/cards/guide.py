@@ -10,6 +10,7 @@ from ._util import normalize, project_to_spines
 
 DENSE_PER_SEGMENT = 8  # spline samples per card segment for the arc-length resampling
 END_MARGIN = 0.01  # extra length at each end, as a fraction of the guide's length
+FOLD_RETRIES = 2  # smoother refits of a folded guide (half the coefficients each), then no extension
 
 
 def cluster_centroids(points: np.ndarray, labels: np.ndarray, n_clusters: int) -> np.ndarray:
@@ -27,7 +28,7 @@ def spline_coefficients(p: int, segments: int) -> int:
     return int(min(p, max(4, segments // 2 + 3)))
 
 
-def smoothing_spline(centroids: np.ndarray, segments: int, samples: int) -> np.ndarray:
+def smoothing_spline(centroids: np.ndarray, segments: int, samples: int, n_coef: int | None = None) -> np.ndarray:
     """Least-squares cubic B-spline fits of curves ``[C, P, 3]``, evaluated at ``samples`` points.
 
     The knots are uniform in the point index (strands are resampled to equal arc length, so their
@@ -36,7 +37,7 @@ def smoothing_spline(centroids: np.ndarray, segments: int, samples: int) -> np.n
     interpolate = require("scipy.interpolate", "cards", "card guide splines", package="scipy")
     c, p = centroids.shape[:2]
     degree = min(3, p - 1)
-    n_coef = max(spline_coefficients(p, segments), degree + 1)
+    n_coef = max(min(n_coef or spline_coefficients(p, segments), p), degree + 1)
     inner = np.linspace(0.0, 1.0, n_coef - degree + 1)
     knots = np.concatenate([np.zeros(degree), inner, np.ones(degree)])
     x = np.linspace(0.0, 1.0, p)
@@ -67,11 +68,42 @@ def guide_spines(points: np.ndarray, labels: np.ndarray, n_clusters: int, segmen
 
     Each guide is extended straight along its end tangents so that all of the cluster's points
     project inside it (a strand longer than the mean would otherwise leave its card's strip).
+    A guide that folds back on itself (adjacent segments turning by more than 90 degrees, e.g. a
+    hooked root extended backwards over itself) is refitted smoother, and finally not extended.
     Also returns each point's spine parameter ``[S * P]`` on its extended spine (segment units):
     its nearest-point projection, carried over by arc length.
     """
     centroids = cluster_centroids(points, labels, n_clusters)
-    dense = smoothing_spline(centroids, segments, DENSE_PER_SEGMENT * segments + 1)  # [C, Q, 3]
+    p = points.shape[1]
+    n_coef = spline_coefficients(p, segments)
+    spines, s = _fit(centroids, points, labels, segments, n_coef, True, show_progress)
+    for attempt in range(FOLD_RETRIES + 1):
+        folded = np.flatnonzero(_folds(spines))
+        if len(folded) == 0:
+            break
+        n_coef = max(4, n_coef // 2)
+        extend = attempt < FOLD_RETRIES
+        remap = np.full(n_clusters, -1)
+        remap[folded] = np.arange(len(folded))
+        strands = np.flatnonzero(remap[labels] >= 0)
+        sub_spines, sub_s = _fit(centroids[folded], points[strands], remap[labels[strands]], segments,
+                                 n_coef, extend, False)
+        spines[folded] = sub_spines
+        idx = (strands[:, None] * p + np.arange(p)[None, :]).ravel()
+        s[idx] = sub_s
+    return spines, s
+
+
+def _folds(spines: np.ndarray) -> np.ndarray:
+    """Cards ``[C]`` whose spine turns by more than 90 degrees between adjacent segments."""
+    d = np.diff(spines, axis=1)
+    return ((d[:, 1:] * d[:, :-1]).sum(-1) < 0).any(axis=1)
+
+
+def _fit(centroids: np.ndarray, points: np.ndarray, labels: np.ndarray, segments: int, n_coef: int,
+         extend: bool, show_progress: bool) -> tuple[np.ndarray, np.ndarray]:
+    n_clusters = len(centroids)
+    dense = smoothing_spline(centroids, segments, DENSE_PER_SEGMENT * segments + 1, n_coef)  # [C, Q, 3]
     t0 = normalize(dense[:, 1] - dense[:, 0])
     t1 = normalize(dense[:, -1] - dense[:, -2])
     arc = np.concatenate([np.zeros((n_clusters, 1)),
@@ -81,13 +113,13 @@ def guide_spines(points: np.ndarray, labels: np.ndarray, n_clusters: int, segmen
     spines = _resample(dense, arc, t0, t1, zero, zero, segments)
     # how far the cluster's points reach beyond each end, along the end segments (strands longer
     # than the mean, and strands that loop back past their root, would leave the strip)
-    s = project_to_spines(spines, np.repeat(labels, points.shape[1]), points.reshape(-1, 3),
-                          show_progress=show_progress)
     point_card = np.repeat(labels, points.shape[1])
+    s = project_to_spines(spines, point_card, points.reshape(-1, 3), show_progress=show_progress)
     s_min = np.zeros(n_clusters)
     s_max = np.full(n_clusters, float(segments))
-    np.minimum.at(s_min, point_card, s)
-    np.maximum.at(s_max, point_card, s)
+    if extend:
+        np.minimum.at(s_min, point_card, s)
+        np.maximum.at(s_max, point_card, s)
     seg_len = length / segments
     before = -s_min * seg_len + END_MARGIN * length
     after = (s_max - segments) * seg_len + END_MARGIN * length

@@ -28,6 +28,8 @@ NEIGHBOURS = 1  # segments tried on each side of the nearest one (then all, for 
 EPS_F = 1e-9  # tolerance on the segment coordinate and the triangle test
 OUTSIDE_PENALTY = 4.0  # cost of leaving the strip, per unit of strip width, vs |delta|
 PLAUSIBLE_OUTSIDE = 1.0  # near the start guess, accept only solutions at most a strip width off the strip
+RETRY_OUTSIDE = 4.0  # on the other segments, at most 4 strip widths (or end segments) off it: farther
+# solutions are exact in float but wild (huge delta), and quantize badly; such points widen the card
 STRIP_TOLERANCE = 1e-3  # v in [-tol, 1 + tol] counts as inside the strip
 WIDEN_MARGIN = 1.02
 UNSOLVED_WIDEN = 1.5  # an unsolved point widens its card at least this much
@@ -47,7 +49,7 @@ def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.einsum("...c,...c->...", a, b)
 
 
-def _solve_triangle(x, origin, a, e, n0, dn, upper: bool, k, m, plausible_only: bool):
+def _solve_triangle(x, origin, a, e, n0, dn, upper: bool, k, m, outside_limit: float):
     """Candidate ``(f, v, delta, cost)`` ``[n, J, 2]`` for one triangle type on segments ``k [n, J]``."""
     q = x - origin
     c0 = _cross(e, n0)
@@ -86,8 +88,7 @@ def _solve_triangle(x, origin, a, e, n0, dn, upper: bool, k, m, plausible_only: 
     out_v = np.maximum(np.maximum(-v, v - 1), 0.0)
     out_f = np.maximum(np.maximum(-f, f - 1), 0.0)
     cost = np.abs(delta) + OUTSIDE_PENALTY * (out_v * width + out_f * length)
-    if plausible_only:
-        ok &= (out_v <= PLAUSIBLE_OUTSIDE) & (out_f <= PLAUSIBLE_OUTSIDE)
+    ok &= (out_v <= outside_limit) & (out_f <= outside_limit)
     cost = np.where(ok & np.isfinite(cost), cost, np.inf)
     return f, v, delta, cost
 
@@ -98,8 +99,9 @@ def solve_uvd(cards: Cards, points: np.ndarray, card: np.ndarray, s: np.ndarray,
     ``[N]`` of the points solved exactly. ``s [N]`` is each point's spine parameter (start guess).
 
     Points with no plausible exact solution near ``s`` (none, or only ones more than a strip width
-    off the strip) are retried on every segment of their card, where the best valid solution wins;
-    a point still unsolved keeps its nearest-spine coordinates (an error the caller reports).
+    off the strip) are retried on every segment of their card, where the best solution at most
+    ``RETRY_OUTSIDE`` off the strip wins; a point still unsolved keeps its nearest-spine
+    coordinates (an error the caller reports, and :func:`fit_strip` widens the card for).
     """
     m = cards.segments
     mesh = card_mesh(cards)
@@ -113,14 +115,14 @@ def solve_uvd(cards: Cards, points: np.ndarray, card: np.ndarray, s: np.ndarray,
         c = card[a0:b0].astype(np.int64)[:, None]
         k0 = np.clip(np.floor(s[a0:b0]), 0, m - 1).astype(np.int64)
         k = np.clip(k0[:, None] + offsets[None, :], 0, m - 1)  # [n, J]
-        uvd[a0:b0], solved[a0:b0] = _solve_on(points[a0:b0], c, k, left, right, nrm, m, plausible_only=True)
+        uvd[a0:b0], solved[a0:b0] = _solve_on(points[a0:b0], c, k, left, right, nrm, m, PLAUSIBLE_OUTSIDE)
     retry = np.flatnonzero(~solved)
     if len(retry):
         k_all = np.broadcast_to(np.arange(m)[None, :], (len(retry), m))
         for a0, b0 in chunks(len(retry), max(1, 65536 // m)):
             idx = retry[a0:b0]
             res, ok = _solve_on(points[idx], card[idx].astype(np.int64)[:, None], k_all[a0:b0],
-                                left, right, nrm, m)
+                                left, right, nrm, m, RETRY_OUTSIDE)
             uvd[idx[ok]] = res[ok]
             solved[idx[ok]] = True
     lost = np.flatnonzero(~solved)
@@ -129,7 +131,7 @@ def solve_uvd(cards: Cards, points: np.ndarray, card: np.ndarray, s: np.ndarray,
     return uvd, solved
 
 
-def _solve_on(x, c, k, left, right, nrm, m, plausible_only: bool = False):
+def _solve_on(x, c, k, left, right, nrm, m, outside_limit: float):
     x = x.astype(np.float64)[:, None, :]
     best = []
     for upper in (False, True):
@@ -138,7 +140,7 @@ def _solve_on(x, c, k, left, right, nrm, m, plausible_only: bool = False):
         else:
             origin, a, e = left[c, k], left[c, k + 1] - left[c, k], right[c, k] - left[c, k]
         n0, dn = nrm[c, k], nrm[c, k + 1] - nrm[c, k]
-        f, v, delta, cost = _solve_triangle(x, origin, a, e, n0, dn, upper, k, m, plausible_only)
+        f, v, delta, cost = _solve_triangle(x, origin, a, e, n0, dn, upper, k, m, outside_limit)
         u = (k[..., None] + f) / m
         best.append((np.stack([u, v, delta], -1).reshape(len(x), -1, 3), cost.reshape(len(x), -1)))
     cand = np.concatenate([b[0] for b in best], axis=1)
