@@ -94,7 +94,8 @@ def _solve_triangle(x, origin, a, e, n0, dn, upper: bool, k, m, outside_limit: f
 
 
 def solve_uvd(cards: Cards, points: np.ndarray, card: np.ndarray, s: np.ndarray,
-              neighbours: int = NEIGHBOURS, show_progress: bool = False) -> tuple[np.ndarray, np.ndarray]:
+              neighbours: int = NEIGHBOURS, show_progress: bool = False,
+              retry_outside: float = RETRY_OUTSIDE) -> tuple[np.ndarray, np.ndarray]:
     """Card coordinates ``[N, 3]`` (float64) of ``points [N, 3]`` on cards ``card [N]``, and a mask
     ``[N]`` of the points solved exactly. ``s [N]`` is each point's spine parameter (start guess).
 
@@ -122,7 +123,7 @@ def solve_uvd(cards: Cards, points: np.ndarray, card: np.ndarray, s: np.ndarray,
         for a0, b0 in chunks(len(retry), max(1, 65536 // m)):
             idx = retry[a0:b0]
             res, ok = _solve_on(points[idx], card[idx].astype(np.int64)[:, None], k_all[a0:b0],
-                                left, right, nrm, m, RETRY_OUTSIDE)
+                                left, right, nrm, m, retry_outside)
             uvd[idx[ok]] = res[ok]
             solved[idx[ok]] = True
     lost = np.flatnonzero(~solved)
@@ -222,4 +223,8 @@ def fit_strip(cards: Cards, points: np.ndarray, card: np.ndarray, s: np.ndarray,
         s_redo = s[redo]
         res, ok = solve_uvd(current, points[redo], card[redo], s_redo, show_progress=show_progress)
         uvd[redo], solved[redo] = res, ok
+    lost = np.flatnonzero(~solved)
+    if len(lost):  # last resort: any exact solution, however far off the strip, beats an approximation
+        res, ok = solve_uvd(current, points[lost], card[lost], s[lost], retry_outside=np.inf)
+        uvd[lost[ok]], solved[lost[ok]] = res[ok], True
     return current, uvd, solved, rounds
