@@ -20,6 +20,10 @@ def _check_geometry(build):
     np.testing.assert_allclose(np.linalg.norm(n, axis=-1), 1.0, atol=1e-5)
     assert np.abs((n * spine_tangents(a.cards.spine.astype(np.float64))).sum(-1)).max() < 1e-3
     v = a.uvd[..., 1]
+    # sane geometry, not only an exact decode: wild solutions (huge delta, far extrapolation) quantize badly
+    diag = build.error.bbox_diagonal
+    assert np.abs(a.uvd[..., 2]).max() <= 0.25 * diag and a.cards.half_width.max() <= 0.25 * diag
+    assert a.uvd[..., 0].min() >= -STRIP_TOLERANCE and a.uvd[..., 0].max() <= 1 + STRIP_TOLERANCE
     assert v.min() >= -STRIP_TOLERANCE and v.max() <= 1 + STRIP_TOLERANCE  # inside the card's width
     assert build.error.mean_rel <= MEAN_TARGET and build.error.max_rel <= MAX_TARGET
     # the report is honest: it matches an independent decode

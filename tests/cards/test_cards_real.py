@@ -20,6 +20,10 @@ def _check(build):
     assert np.abs(np.linalg.norm(n, axis=-1) - 1).max() < 1e-5
     assert np.abs((n * spine_tangents(a.cards.spine.astype(np.float64))).sum(-1)).max() < 1e-3
     v = a.uvd[..., 1]
+    # sane geometry, not only an exact decode: wild solutions (huge delta, far extrapolation) quantize badly
+    diag = build.error.bbox_diagonal
+    assert np.abs(a.uvd[..., 2]).max() <= 0.25 * diag and a.cards.half_width.max() <= 0.25 * diag
+    assert a.uvd[..., 0].min() >= -STRIP_TOLERANCE and a.uvd[..., 0].max() <= 1 + STRIP_TOLERANCE
     assert v.min() >= -STRIP_TOLERANCE and v.max() <= 1 + STRIP_TOLERANCE
     assert build.error.mean_rel <= MEAN_TARGET, build.error.line("error")
     assert build.error.max_rel <= MAX_TARGET, build.error.line("error")
@@ -56,3 +60,16 @@ def test_every_real_model_at_its_own_size():
     for name, b, sec in rows:
         print(f"{name:<29}{b.info['strands']:>8}{b.info['cards']:>7}{b.info['groups']:>7}  "
               f"{b.error.mean_rel:.2e}  {b.error.max_rel:.2e}  {sec:8.1f}")
+
+
+@pytest.mark.slow
+def test_densified_straight_hair_at_the_paper_scale():
+    # regression: a hooked-root guide extended backwards over itself once gave a card 4,000 units wide
+    # and deltas of 1e5 (exact in float, but the codec could not quantize them)
+    from cghair_format.strands import densify, resample
+
+    strands = densify(resample(load_real("straight.hair"), 100, method="bspline"), 25_000, seed=0)
+    build = build_cards(strands, progress=False)
+    _check(build)
+    assert build.unsolved_points == 0
+    print("\n" + build.timing_table() + build.error.line("error"))
