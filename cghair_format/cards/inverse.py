@@ -12,7 +12,11 @@ the card (smallest ``|delta|``, inside the strip) wins. This is the L2 optimum o
 (zero), reached without iterations, against exactly the decode's mesh.
 
 Strands that leave their card's strip are handled by widening the card at the nodes they cross
-and extending its end nodes along the spine, then solving again (a few rounds).
+and extending its end nodes along the spine, then solving again (a few rounds). Inside the strip
+the mapping is continuous; outside it the extrapolated half-planes change direction at segment
+ends and can leave gaps, so points without a solution near the strip widen their card too. A point
+that still has none takes the best exact solution however far off the strip (never observed on
+the real models at the default settings; counted in ``CardBuild.outside_strip``).
 """
 
 from __future__ import annotations
