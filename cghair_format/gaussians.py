@@ -13,6 +13,7 @@ import numpy as np
 
 from .asset import Appearance, HairAsset
 from .geometry import strand_points
+from .parallel import map_blocks
 
 SH_C0 = 0.28209479177387814
 SH_C1 = 0.4886025119029199
@@ -47,19 +48,27 @@ def segment_frames(points: np.ndarray, thickness: float) -> tuple[np.ndarray, np
     The rotation is the shortest arc taking +z to the segment direction; a zero-length segment
     gets the identity, a segment along -z a half turn about x.
     """
-    p = points.astype(np.float64)
-    seg = p[:, 1:] - p[:, :-1]
-    length = np.linalg.norm(seg, axis=-1)
-    d = seg / np.maximum(length, 1e-30)[..., None]
-    d[length <= 0] = (0.0, 0.0, 1.0)
-    w = 1.0 + d[..., 2]
-    q = np.stack([w, -d[..., 1], d[..., 0], np.zeros_like(w)], axis=-1)
-    q[w < 1e-12] = (0.0, 1.0, 0.0, 0.0)
-    q /= np.linalg.norm(q, axis=-1, keepdims=True)
-    scales = np.stack([np.full_like(length, thickness), np.full_like(length, thickness), length / 2], -1)
-    means = (p[:, 1:] + p[:, :-1]) / 2
-    return (means.reshape(-1, 3).astype(np.float32), q.reshape(-1, 4).astype(np.float32),
-            scales.reshape(-1, 3).astype(np.float32))
+    s, p = points.shape[:2]
+    means = np.empty((s, p - 1, 3), np.float32)
+    rotations = np.empty((s, p - 1, 4), np.float32)
+    scales = np.empty((s, p - 1, 3), np.float32)
+
+    def block(b: slice) -> None:
+        pts = points[b].astype(np.float64)
+        seg = pts[:, 1:] - pts[:, :-1]
+        length = np.sqrt(np.sum(seg * seg, axis=-1))
+        d = seg / np.maximum(length, 1e-30)[..., None]
+        d[length <= 0] = (0.0, 0.0, 1.0)
+        w = 1.0 + d[..., 2]
+        q = np.stack([w, -d[..., 1], d[..., 0], np.zeros_like(w)], axis=-1)
+        q[w < 1e-12] = (0.0, 1.0, 0.0, 0.0)
+        rotations[b] = q / np.sqrt(np.sum(q * q, axis=-1, keepdims=True))
+        means[b] = (pts[:, 1:] + pts[:, :-1]) / 2
+        scales[b, :, :2] = thickness
+        scales[b, :, 2] = length / 2
+
+    map_blocks(block, s)
+    return means.reshape(-1, 3), rotations.reshape(-1, 4), scales.reshape(-1, 3)
 
 
 def strand_weights(appearance: Appearance) -> np.ndarray:
@@ -81,18 +90,22 @@ def strand_latents(appearance: Appearance, strand_group: np.ndarray) -> np.ndarr
     return np.einsum("sk,skd->sd", w, appearance.codebooks.astype(np.float64)[strand_group])
 
 
-def run_mlp(appearance: Appearance, latents: np.ndarray, batch: int = 4096) -> np.ndarray:
-    """The global MLP applied to latents ``[S, D]``, in float32, batched; returns ``[S, out]``."""
+def run_mlp(appearance: Appearance, latents: np.ndarray) -> np.ndarray:
+    """The global MLP applied to latents ``[S, D]``, in float32, by blocks of strands; ``[S, out]``."""
     out = np.empty((latents.shape[0], appearance.mlp[-1].weight.shape[0]), np.float32)
     weights = [(layer.weight.astype(np.float32).T.copy(), layer.bias.astype(np.float32), layer.activation)
                for layer in appearance.mlp]
-    for start in range(0, latents.shape[0], batch):
-        h = latents[start:start + batch].astype(np.float32)
-        for w, b, act in weights:
-            h = h @ w + b
+
+    def block(b: slice) -> None:
+        h = latents[b].astype(np.float32)
+        for w, bias, act in weights:
+            h = h @ w
+            h += bias
             if act == "relu":
                 np.maximum(h, 0, out=h)
-        out[start:start + batch] = h
+        out[b] = h
+
+    map_blocks(block, latents.shape[0], block=1024)
     return out
 
 

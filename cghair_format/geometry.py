@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .asset import Cards
+from .parallel import map_blocks
 
 
 def _normalize(v: np.ndarray) -> np.ndarray:
@@ -136,5 +137,12 @@ def strand_points(cards: Cards, strand_card: np.ndarray, uvd: np.ndarray) -> np.
     ``x = sum_j beta_j V_j + delta * normalize(sum_j beta_j N_j)`` over the point's card triangle.
     """
     s, p = uvd.shape[:2]
-    card = np.repeat(strand_card.astype(np.int64), p)
-    return CardMap(cards)(card, uvd.reshape(-1, 3)).reshape(s, p, 3).astype(np.float32)
+    cmap = CardMap(cards)
+    out = np.empty((s, p, 3), np.float32)
+
+    def block(b: slice) -> None:
+        card = np.repeat(strand_card[b].astype(np.int64), p)
+        out[b] = cmap(card, uvd[b].reshape(-1, 3)).reshape(-1, p, 3)
+
+    map_blocks(block, s)
+    return out

@@ -13,13 +13,14 @@ import numpy as np
 
 from .asset import Cards
 from .geometry import CardMap
+from .parallel import map_blocks
 from .quantize import base_prediction, level_plan
 
 NEWTON_STEPS = 2
 MAX_STEP_RATIO = 64.0
 
 
-def _run(cards: Cards, strand_card: np.ndarray, scale: np.ndarray, n: int, base_stride: int, newton: int,
+def _run(cmap: CardMap, strand_card: np.ndarray, scale: np.ndarray, n: int, base_stride: int, newton: int,
          y: np.ndarray | None = None, residuals: tuple[np.ndarray, list[np.ndarray]] | None = None):
     """Encode (``y`` given, scaled card coordinates ``[S, n, 3]``) or decode (``residuals`` given).
 
@@ -27,7 +28,6 @@ def _run(cards: Cards, strand_card: np.ndarray, scale: np.ndarray, n: int, base_
     residuals (base ``[S, nb, 3]``, levels ``[S, L, 3]``)."""
     base, levels = level_plan(n, base_stride)
     s = len(strand_card)
-    cmap = CardMap(cards)
     rec = np.zeros((s, n, 3))
     world = np.zeros((s, n, 3))
     out_base = np.zeros((s, len(base), 3), np.int64) if y is not None else residuals[0]
@@ -96,12 +96,30 @@ def encode_uvd(cards: Cards, strand_card: np.ndarray, y: np.ndarray, scale: np.n
     """Residuals (base, levels) of scaled card coordinates ``y [S, P, 3]`` (``uvd * scale``), and the
     world points ``[S, P, 3]`` the decoder will reconstruct. Every reconstructed value is within 0.5
     of ``y``."""
-    _, world, (base, levels) = _run(cards, strand_card, scale, y.shape[1], base_stride, newton, y=y)
+    _, world, (base, levels) = _in_chunks(cards, strand_card, scale, y.shape[1], base_stride, newton, y=y)
     return base, levels, world
 
 
 def decode_uvd(cards: Cards, strand_card: np.ndarray, base: np.ndarray, levels: list[np.ndarray], n: int,
                scale: np.ndarray, base_stride: int, newton: int = NEWTON_STEPS) -> np.ndarray:
     """Card coordinates ``[S, n, 3]`` (float64) from the residuals of :func:`encode_uvd`."""
-    rec, _, _ = _run(cards, strand_card, scale, n, base_stride, newton, residuals=(base, levels))
+    rec, _, _ = _in_chunks(cards, strand_card, scale, n, base_stride, newton, residuals=(base, levels))
     return rec / scale[:, None, :]
+
+
+def _in_chunks(cards: Cards, strand_card: np.ndarray, scale: np.ndarray, n: int, base_stride: int, newton: int,
+               y: np.ndarray | None = None, residuals=None):
+    """:func:`_run` over blocks of strands, which are independent of each other, in parallel."""
+    cmap = CardMap(cards)
+
+    def one(b: slice):
+        part = None if residuals is None else (residuals[0][b], [r[b] for r in residuals[1]])
+        return _run(cmap, strand_card[b], scale[b], n, base_stride, newton,
+                    y=None if y is None else y[b], residuals=part)
+
+    parts = map_blocks(one, len(strand_card))
+    rec = np.concatenate([p[0] for p in parts])
+    world = np.concatenate([p[1] for p in parts])
+    base = np.concatenate([p[2][0] for p in parts])
+    levels = [np.concatenate([p[2][1][i] for p in parts]) for i in range(len(parts[0][2][1]))]
+    return rec, world, (base, levels)
