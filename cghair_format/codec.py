@@ -38,7 +38,7 @@ MAX_TIGHTENINGS = 8
 class EncodeReport:
     profile: str
     step: float | None  # strand-point quantization step (scene units), None if lossless
-    max_point_error: float  # measured, scene units
+    max_point_error: float  # largest Euclidean distance to the input point, measured, scene units
     bbox_diagonal: float
     chunk_sizes: dict[str, int] = field(default_factory=dict)  # stored bytes per chunk
 
@@ -89,7 +89,7 @@ def encode(asset: HairAsset, profile: str | Profile = "compact") -> tuple[bytes,
     step = None if prof.lossless else 0.9 * 2 * tol / math.sqrt(3)
     for _ in range(MAX_TIGHTENINGS):
         chunks, decoded_points = _chunks(asset, prof, step, diag)
-        err = 0.0 if decoded_points is None else float(np.abs(decoded_points - points).max())
+        err = 0.0 if decoded_points is None else float(np.linalg.norm(decoded_points - points, axis=-1).max())
         if step is None or err <= tol:
             break
         step *= 0.8 * tol / err if err > 0 else 0.8

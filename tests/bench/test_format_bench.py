@@ -43,7 +43,7 @@ def test_format_table(model, request, tmp_path, benchmark):
         (data, report), t_enc = _timed(lambda p=profile: cgh.encode(asset, p))
         decoded, t_dec = _timed(lambda d=data: cgh.decode(d), repeat=2)
         _, t_gauss = _timed(lambda a=decoded: cgh.decode_gaussians(a))
-        err = float(np.abs(cgh.decode_points(decoded) - points).max()) / diag
+        err = float(np.linalg.norm(cgh.decode_points(decoded) - points, axis=-1).max()) / diag
         op_err = float(np.abs(decoded.opacity - asset.opacity).max())
         chunks = {k: v for k, v in report.chunk_sizes.items()}
         rows.append((profile, len(data), 8 * len(data) / asset.n_gaussians, t_enc, t_dec, t_gauss, err, op_err,

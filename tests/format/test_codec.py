@@ -29,7 +29,7 @@ def _check_bounds(a, b, profile):
         for la, lb in zip(a.appearance.mlp, b.appearance.mlp, strict=True):
             assert np.array_equal(la.weight, lb.weight) and np.array_equal(la.bias, lb.bias)
         return
-    assert np.abs(pa - pb).max() <= prof.position_tolerance * _diag(pa)
+    assert np.linalg.norm(pa - pb, axis=-1).max() <= prof.position_tolerance * _diag(pa)
     assert np.abs(a.opacity - b.opacity).max() <= prof.opacity_tolerance + 1e-7
     assert np.array_equal(a.strand_card, b.strand_card) and np.array_equal(a.cards.group, b.cards.group)
     # codebooks and MLP: within half an int8 step of each row's absmax
@@ -143,4 +143,4 @@ def test_points_far_from_their_card_get_finer_normals():
     meta = json.loads(container.unpack(data, {"META"} | set(cgh.codec.REQUIRED_CHUNKS))[2]["META"])
     assert meta["quant"]["normal_bits"] > 16
     b = cgh.decode(data)
-    assert np.abs(cgh.decode_points(b) - cgh.decode_points(a)).max() <= 2e-4 * report.bbox_diagonal
+    assert np.linalg.norm(cgh.decode_points(b) - cgh.decode_points(a), axis=-1).max() <= 2e-4 * report.bbox_diagonal
