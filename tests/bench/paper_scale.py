@@ -14,20 +14,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import pytest
+from hairdata import hair_path
 
 import cghair_format as cgh
 from cghair_format.asset import Appearance, HairAsset, MlpLayer
 
-HAIR_DIR = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "hair"
 STRANDS, POINTS, CARDS, GROUPS, K, D, HIDDEN, SH_DEGREE = 25_000, 100, 800, 64, 10, 64, 64, 3
-
-
-def source_path(name: str) -> Path:
-    path = HAIR_DIR / name
-    if not path.exists():
-        pytest.skip(f"{path} is absent: the paper-scale benchmarks need the real hair models in ../shared/data/hair")
-    return path
 
 
 def paper_scale_asset(name: str, cache_dir: Path) -> tuple[HairAsset, dict]:
@@ -39,7 +31,7 @@ def paper_scale_asset(name: str, cache_dir: Path) -> tuple[HairAsset, dict]:
     from cghair_format.exchange import load_strands
     from cghair_format.strands import densify, resample
 
-    strands = densify(resample(load_strands(source_path(name)), POINTS, method="bspline"), STRANDS, seed=0)
+    strands = densify(resample(load_strands(hair_path(name)), POINTS, method="bspline"), STRANDS, seed=0)
     build = build_cards(strands, n_cards=CARDS, n_groups=GROUPS, points=POINTS, seed=0, progress=False)
     asset = with_trained_like_appearance(build.asset)
     cgh.write(asset, cached, "lossless")

@@ -8,13 +8,12 @@ procedural wavy hair when ../shared is absent. Run with ``make bench``.
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import pytest
+from hairdata import HAIR_DIR, hair_path
 
 pytest.importorskip("sklearn", reason="the card builder needs scikit-learn (pip install 'cghair[cards]')")
 
-HAIR_DIR = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "hair"
 PAPER_STRANDS = 25_000
 PAPER_POINTS = 100
 PROFILES = ("lossless", "high", "compact")
@@ -24,7 +23,7 @@ def _paper_scale_strands():
     from cghair_format.strands import densify
 
     src = HAIR_DIR / "harolongo.data"
-    if src.exists():
+    if src.exists():  # else a procedural stand-in, named as such in the printed table
         from cghair_format.exchange import load_strands
 
         return "harolongo.data densified", densify(load_strands(src), PAPER_STRANDS, seed=0, n_points=PAPER_POINTS)
@@ -74,9 +73,7 @@ def test_cards_paper_scale(benchmark):
 @pytest.mark.bench
 @pytest.mark.slow
 def test_cards_straight_hair(benchmark):
-    src = HAIR_DIR / "straight.hair"
-    if not src.exists():
-        pytest.skip(f"straight.hair not found in {HAIR_DIR.resolve()}")
+    src = hair_path("straight.hair")
     from cghair_format.cards import build_cards
     from cghair_format.exchange import load_strands
 

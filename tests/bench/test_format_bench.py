@@ -55,7 +55,8 @@ def test_format_table(model, request, tmp_path, benchmark):
              f"groups, K={asset.appearance.k}, D={asset.appearance.latent_dim}, SH degree "
              f"{asset.appearance.sh_degree} (stand-in appearance: see tests/bench/paper_scale.py)",
              f"3DGS PLY of the same Gaussians (SH 3, INRIA layout): {ply_bytes:,} bytes",
-             "profile   bytes        bits/G  encode s  decode s  +Gaussians s  max pt err/diag  max opac err  PLY ratio"]
+             "profile   bytes        bits/G  encode s  decode s  +Gaussians s  max pt err/diag  max opac err"
+             "  PLY ratio"]
     for r in rows:
         lines.append(f"{r[0]:<9} {r[1]:>11,}  {r[2]:6.2f}  {r[3]:8.2f}  {r[4]:8.2f}  {r[5]:12.2f}  {r[6]:15.2e}  "
                      f"{r[7]:12.5f}  {r[8]:9.0f}x")

@@ -2,17 +2,11 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
-import pytest
+from hairdata import load_hair
 
 from cghair_format.strands import Strands
 
-HAIR_DIR = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "hair"
-REAL_FILES = ("straight.hair", "harolongo.data", "ruby_long_hair_16_guide.tfx", "Ratboy_mohawk.tfx",
-              "Bangs_100.hair", "Bangs_100.data", "Bangs_100_binary.ply", "Bangs_100_ascii.ply",
-              "Curly_100.ply")
 SMALL_REAL = ("Bangs_100.hair", "Curly_100.ply")
 
 # accuracy targets of the card builder, before quantization, relative to the bounding-box diagonal
@@ -22,13 +16,7 @@ STRIP_TOLERANCE = 1e-3  # v may leave [0, 1] by this much (the builder's own wid
 
 
 def load_real(name: str) -> Strands:
-    path = HAIR_DIR / name
-    if not path.exists():
-        pytest.skip(f"real hair model {name} not found in {HAIR_DIR.resolve()} "
-                    "(the ../shared data folder beside the repository; see its PROVENANCE.md)")
-    from cghair_format.exchange import load_strands
-
-    return load_strands(path)
+    return load_hair(name)
 
 
 def synth(style: str = "wavy", n: int = 300, points: int = 40, seed: int = 3) -> Strands:

@@ -2,7 +2,8 @@
 
 import numpy as np
 import pytest
-from cards_helpers import HAIR_DIR, synth
+from cards_helpers import synth
+from hairdata import hair_path
 
 from cghair_format import read
 from cghair_format.cli import main
@@ -39,9 +40,7 @@ def test_build_write_and_report(strand_file, tmp_path, capsys):
 
 
 def test_real_model_with_default_profile(tmp_path, capsys):
-    src = HAIR_DIR / "Curly_100.ply"
-    if not src.exists():
-        pytest.skip(f"real hair model not found in {HAIR_DIR.resolve()}")
+    src = hair_path("Curly_100.ply")
     out = tmp_path / "curly.cgh"
     assert main(["cards", str(src), "-o", str(out), "--cards", "10", "--groups", "2", "--no-progress",
                  "--profile", "lossless"]) == 0

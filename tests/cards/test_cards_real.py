@@ -8,7 +8,8 @@ import time
 
 import numpy as np
 import pytest
-from cards_helpers import MAX_TARGET, MEAN_TARGET, REAL_FILES, SMALL_REAL, STRIP_TOLERANCE, load_real
+from cards_helpers import MAX_TARGET, MEAN_TARGET, SMALL_REAL, STRIP_TOLERANCE, load_real
+from hairdata import REAL_FILES
 
 from cghair_format.cards import build_cards
 from cghair_format.geometry import spine_tangents

@@ -2,34 +2,10 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from cghair_format.strands import Strands
-
-HAIR_DIR = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "hair"
-
-# file -> (strands, min points, max points, total points), from PROVENANCE.md and the files' headers
-REAL_FILES = {
-    "straight.hair": (10_000, 16, 16, 160_000),
-    "harolongo.data": (7_905, 21, 21, 166_005),
-    "ruby_long_hair_16_guide.tfx": (3_000, 16, 16, 48_000),
-    "Ratboy_mohawk.tfx": (2_228, 32, 32, 71_296),
-    "Bangs_100.hair": (100, 5, 21, 1_165),
-    "Bangs_100.data": (100, 5, 21, 1_165),
-    "Bangs_100_binary.ply": (100, 5, 21, 1_165),
-    "Bangs_100_ascii.ply": (100, 5, 21, 1_165),
-    "Curly_100.ply": (100, 10, 47, 2_528),
-}
-
-
-def real_file(name: str) -> Path:
-    path = HAIR_DIR / name
-    if not path.exists():
-        pytest.skip(f"real hair data not found at {HAIR_DIR} (it lives in ../shared beside the repository)")
-    return path
 
 
 @pytest.fixture

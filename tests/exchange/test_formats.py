@@ -6,7 +6,7 @@ import struct
 
 import numpy as np
 import pytest
-from conftest import real_file
+from hairdata import hair_path
 
 from cghair_format.exchange import StrandFileError, load_strands, save_strands
 from cghair_format.exchange._ply import write_ply
@@ -26,7 +26,7 @@ def test_hair_default_segments_and_no_placeholder_attributes(tmp_path):
 
 
 def test_tressfx_ascii_and_binary_agree(tmp_path):
-    ascii_strands = load_strands(real_file("ruby_long_hair_16_guide.tfx"))
+    ascii_strands = load_strands(hair_path("ruby_long_hair_16_guide.tfx"))
     path = tmp_path / "ruby.tfx"
     save_strands(ascii_strands, path)  # written as TressFX 4 binary
     assert path.read_bytes()[:4] == struct.pack("<f", 4.0)

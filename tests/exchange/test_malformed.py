@@ -6,7 +6,7 @@ import shutil
 
 import numpy as np
 import pytest
-from conftest import REAL_FILES, real_file
+from hairdata import REAL_FILES, hair_path
 
 from cghair_format.errors import CghError
 from cghair_format.exchange import StrandFileError, UnsupportedFormatError, load_strands, save_strands
@@ -21,7 +21,7 @@ def _cut_points(size: int) -> list[int]:
 
 @pytest.mark.parametrize("name", sorted(REAL_FILES))
 def test_truncated_real_files(name, tmp_path):
-    data = real_file(name).read_bytes()
+    data = hair_path(name).read_bytes()
     for cut in _cut_points(len(data)):
         path = tmp_path / f"cut{cut}_{name}"
         path.write_bytes(data[:cut])
@@ -70,7 +70,7 @@ def test_unknown_extension_and_missing_file(tmp_path, small_strands):
 
 
 def test_trailing_bytes_in_data_file(tmp_path):
-    src = real_file("Bangs_100.data")
+    src = hair_path("Bangs_100.data")
     path = tmp_path / "extra.data"
     shutil.copy(src, path)
     with open(path, "ab") as f:

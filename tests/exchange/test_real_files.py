@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import REAL_FILES, real_file
+from hairdata import REAL_FILES, hair_path
 
 from cghair_format.exchange import load_strands
 
 
 @pytest.mark.parametrize("name", sorted(REAL_FILES))
 def test_real_file_counts(name):
-    strands = load_strands(real_file(name))
+    strands = load_strands(hair_path(name))
     n, lo, hi, total = REAL_FILES[name]
     counts = strands.point_counts
     assert strands.count == n
@@ -27,7 +27,7 @@ def test_real_file_counts(name):
 
 
 def test_four_bangs_files_give_the_same_strands():
-    loaded = [load_strands(real_file(f"Bangs_100{suffix}"))
+    loaded = [load_strands(hair_path(f"Bangs_100{suffix}"))
               for suffix in (".hair", ".data", "_binary.ply", "_ascii.ply")]
     ref = loaded[0]
     for other in loaded[1:]:
@@ -41,12 +41,12 @@ def test_four_bangs_files_give_the_same_strands():
 
 
 def test_tressfx_files_are_y_up_and_colour_files_have_colours():
-    assert load_strands(real_file("Ratboy_mohawk.tfx")).up_axis == "Y"
-    straight = load_strands(real_file("straight.hair"))
+    assert load_strands(hair_path("Ratboy_mohawk.tfx")).up_axis == "Y"
+    straight = load_strands(hair_path("straight.hair"))
     assert straight.colors is not None and straight.colors.shape == (160_000, 3)
     assert 0 <= straight.colors.min() and straight.colors.max() <= 1
 
 
 def test_units_and_up_overrides():
-    s = load_strands(real_file("straight.hair"), units=0.01, up="z")
+    s = load_strands(hair_path("straight.hair"), units=0.01, up="z")
     assert (s.meters_per_unit, s.up_axis) == (0.01, "Z")

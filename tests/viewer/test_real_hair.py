@@ -4,10 +4,10 @@ the reference splatter. Skipped with a message where the shared folder is absent
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
+from hairdata import load_hair
 
 import cghair_format
 from cghair_format import decode_gaussians
@@ -15,19 +15,14 @@ from cghair_format.camera import Camera
 from viewer.decode import read_gaussians
 from viewer.renderer import Renderer, ViewSettings
 
-HAIR = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "hair"
 pytestmark = pytest.mark.gl
 
 
 @pytest.fixture(scope="module")
 def real_asset(tmp_path_factory):
-    if not HAIR.is_dir():
-        pytest.skip(f"real hair models not found at {HAIR} (they live beside the repository, in ../shared)")
     pytest.importorskip("sklearn", reason="the card builder needs the 'cards' extra")
     from cghair_format.cards.build import build_cards
-    from cghair_format.exchange import load_strands
-
-    strands = load_strands(HAIR / "Bangs_100.hair")
+    strands = load_hair("Bangs_100.hair")
     asset = build_cards(strands, n_cards=12, n_groups=4, points=12, progress=False, sh_degree=2).asset
     path = tmp_path_factory.mktemp("real") / "bangs.cgh"
     cghair_format.write(asset, path)
