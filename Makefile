@@ -35,7 +35,7 @@ test: venv blender
 	$(PY) -m pytest -q
 
 bench: venv
-	$(PY) -m pytest -q -m bench --benchmark-enable --benchmark-only -p no:randomly tests/bench
+	$(PY) -m pytest -q -m bench --benchmark-enable --benchmark-only tests/bench
 
 lint: venv
 	$(VENV)/bin/ruff check .

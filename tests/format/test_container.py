@@ -5,8 +5,15 @@ import struct
 import pytest
 
 from cghair_format import container
-from cghair_format.errors import (BadMagicError, ChecksumError, CghFormatError, LimitError, TruncatedError,
-                                  UnknownRequiredChunkError, UnsupportedVersionError)
+from cghair_format.errors import (
+    BadMagicError,
+    CghFormatError,
+    ChecksumError,
+    LimitError,
+    TruncatedError,
+    UnknownRequiredChunkError,
+    UnsupportedVersionError,
+)
 
 KNOWN = {"AAAA", "BBBB"}
 

@@ -4,8 +4,17 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cghair_format.quantize import (hier_decode, hier_encode, level_plan, oct_decode, oct_encode,
-                                    rows_int8_decode, rows_int8_encode, unzigzag, zigzag)
+from cghair_format.quantize import (
+    hier_decode,
+    hier_encode,
+    level_plan,
+    oct_decode,
+    oct_encode,
+    rows_int8_decode,
+    rows_int8_encode,
+    unzigzag,
+    zigzag,
+)
 
 
 @given(st.lists(st.integers(-2**62, 2**62), min_size=1, max_size=50))
