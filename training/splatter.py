@@ -113,15 +113,16 @@ def project(means: Tensor, quats: Tensor, scales: Tensor, camera: Camera) -> Pro
     t = t_all[index]
     x, y, z = t.unbind(-1)
     fx, fy = float(camera.fx), float(camera.fy)
-    zero = torch.zeros_like(z)
-    jac = torch.stack([fx / z, zero, -fx * x / (z * z), zero, fy / z, -fy * y / (z * z)], -1)
-    jac = jac.reshape(-1, 2, 3)
-    m = quat_to_rotmat(quats[index]) * scales[index][:, None, :]  # R_q S
-    a = jac @ (rot @ m)  # [V, 2, 3]
-    cov = a @ a.transpose(1, 2)
-    ca = cov[:, 0, 0] + DILATION
-    cb = cov[:, 0, 1]
-    cc = cov[:, 1, 1] + DILATION
+    m = quat_to_rotmat(quats[index]) * scales[index][:, None, :]  # R_q S, [V, 3, 3]
+    # rows of J W (the Jacobian's zeros written out), then A = J W R_q S and Sigma2 = A A^T + 0.3 I;
+    # explicit rows instead of batched 2x3 @ 3x3 products: half the time on CPU
+    jw0 = (fx / z)[:, None] * rot[0] - (fx * x / (z * z))[:, None] * rot[2]
+    jw1 = (fy / z)[:, None] * rot[1] - (fy * y / (z * z))[:, None] * rot[2]
+    a0 = torch.einsum("vk,vkj->vj", jw0, m)
+    a1 = torch.einsum("vk,vkj->vj", jw1, m)
+    ca = (a0 * a0).sum(-1) + DILATION
+    cb = (a0 * a1).sum(-1)
+    cc = (a1 * a1).sum(-1) + DILATION
     det = ca * cc - cb * cb
     conic = torch.stack([cc / det, -cb / det, ca / det], -1)
     mean2d = torch.stack([fx * x / z + float(camera.cx), fy * y / z + float(camera.cy)], -1)
