@@ -43,6 +43,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.threads:
         torch.set_num_threads(args.threads)
     work = Path(args.work)
+    work.mkdir(parents=True, exist_ok=True)
     ds_dir = Path(args.dataset) if args.dataset else work / f"dataset_{args.engine}_{args.res}"
     strands = load_strands(args.strands)
     if not (ds_dir / "transforms_test.json").is_file():

@@ -114,6 +114,7 @@ def save_checkpoint(path: Path, *, model: HairModel, optimizer: torch.optim.Opti
         "base_cgh": encode(base, "lossless")[0], "history": history, "dataset": dataset,
         "rng": torch.get_rng_state(),
     }
+    path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(path.suffix + ".tmp")
     torch.save(state, tmp)
     tmp.replace(path)

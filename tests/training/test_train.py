@@ -78,6 +78,13 @@ def test_resume_is_exact(tiny, tmp_path):
     assert [h["iteration"] for h in resumed.history] == [4, 8, 12]
 
 
+def test_output_folders_are_created(tiny, tmp_path):
+    root, strands = tiny
+    out = tmp_path / "new" / "deeper" / "hair.cgh"
+    train(root / "ds", strands=strands, out=out, config=_tiny_config(iterations=2), progress=False)
+    assert out.is_file() and out.with_suffix(".ckpt.pt").is_file()
+
+
 def test_view_order_is_a_permutation_per_epoch():
     seen = [view_at(3, i, 5) for i in range(10)]
     assert sorted(seen[:5]) == list(range(5)) and sorted(seen[5:]) == list(range(5))
