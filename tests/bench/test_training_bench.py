@@ -6,19 +6,15 @@ The full 2,000-iteration measurement with a per-stage breakdown is ``python -m t
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
+from hairdata import hair_path
 
 pytest.importorskip("torch", reason="the training benchmark needs torch (pip install 'cghair[training]')")
 
-HAIR = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "hair" / "Ratboy_mohawk.tfx"
 
 
 @pytest.fixture(scope="module")
 def setup():
-    if not HAIR.exists():
-        pytest.skip(f"{HAIR} is absent: the training benchmark needs the real hair models in ../shared/data/hair")
     import torch
 
     from cghair_format.exchange import load_strands
@@ -27,7 +23,7 @@ def setup():
     from training.model import HairModel
     from training.train import base_asset
 
-    strands = load_strands(HAIR)
+    strands = load_strands(hair_path("Ratboy_mohawk.tfx"))
     cfg = scaled_config("latents", 2000, points_per_strand=32)
     base = base_asset(cfg, strands, progress=False)
     model = HairModel(base, cfg)

@@ -30,7 +30,7 @@ def tiny(tmp_path_factory):
     from pathlib import Path
 
     sys.path.insert(0, str(Path(__file__).parent))
-    from conftest import hair_cap
+    from training_helpers import hair_cap
 
     torch.set_num_threads(1)
     root = tmp_path_factory.mktemp("tiny")
