@@ -131,11 +131,9 @@ def decode_gaussians(asset: HairAsset, points: np.ndarray | None = None) -> Gaus
     return Gaussians(means, rotations, scales, asset.opacity.reshape(-1).astype(np.float32), sh)
 
 
-def eval_sh(sh: np.ndarray, dirs: np.ndarray) -> np.ndarray:
-    """RGB ``[G, 3]`` = ``max(0, sum_lm c_lm Y_lm(dir) + 0.5)``, the 3DGS (INRIA) convention.
-
-    ``sh`` is ``[G, (deg+1)^2, 3]``; ``dirs`` ``[G, 3]`` unit view directions (camera to Gaussian).
-    """
+def sh_polynomial(sh, dirs):
+    """``sum_lm c_lm Y_lm(dir)`` per channel, for SH ``[G, (deg+1)^2, 3]`` and unit directions
+    ``[G, 3]``; only arithmetic and indexing, so numpy arrays and torch tensors both work."""
     deg = int(round(np.sqrt(sh.shape[1]))) - 1
     res = SH_C0 * sh[:, 0]
     if deg > 0:
@@ -152,7 +150,15 @@ def eval_sh(sh: np.ndarray, dirs: np.ndarray) -> np.ndarray:
                        + SH_C3[3] * z * (2 * zz - 3 * xx - 3 * yy) * sh[:, 12]
                        + SH_C3[4] * x * (4 * zz - xx - yy) * sh[:, 13]
                        + SH_C3[5] * z * (xx - yy) * sh[:, 14] + SH_C3[6] * x * (xx - 3 * yy) * sh[:, 15])
-    return np.maximum(res + 0.5, 0.0)
+    return res
+
+
+def eval_sh(sh: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+    """RGB ``[G, 3]`` = ``max(0, sum_lm c_lm Y_lm(dir) + 0.5)``, the 3DGS (INRIA) convention.
+
+    ``sh`` is ``[G, (deg+1)^2, 3]``; ``dirs`` ``[G, 3]`` unit view directions (camera to Gaussian).
+    """
+    return np.maximum(sh_polynomial(sh, dirs) + 0.5, 0.0)
 
 
 def rgb_to_sh0(rgb: np.ndarray) -> np.ndarray:

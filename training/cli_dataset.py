@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import argparse
 
-from ._argtypes import int_at_least, positive_float
+from cghair_format.cli.argtypes import int_at_least, positive_float
 
 ENGINES = ("splat", "cycles")
 PRESETS = ("brown", "black", "blonde", "red")

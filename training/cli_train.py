@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ._argtypes import int_at_least
+from cghair_format.cli.argtypes import int_at_least
 
 VARIANTS = ("latents", "unique", "single-sh", "multi-sh", "no-card-clustering")
 PROFILE_NAMES = ("compact", "high", "lossless")

@@ -19,13 +19,14 @@ touches pixel ``(i, j)`` iff ``|i + 0.5 - m_x| <= r`` and ``|j + 0.5 - m_y| <= r
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 from torch import Tensor
+
+from cghair_format.gaussians import sh_polynomial
 
 if TYPE_CHECKING:
     from cghair_format.camera import Camera
@@ -36,14 +37,6 @@ DILATION = 0.3  # px^2 added to the 2D covariance's diagonal (low-pass filter)
 ALPHA_MAX = 0.99  # per-contribution alpha clamp
 ALPHA_MIN = 1.0 / 255.0  # contributions below this are skipped
 SIGMA_SUPPORT = 3.0  # support half-size in standard deviations (largest axis)
-
-SH_C0 = 0.28209479177387814
-SH_C1 = 0.4886025119029199
-SH_C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792,
-         0.5462742152960396)
-SH_C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154,
-         -0.4570457994644658, 1.445305721320277, -0.5900435899266435)
-
 
 @dataclass
 class RenderOutput:
@@ -75,27 +68,9 @@ def quat_to_rotmat(quats: Tensor) -> Tensor:
 
 
 def eval_sh(sh: Tensor, dirs: Tensor) -> Tensor:
-    """RGB ``[G, 3]`` from SH ``[G, (deg+1)^2, 3]`` and unit directions ``[G, 3]`` (3DGS convention).
-
-    Same polynomial as :func:`cghair_format.gaussians.eval_sh`: ``max(0, sum c_lm Y_lm + 0.5)``.
-    """
-    deg = int(round(math.sqrt(sh.shape[1]))) - 1
-    res = SH_C0 * sh[:, 0]
-    if deg > 0:
-        x, y, z = (dirs[:, i:i + 1] for i in range(3))
-        res = res - SH_C1 * y * sh[:, 1] + SH_C1 * z * sh[:, 2] - SH_C1 * x * sh[:, 3]
-        if deg > 1:
-            xx, yy, zz, xy, yz, xz = x * x, y * y, z * z, x * y, y * z, x * z
-            res = (res + SH_C2[0] * xy * sh[:, 4] + SH_C2[1] * yz * sh[:, 5]
-                   + SH_C2[2] * (2 * zz - xx - yy) * sh[:, 6] + SH_C2[3] * xz * sh[:, 7]
-                   + SH_C2[4] * (xx - yy) * sh[:, 8])
-            if deg > 2:
-                res = (res + SH_C3[0] * y * (3 * xx - yy) * sh[:, 9] + SH_C3[1] * xy * z * sh[:, 10]
-                       + SH_C3[2] * y * (4 * zz - xx - yy) * sh[:, 11]
-                       + SH_C3[3] * z * (2 * zz - 3 * xx - 3 * yy) * sh[:, 12]
-                       + SH_C3[4] * x * (4 * zz - xx - yy) * sh[:, 13]
-                       + SH_C3[5] * z * (xx - yy) * sh[:, 14] + SH_C3[6] * x * (xx - 3 * yy) * sh[:, 15])
-    return torch.clamp_min(res + 0.5, 0.0)
+    """RGB ``[G, 3]`` from SH ``[G, (deg+1)^2, 3]`` and unit directions ``[G, 3]`` (3DGS convention):
+    the polynomial of :func:`cghair_format.gaussians.sh_polynomial`, ``+ 0.5``, clamped at 0."""
+    return torch.clamp_min(sh_polynomial(sh, dirs) + 0.5, 0.0)
 
 
 def _camera_tensors(camera: Camera, like: Tensor) -> tuple[Tensor, Tensor, Tensor]:

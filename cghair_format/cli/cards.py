@@ -9,46 +9,26 @@ from __future__ import annotations
 import argparse
 import sys
 
+from .argtypes import int_at_least, positive_float
+
 PROFILE_NAMES = ("compact", "high", "lossless")
-
-
-def _int_at_least(low: int):
-    def parse(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"must be an integer, got {text!r}") from None
-        if v < low:
-            raise argparse.ArgumentTypeError(f"must be at least {low}, got {v}")
-        return v
-    return parse
-
-
-def _positive_float(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
-    if not v > 0:
-        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
-    return v
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("strands", metavar="STRANDS", help="input strands (.hair .data .tfx .ply .usd* .npz .cgh)")
     p.add_argument("-o", "--output", required=True, help="output .cgh file")
-    p.add_argument("--cards", type=_int_at_least(1), default=800,
+    p.add_argument("--cards", type=int_at_least(1), default=800,
                    help="number of cards N_c (default: 800; capped at the strand count)")
-    p.add_argument("--groups", type=_int_at_least(1), default=64,
+    p.add_argument("--groups", type=int_at_least(1), default=64,
                    help="number of card groups N_T sharing a codebook (default: 64; capped at the card count)")
-    p.add_argument("--segments", type=_int_at_least(1), default=32, help="segments M per card (default: 32)")
-    p.add_argument("--points", type=_int_at_least(4), default=100,
+    p.add_argument("--segments", type=int_at_least(1), default=32, help="segments M per card (default: 32)")
+    p.add_argument("--points", type=int_at_least(4), default=100,
                    help="points P per strand; strands are resampled to it (default: 100)")
     p.add_argument("--sh-degree", type=int, choices=(0, 1, 2, 3), default=3, help="SH degree (default: 3)")
     p.add_argument("--seed", type=int, default=0, help="random seed of the k-means stages (default: 0)")
     p.add_argument("--profile", choices=PROFILE_NAMES, default="compact",
                    help="precision profile of the written file (default: compact)")
-    p.add_argument("--units", type=_positive_float, default=None,
+    p.add_argument("--units", type=positive_float, default=None,
                    help="metres per input unit (overrides what the file says)")
     p.add_argument("--up", choices=("Y", "Z"), default=None, help="up axis of the input (overrides the file)")
     p.add_argument("--attribution", default=None, help="attribution text stored in the .cgh")

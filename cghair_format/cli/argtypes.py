@@ -1,4 +1,4 @@
-"""argparse value types shared by the training verbs (argparse-level only: no heavy imports)."""
+"""argparse value types shared by the verbs (argparse-level only: no heavy imports)."""
 
 from __future__ import annotations
 
