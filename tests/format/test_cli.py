@@ -66,3 +66,12 @@ def test_bad_arguments_give_usage_not_traceback():
     r = subprocess.run([sys.executable, "-m", "cghair_format", "encode", "x.cgh", "--profile", "tiny"],
                        capture_output=True, text=True)
     assert r.returncode == 2 and "invalid choice" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_output_into_a_closed_pipe_is_quiet(asset_file):
+    """`cgh info FILE | head -1`: the reader has gone before cgh writes; no traceback."""
+    proc = subprocess.Popen([sys.executable, "-m", "cghair_format", "info", str(asset_file)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    proc.stdout.close()  # closed long before the interpreter has started and read the file
+    err = proc.stderr.read()
+    assert proc.wait() == 141 and "Traceback" not in err, err
