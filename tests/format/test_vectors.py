@@ -37,3 +37,15 @@ def test_reject_vector_raises_named_error(name):
     spec = REJECT[name]
     with pytest.raises(getattr(errors, spec["error"]), match=spec["message"]):
         cgh.read(VECTORS / name)
+
+
+def test_worked_example_in_the_spec_matches_its_vector():
+    from cghair_format import container
+
+    spec = (VECTORS.parent / "cgh.md").read_text()
+    data = (VECTORS / "minimal_compact.cgh").read_bytes()
+    assert f"**{len(data)} bytes**" in spec
+    _, infos = container.read_table(data)
+    for info in infos:
+        codec = "zstd" if info.codec else "raw"
+        assert f"| {info.type}, {codec}" in spec and f"at {info.offset}" in spec, info
