@@ -87,15 +87,16 @@ def encode(asset: HairAsset, profile: str | Profile = "compact") -> tuple[bytes,
     tol = prof.position_tolerance * max(diag, 1e-12)
     # start from the step whose worst case (half a step on each of u, v, delta) meets the bound
     step = None if prof.lossless else 0.9 * 2 * tol / math.sqrt(3)
+    appearance_chunks = _appearance_chunks(asset, prof)
     for _ in range(MAX_TIGHTENINGS):
-        chunks, decoded_points = _chunks(asset, prof, step, diag)
+        chunks, decoded_points = _geometry_chunks(asset, prof, step, diag)
         err = 0.0 if decoded_points is None else float(np.linalg.norm(decoded_points - points, axis=-1).max())
         if step is None or err <= tol:
             break
         step *= 0.8 * tol / err if err > 0 else 0.8
     else:
         raise AssetError(f"could not meet the position tolerance {tol:g} (error {err:g})")
-    data = container.pack(chunks, level=prof.zstd_level)
+    data = container.pack(chunks + appearance_chunks, level=prof.zstd_level)
     _, infos = container.read_table(data)
     return data, EncodeReport(prof.name, step, err, diag, {i.type: i.stored for i in infos})
 
@@ -193,25 +194,19 @@ def _parse_meta(raw: bytes) -> dict:
 
 # --- chunks ---------------------------------------------------------------------------------------
 
-def _chunks(asset: HairAsset, prof: Profile, step: float | None, diag: float
-            ) -> tuple[list[container.Chunk], np.ndarray | None]:
-    """The chunks of ``asset``, and (quantized profiles) the world points a decoder will get."""
+def _geometry_chunks(asset: HairAsset, prof: Profile, step: float | None, diag: float
+                     ) -> tuple[list[container.Chunk], np.ndarray | None]:
+    """META, CARD and STRD, which depend on the step, and (quantized profiles) the world points a
+    decoder will get."""
     decoded_points = None
     meta = _meta(asset, prof, step, diag)
     q = meta["quant"]
-    cards_w, strd_w, opac_w, logt_w, cbks_w, mlp_w = (StreamWriter() for _ in range(6))
-    app = asset.appearance
+    cards_w, strd_w = StreamWriter(), StreamWriter()
     strd_w.ints(np.diff(asset.strand_card.astype(np.int64), prepend=0))
     if q["lossless"]:
         for a in (asset.cards.spine, asset.cards.normal, asset.cards.half_width):
             cards_w.array(a.astype(np.float32), shuffle=True)
         strd_w.array(asset.uvd.astype(np.float32), shuffle=True)
-        opac_w.array(asset.opacity.astype(np.float32), shuffle=True)
-        logt_w.array(app.logits.astype(np.float32), shuffle=True)
-        cbks_w.array(app.codebooks.astype(np.float32), shuffle=True)
-        for layer in app.mlp:
-            mlp_w.array(layer.weight.astype(np.float32), shuffle=True)
-            mlp_w.array(layer.bias.astype(np.float32), shuffle=True)
     else:
         cards = _encode_cards(asset.cards, q, cards_w)
         su, sv = _card_scales(cards, q["step"])
@@ -223,12 +218,30 @@ def _chunks(asset: HairAsset, prof: Profile, step: float | None, diag: float
         for residuals in [base] + levels:
             for ch in range(3):
                 strd_w.ints(residuals[..., ch])
-        _put_hier(opac_w, asset.opacity * q["opacity_scale"], q["base_stride"])
+    groups = asset.cards.group.astype(np.uint16 if asset.appearance.n_groups <= 65536 else np.uint32)
+    cards_w.array(groups, shuffle=True)
+    return [container.Chunk("META", json.dumps(meta, separators=(",", ":")).encode("utf-8")),
+            container.Chunk("CARD", cards_w.getvalue()), container.Chunk("STRD", strd_w.getvalue())], decoded_points
+
+
+def _appearance_chunks(asset: HairAsset, prof: Profile) -> list[container.Chunk]:
+    """OPAC, LOGT, CBKS and MLPW, then the optional chunks: none depends on the point step."""
+    opac_w, logt_w, cbks_w, mlp_w = (StreamWriter() for _ in range(4))
+    app = asset.appearance
+    if prof.lossless:
+        opac_w.array(asset.opacity.astype(np.float32), shuffle=True)
+        logt_w.array(app.logits.astype(np.float32), shuffle=True)
+        cbks_w.array(app.codebooks.astype(np.float32), shuffle=True)
+        for layer in app.mlp:
+            mlp_w.array(layer.weight.astype(np.float32), shuffle=True)
+            mlp_w.array(layer.bias.astype(np.float32), shuffle=True)
+    else:
+        _put_hier(opac_w, asset.opacity * prof.opacity_scale, prof.base_stride)
         if app.weight_mode == "hard":
             logt_w.ints(np.argmax(app.logits, axis=1))
         else:
-            z = np.maximum(app.logits - app.logits.max(axis=1, keepdims=True), q["logit_floor"])
-            logt_w.ints(np.rint(-z / q["logit_step"]))
+            z = np.maximum(app.logits - app.logits.max(axis=1, keepdims=True), prof.logit_floor)
+            logt_w.ints(np.rint(-z / prof.logit_step))
         qc, sc = rows_int8_encode(app.codebooks.reshape(-1, app.latent_dim))
         cbks_w.array(qc)
         cbks_w.array(sc)
@@ -236,13 +249,10 @@ def _chunks(asset: HairAsset, prof: Profile, step: float | None, diag: float
             qw, sw = rows_int8_encode(layer.weight)
             mlp_w.array(qw)
             mlp_w.array(sw)
-            mlp_w.array(layer.bias.astype(np.float16 if q["half_bias"] else np.float32))
-    cards_w.array(asset.cards.group.astype(np.uint16 if app.n_groups <= 65536 else np.uint32), shuffle=True)
-    chunks = [container.Chunk("META", json.dumps(meta, separators=(",", ":")).encode("utf-8"))]
-    chunks += [container.Chunk(t, w.getvalue()) for t, w in
-               (("CARD", cards_w), ("STRD", strd_w), ("OPAC", opac_w), ("LOGT", logt_w), ("CBKS", cbks_w),
-                ("MLPW", mlp_w))]
-    return chunks + _optional_chunks(asset), decoded_points
+            mlp_w.array(layer.bias.astype(np.float16 if prof.half_bias else np.float32))
+    chunks = [container.Chunk(t, w.getvalue()) for t, w in
+              (("OPAC", opac_w), ("LOGT", logt_w), ("CBKS", cbks_w), ("MLPW", mlp_w))]
+    return chunks + _optional_chunks(asset)
 
 
 def _choose_newton_steps(cards: Cards, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray,

@@ -71,13 +71,29 @@ def pack(chunks: list[Chunk], level: int = 19) -> bytes:
         layout.append((offset, stored))
         offset = _align(offset + len(stored))
     total = offset
-    head = HEADER.pack(MAGIC, VERSION_MAJOR, VERSION_MINOR, 0, total, len(chunks), 0)[:-4]
     out = bytearray(total)
-    out[:HEADER_SIZE] = head + struct.pack("<I", crc32(head + table))
+    out[:HEADER_SIZE] = _header(VERSION_MAJOR, VERSION_MINOR, 0, total, len(chunks), table)
     out[HEADER_SIZE:HEADER_SIZE + len(table)] = table
     for off, stored in layout:
         out[off:off + len(stored)] = stored
     return bytes(out)
+
+
+def _header(major: int, minor: int, flags: int, length: int, count: int, table: bytes) -> bytes:
+    """The 32 header bytes, checksum (over the header and the chunk table) included."""
+    head = HEADER.pack(MAGIC, major, minor, flags, length, count, 0)[:-4]
+    return head + struct.pack("<I", crc32(head + table))
+
+
+def rewrite_header(data: bytes, **fields: int) -> bytes:
+    """``data`` with header fields (``major``, ``minor``, ``flags``, ``length``, ``count``) replaced
+    and the header checksum recomputed: how tests and the conformance vectors make the files of newer
+    or faulty writers."""
+    _, major, minor, flags, length, count, _ = HEADER.unpack_from(data)
+    vals = dict(major=major, minor=minor, flags=flags, length=length, count=count) | fields
+    table = bytes(data[HEADER_SIZE:HEADER_SIZE + ENTRY_SIZE * count])
+    return _header(vals["major"], vals["minor"], vals["flags"], vals["length"], vals["count"], table) + \
+        bytes(data[HEADER_SIZE:])
 
 
 @dataclass

@@ -7,7 +7,6 @@ files are listed in ``reject.json`` with the error class and a fragment of its m
 from __future__ import annotations
 
 import json
-import struct
 from pathlib import Path
 
 import numpy as np
@@ -35,13 +34,6 @@ def _rechunk(data: bytes, edit) -> bytes:
     return container.pack(edit(chunks))
 
 
-def _with_header(data: bytes, major: int, minor: int) -> bytes:
-    magic, _, _, flags, length, count, _ = container.HEADER.unpack_from(data)
-    head = container.HEADER.pack(magic, major, minor, flags, length, count, 0)[:-4]
-    table = data[container.HEADER_SIZE:container.HEADER_SIZE + container.ENTRY_SIZE * count]
-    return head + struct.pack("<I", container.crc32(head + table)) + data[container.HEADER_SIZE:]
-
-
 def _meta_edit(chunks, change):
     meta = json.loads(chunks[0].payload)
     change(meta)
@@ -64,7 +56,7 @@ def main() -> None:
     extras.metadata = {"note": "optional chunks"}
     _expected("optional_chunks", _rechunk(cgh.encode(extras, "compact")[0],
                                           lambda c: c + [container.Chunk("ZEXT", b"future data", required=False)]))
-    _expected("newer_minor", _with_header(compact, 1, 9))
+    _expected("newer_minor", container.rewrite_header(compact, minor=9))
     # real-looking hair: grown strands on built cards, whose card coordinates need the world-guided
     # (Newton) prediction of spec section 4.3
     from cghair_format.cards import build_cards
@@ -88,7 +80,7 @@ def main() -> None:
     flipped = bytearray(compact)
     flipped[len(compact) // 2] ^= 0x01
     bad("reject_flipped_byte", bytes(flipped), "ChecksumError", "checksum")
-    bad("reject_major_2", _with_header(compact, 2, 0), "UnsupportedVersionError", "version 2.0")
+    bad("reject_major_2", container.rewrite_header(compact, major=2, minor=0), "UnsupportedVersionError", "version 2.0")
     bad("reject_unknown_required", _rechunk(compact, lambda c: c + [container.Chunk("ZREQ", b"x")]),
         "UnknownRequiredChunkError", "ZREQ")
     bad("reject_missing_chunk", _rechunk(compact, lambda c: [x for x in c if x.type != "OPAC"]),

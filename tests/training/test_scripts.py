@@ -6,15 +6,7 @@ import json
 
 import pytest
 
-from cghair_format.exchange import save_strands
 from training import ablation, bench
-
-
-@pytest.fixture
-def strands_file(tmp_path, strands):
-    path = tmp_path / "cap.npz"
-    save_strands(strands, path)
-    return path
 
 
 def test_ablation_table(tmp_path, strands_file, capsys):

@@ -7,14 +7,6 @@ import json
 import pytest
 
 from cghair_format.cli import main
-from cghair_format.exchange import save_strands
-
-
-@pytest.fixture
-def strands_file(tmp_path, strands):
-    path = tmp_path / "cap.npz"
-    save_strands(strands, path)
-    return path
 
 
 def test_render_train_eval(tmp_path, strands_file, capsys):
