@@ -22,7 +22,8 @@ from .errors import AssetError, InvalidContentError, LimitError
 from .geometry import card_mesh, strand_points
 from .profiles import Profile, get_profile
 from .quantize import hier_decode, hier_encode, level_plan, oct_decode, oct_encode, rows_int8_decode, rows_int8_encode
-from .strand_coder import NEWTON_STEPS, decode_uvd, encode_uvd
+from .strand_coder import (NEWTON_STEPS, decode_uvd, encode_uvd, neighbour_decode, neighbour_encode,
+                           neighbour_order)
 from .streams import StreamReader, StreamWriter
 
 REQUIRED_CHUNKS = ("META", "CARD", "STRD", "OPAC", "LOGT", "CBKS", "MLPW")
@@ -32,6 +33,8 @@ LIMITS = {"strands": 1 << 24, "points": 4096, "cards": 1 << 20, "segments": 1024
 CARD_STEP_FRACTION = 1 / 8  # card geometry is quantized 8x finer than strand points
 MIN_NORMAL_BITS, MAX_NORMAL_BITS = 16, 24
 MAX_TIGHTENINGS = 8
+STEP_START = 0.95  # first step, as a fraction of the position tolerance
+TIGHTEN_TARGET = 0.97  # a retry aims the measured error at this fraction of the tolerance
 
 
 @dataclass
@@ -85,15 +88,16 @@ def encode(asset: HairAsset, profile: str | Profile = "compact") -> tuple[bytes,
     points = strand_points(asset.cards, asset.strand_card, asset.uvd).astype(np.float64)
     diag = float(np.linalg.norm(points.reshape(-1, 3).max(0) - points.reshape(-1, 3).min(0)))
     tol = prof.position_tolerance * max(diag, 1e-12)
-    # start from the step whose worst case (half a step on each of u, v, delta) meets the bound
-    step = None if prof.lossless else 0.9 * 2 * tol / math.sqrt(3)
+    # measured at the paper's scale, the largest point error is about 1.03 steps (half a step on
+    # each of u, v, delta, plus the card's own error): start just under the bound, then tighten
+    step = None if prof.lossless else STEP_START * tol
     appearance_chunks = _appearance_chunks(asset, prof)
     for _ in range(MAX_TIGHTENINGS):
         chunks, decoded_points = _geometry_chunks(asset, prof, step, diag)
         err = 0.0 if decoded_points is None else float(np.linalg.norm(decoded_points - points, axis=-1).max())
         if step is None or err <= tol:
             break
-        step *= 0.8 * tol / err if err > 0 else 0.8
+        step *= TIGHTEN_TARGET * tol / err if err > 0 else TIGHTEN_TARGET
     else:
         raise AssetError(f"could not meet the position tolerance {tol:g} (error {err:g})")
     data = container.pack(chunks + appearance_chunks, level=prof.zstd_level)
@@ -189,6 +193,12 @@ def _parse_meta(raw: bytes) -> dict:
         need("base_stride", int, 1, 256, src=quant)
         need("newton_steps", int, 0, 8, src=quant)
         need("half_bias", bool, src=quant)
+        arrays = 1 + len(level_plan(meta["points"], quant["base_stride"])[1])
+        masks = quant.get("neighbour")
+        if (not isinstance(masks, list) or len(masks) != arrays
+                or not all(isinstance(m, int) and not isinstance(m, bool) and 0 <= m <= 7 for m in masks)):
+            raise InvalidContentError(f"META quant.neighbour must list {arrays} channel masks in 0..7, got "
+                                      f"{masks!r}", chunk="META")
     return meta
 
 
@@ -215,7 +225,8 @@ def _geometry_chunks(asset: HairAsset, prof: Profile, step: float | None, diag: 
         q["newton_steps"] = _choose_newton_steps(cards, asset.strand_card, y, scale, q["base_stride"])
         base, levels, decoded_points = encode_uvd(cards, asset.strand_card, y, scale, q["base_stride"],
                                                   q["newton_steps"])
-        for residuals in [base] + levels:
+        stored, q["neighbour"] = _with_neighbour_prediction(asset.strand_card, [base] + levels)
+        for residuals in stored:
             for ch in range(3):
                 strd_w.ints(residuals[..., ch])
     groups = asset.cards.group.astype(np.uint16 if asset.appearance.n_groups <= 65536 else np.uint32)
@@ -255,6 +266,46 @@ def _appearance_chunks(asset: HairAsset, prof: Profile) -> list[container.Chunk]
     return chunks + _optional_chunks(asset)
 
 
+def _with_neighbour_prediction(strand_card: np.ndarray, residuals: list[np.ndarray]
+                               ) -> tuple[list[np.ndarray], list[int]]:
+    """Per residual array and channel, the plain residuals or their differences from the card
+    neighbour's (spec 4.3), whichever zstd codes smaller. Returns the arrays to store and, per array,
+    the mask of channels stored as differences (bit 0 u, bit 1 v, bit 2 delta). The roots (column 0
+    of the base array) stay plain: they define the neighbour order."""
+    order, starts = neighbour_order(strand_card, residuals[0][:, 0])
+    stored, masks = [], []
+    for j, r in enumerate(residuals):
+        r = r.copy()
+        part = r[:, 1:] if j == 0 else r
+        mask = 0
+        for ch in range(3):
+            diff = neighbour_encode(part[..., ch], order, starts)
+            if _packed_size([diff]) < _packed_size([part[..., ch]]):
+                part[..., ch] = diff
+                mask |= 1 << ch
+        stored.append(r)
+        masks.append(mask)
+    return stored, masks
+
+
+def _undo_neighbour_prediction(strand_card: np.ndarray, stored: list[np.ndarray], masks: list[int]) -> None:
+    """Inverse of :func:`_with_neighbour_prediction`, in place."""
+    order, starts = neighbour_order(strand_card, stored[0][:, 0])
+    for j, (r, mask) in enumerate(zip(stored, masks, strict=True)):
+        part = r[:, 1:] if j == 0 else r
+        for ch in range(3):
+            if mask >> ch & 1:
+                part[..., ch] = neighbour_decode(part[..., ch], order, starts)
+
+
+def _packed_size(arrays: list[np.ndarray], level: int = 3) -> int:
+    """zstd size of integer arrays as STRD stores them: a quick estimate for the writer's choices."""
+    w = StreamWriter()
+    for a in arrays:
+        w.ints(a)
+    return len(zstandard.ZstdCompressor(level=level).compress(w.getvalue()))
+
+
 def _choose_newton_steps(cards: Cards, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray,
                          base_stride: int, sample: int = 512) -> int:
     """World-guided prediction (NEWTON_STEPS) or plain card-space prediction (0), whichever codes an
@@ -264,10 +315,7 @@ def _choose_newton_steps(cards: Cards, strand_card: np.ndarray, y: np.ndarray, s
     sizes = {}
     for steps in (NEWTON_STEPS, 0):
         base, levels, _ = encode_uvd(cards, strand_card[pick], y[pick], scale[pick], base_stride, steps)
-        w = StreamWriter()
-        for r in [base] + levels:
-            w.ints(r)
-        sizes[steps] = len(zstandard.ZstdCompressor(level=9).compress(w.getvalue()))
+        sizes[steps] = _packed_size([base] + levels, level=9)
     return min(sizes, key=sizes.get)
 
 
@@ -370,6 +418,7 @@ def _decode_chunks(meta: dict, payloads: dict[str, bytes]) -> HairAsset:
         named = [("base", base_idx)] + [(f"level {i}", lv[0]) for i, lv in enumerate(plan)]
         residuals = [np.stack([rd["STRD"].ints((s, len(idx)), f"{name} {ch}") for ch in "uvd"], axis=-1)
                      for name, idx in named]
+        _undo_neighbour_prediction(strand_card, residuals, q["neighbour"])
         scale = _uvd_scale(su, sv, strand_card, step)
         uvd = decode_uvd(cards, strand_card, residuals[0], residuals[1:], p, scale, stride, q["newton_steps"])
         opacity = np.clip(_get_hier(rd["OPAC"], s, p - 1, stride, "opacity") / q["opacity_scale"], 0, 1)

@@ -87,7 +87,11 @@ def strand_weights(appearance: Appearance) -> np.ndarray:
 def strand_latents(appearance: Appearance, strand_group: np.ndarray) -> np.ndarray:
     """Each strand's latent ``[S, D]``: its weights over its card group's codebook."""
     w = strand_weights(appearance)
-    return np.einsum("sk,skd->sd", w, appearance.codebooks.astype(np.float64)[strand_group])
+    codebooks = appearance.codebooks.astype(np.float64)
+    latents = np.zeros((len(strand_group), appearance.latent_dim))
+    for k in range(appearance.k):  # gathers one latent per strand at a time: no [S, K, D] temporary
+        latents += w[:, k:k + 1] * codebooks[strand_group, k]
+    return latents
 
 
 def run_mlp(appearance: Appearance, latents: np.ndarray) -> np.ndarray:
@@ -98,12 +102,11 @@ def run_mlp(appearance: Appearance, latents: np.ndarray) -> np.ndarray:
 
     def block(b: slice) -> None:
         h = latents[b].astype(np.float32)
-        for w, bias, act in weights:
-            h = h @ w
+        for j, (w, bias, act) in enumerate(weights):
+            h = np.matmul(h, w, out=out[b] if j == len(weights) - 1 else None)  # the last layer in place
             h += bias
             if act == "relu":
                 np.maximum(h, 0, out=h)
-        out[b] = h
 
     map_blocks(block, latents.shape[0], block=1024)
     return out

@@ -89,46 +89,51 @@ def triangle_and_barycentrics(uv: np.ndarray, segments: int) -> tuple[np.ndarray
 
 
 class CardMap:
-    """The card-to-world mapping of section "Strand points", with its Jacobian, for many points."""
+    """The card-to-world mapping of section "Strand points", with its Jacobian, for many points.
+
+    Each triangle is kept as an affine frame: ``x = A + f * Ef + (v - upper) * Ev`` and likewise for
+    the normal, where ``f`` is the fraction of the way along the quad and ``upper`` is 1 on a quad's
+    upper triangle. This equals the barycentric form of the spec; one gather per point fetches it.
+    """
 
     def __init__(self, cards: Cards) -> None:
         mesh = card_mesh(cards)
         self.segments = cards.segments
-        self.vertices = mesh.vertices.astype(np.float64)
-        self.normals = mesh.normals.astype(np.float64)
-        self.triangles = mesh.triangles.astype(np.int64)
+        v = mesh.vertices.astype(np.float64)[mesh.triangles]  # [T, 3 corners, 3]
+        n = mesh.normals.astype(np.float64)[mesh.triangles]
+        upper = (np.arange(len(mesh.triangles)) % 2 == 1)[:, None]
+
+        def frame(c):  # lower: d/df = c2 - c0, d/dv = c1 - c0; upper: d/df = c1 - c0, d/dv = c1 - c2
+            return [c[:, 0], np.where(upper, c[:, 1], c[:, 2]) - c[:, 0],
+                    np.where(upper, c[:, 1] - c[:, 2], c[:, 1] - c[:, 0])]
+
+        self.frames = np.concatenate(frame(v) + frame(n), axis=1)  # [T, 18]: A, Ef, Ev, NA, NEf, NEv
 
     def __call__(self, card: np.ndarray, uvd: np.ndarray, jacobian: bool = False):
         """World points ``[N, 3]`` of card coordinates ``uvd [N, 3]`` on cards ``card [N]``; with
         ``jacobian``, also ``d point / d (u, v, delta)`` as three ``[N, 3]`` columns (u, v, delta)."""
         m = self.segments
         uvd = np.asarray(uvd, np.float64)
-        tri_local, bary = triangle_and_barycentrics(uvd[:, :2], m)
-        corners = self.triangles[card.astype(np.int64) * 2 * m + tri_local]  # [N, 3]
-        v0, v1, v2 = (self.vertices[corners[:, j]] for j in range(3))
-        n0, n1, n2 = (self.normals[corners[:, j]] for j in range(3))
-        b0, b1, b2 = bary[:, 0:1], bary[:, 1:2], bary[:, 2:3]
-        n = b0 * n0 + b1 * n1 + b2 * n2
+        s = uvd[:, 0] * m
+        k = np.clip(np.floor(s), 0, m - 1)
+        f = (s - k)[:, None]
+        upper = f[:, 0] + uvd[:, 1] > 1
+        g = (uvd[:, 1] - upper)[:, None]
+        fr = self.frames[card.astype(np.int64) * 2 * m + 2 * k.astype(np.int64) + upper]
+        ef, ev, nf, nv = fr[:, 3:6], fr[:, 6:9], fr[:, 12:15], fr[:, 15:18]
+        n = fr[:, 9:12] + f * nf + g * nv
         length = np.sqrt(np.sum(n * n, axis=1, keepdims=True))
         np.maximum(length, 1e-30, out=length)
         nh = n / length
         delta = uvd[:, 2:3]
-        x = b0 * v0 + b1 * v1 + b2 * v2 + delta * nh
+        x = fr[:, 0:3] + f * ef + g * ev + delta * nh
         if not jacobian:
             return x
-        # d bary / d f: lower (-1, 0, 1), upper (-1, 1, 0); d bary / d v: lower (-1, 1, 0), upper (0, 1, -1)
-        upper = (tri_local % 2 == 1)[:, None]
-        dv_f = np.where(upper, v1, v2) - v0
-        dv_v = np.where(upper, v1 - v2, v1 - v0)
-        dn_f = np.where(upper, n1, n2) - n0
-        dn_v = np.where(upper, n1 - n2, n1 - n0)
 
         def d_normal(dn):
             return (dn - nh * np.sum(nh * dn, axis=1, keepdims=True)) / length
 
-        ju = m * (dv_f + delta * d_normal(dn_f))
-        jv = dv_v + delta * d_normal(dn_v)
-        return x, (ju, jv, nh)
+        return x, (m * (ef + delta * d_normal(nf)), ev + delta * d_normal(nv), nh)
 
 
 def strand_points(cards: Cards, strand_card: np.ndarray, uvd: np.ndarray) -> np.ndarray:

@@ -5,6 +5,10 @@ they kink wherever the strand crosses a triangle edge. World positions are smoot
 sample is therefore predicted in world space (Lagrange interpolation of the decoded neighbours'
 world positions), carried back to card coordinates by Newton steps on the card mapping started from
 the card-space interpolation, and only the residual in card coordinates is stored.
+
+Strands of one card run side by side, so their residuals are alike too: with neighbour prediction
+(spec 4.3) a strand's residuals are stored as differences from those of the strand next to it on
+the card (ordered by root position), level by level and channel by channel where that is smaller.
 """
 
 from __future__ import annotations
@@ -123,3 +127,37 @@ def _in_chunks(cards: Cards, strand_card: np.ndarray, scale: np.ndarray, n: int,
     base = np.concatenate([p[2][0] for p in parts])
     levels = [np.concatenate([p[2][1][i] for p in parts]) for i in range(len(parts[0][2][1]))]
     return rec, world, (base, levels)
+
+
+# --- neighbour prediction across the strands of a card (spec 4.3) ----------------------------------
+
+def neighbour_order(strand_card: np.ndarray, roots: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Strands ordered by card, then root ``v``, then root ``u``, then index (``roots``: the base
+    residuals of sample 0, ``[S, 3]`` integers), and for each position whether it starts its card."""
+    order = np.lexsort((roots[:, 0], roots[:, 1], strand_card))
+    cards = strand_card[order]
+    starts = np.r_[True, cards[1:] != cards[:-1]]
+    return order, starts
+
+
+def neighbour_encode(r: np.ndarray, order: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """Residuals ``[S, ...]`` minus those of the previous strand of the same card in ``order``."""
+    rs = r[order]
+    out = rs.copy()
+    out[1:] -= rs[:-1]
+    out[starts] = rs[starts]
+    res = np.empty_like(r)
+    res[order] = out
+    return res
+
+
+def neighbour_decode(d: np.ndarray, order: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`neighbour_encode`: a cumulative sum that restarts at each card."""
+    total = np.cumsum(d[order], axis=0)
+    first = np.flatnonzero(starts)
+    before = np.zeros_like(total[first])
+    before[1:] = total[first[1:] - 1]
+    total -= np.repeat(before, np.diff(np.r_[first, len(order)]), axis=0)
+    res = np.empty_like(d)
+    res[order] = total
+    return res
