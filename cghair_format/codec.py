@@ -22,8 +22,7 @@ from .errors import AssetError, InvalidContentError, LimitError
 from .geometry import card_mesh, strand_points
 from .profiles import Profile, get_profile
 from .quantize import hier_decode, hier_encode, level_plan, oct_decode, oct_encode, rows_int8_decode, rows_int8_encode
-from .strand_coder import (NEWTON_STEPS, decode_uvd, encode_uvd, neighbour_decode, neighbour_encode,
-                           neighbour_order)
+from .strand_coder import NEWTON_STEPS, decode_uvd, encode_uvd, neighbour_decode, neighbour_encode, neighbour_order
 from .streams import StreamReader, StreamWriter
 
 REQUIRED_CHUNKS = ("META", "CARD", "STRD", "OPAC", "LOGT", "CBKS", "MLPW")
