@@ -134,7 +134,7 @@ def _meta(asset: HairAsset, prof: Profile, step: float | None, diag: float) -> d
             "lossless": False, "step": step, "card_step": step * CARD_STEP_FRACTION,
             "normal_bits": _normal_bits(asset.uvd, step), "base_stride": prof.base_stride, "newton_steps": NEWTON_STEPS,
             "opacity_scale": prof.opacity_scale,
-            "logit_step": prof.logit_step, "logit_floor": prof.logit_floor, "half_bias": prof.half_bias},
+            "logit_levels": prof.logit_levels, "logit_floor": prof.logit_floor, "half_bias": prof.half_bias},
     }
 
 
@@ -185,8 +185,9 @@ def _parse_meta(raw: bytes) -> dict:
     if not isinstance(quant, dict):
         raise InvalidContentError("META quant must be an object", chunk="META")
     if not need("lossless", bool, src=quant):
-        for key in ("step", "card_step", "opacity_scale", "logit_step"):
+        for key in ("step", "card_step", "opacity_scale"):
             need(key, (int, float), 1e-30, src=quant)
+        need("logit_levels", int, 1, 1 << 24, src=quant)
         need("logit_floor", (int, float), -1e6, 0, src=quant)
         need("normal_bits", int, 8, 24, src=quant)
         need("base_stride", int, 1, 256, src=quant)
@@ -250,8 +251,8 @@ def _appearance_chunks(asset: HairAsset, prof: Profile) -> list[container.Chunk]
         if app.weight_mode == "hard":
             logt_w.ints(np.argmax(app.logits, axis=1))
         else:
-            z = np.maximum(app.logits - app.logits.max(axis=1, keepdims=True), prof.logit_floor)
-            logt_w.ints(np.rint(-z / prof.logit_step))
+            z = (app.logits.astype(np.float64) - app.logits.max(axis=1, keepdims=True)) / app.temperature
+            logt_w.ints(np.rint(prof.logit_levels * np.exp(z)))  # the strand's largest logit -> levels
         qc, sc = rows_int8_encode(app.codebooks.reshape(-1, app.latent_dim))
         cbks_w.array(qc)
         cbks_w.array(sc)
@@ -428,7 +429,11 @@ def _decode_chunks(meta: dict, payloads: dict[str, bytes]) -> HairAsset:
             logits = np.full((s, k), q["logit_floor"], np.float32)
             logits[np.arange(s), idx] = 0.0
         else:
-            logits = -rd["LOGT"].ints((s, k), "logits") * q["logit_step"]
+            levels = rd["LOGT"].ints((s, k), "logits")
+            if levels.min() < 0 or levels.max() > q["logit_levels"]:
+                raise InvalidContentError(f"soft logits outside [0, {q['logit_levels']}]", chunk="LOGT")
+            with np.errstate(divide="ignore"):  # a stored 0 is the floor
+                logits = np.maximum(meta["temperature"] * np.log(levels / q["logit_levels"]), q["logit_floor"])
         cq = rd["CBKS"].array((nt * k, d), "codebooks", ("|i1",))
         codebooks = rows_int8_decode(cq, rd["CBKS"].array((nt * k,), "codebook scales", ("<f4",))).reshape(nt, k, d)
         mlp = []

@@ -15,8 +15,8 @@ class Profile:
     lossless: bool = False
     position_tolerance: float = 2e-4  # max point error / bounding-box diagonal
     opacity_scale: float = 127.5  # opacity = round(o * scale) / scale: max error 0.5 / scale
-    logit_step: float = 1 / 16  # logits (minus the strand's max) quantized to this step ...
-    logit_floor: float = -16.0  # ... and clamped at this value
+    logit_levels: int = 1023  # soft logits stored as round(levels * exp((logit - max) / temperature)) ...
+    logit_floor: float = -16.0  # ... and a stored 0 decodes to this logit
     half_bias: bool = True  # MLP biases as float16 (else float32)
     base_stride: int = 16  # hierarchical predictor: coarse samples every this many points
     zstd_level: int = 19
@@ -30,7 +30,7 @@ class Profile:
 PROFILES: dict[str, Profile] = {
     "lossless": Profile("lossless", lossless=True, zstd_level=9,
                         description="every float32 value stored exactly (byte-shuffled + zstd)"),
-    "high": Profile("high", position_tolerance=2e-5, opacity_scale=1023.5, logit_step=1 / 64,
+    "high": Profile("high", position_tolerance=2e-5, opacity_scale=1023.5, logit_levels=8191,
                     logit_floor=-24.0, half_bias=False,
                     description="points within 2e-5 of the bbox diagonal, opacity within 1/2047"),
     "compact": Profile("compact", description="the default: points within 2e-4 of the bbox diagonal, "

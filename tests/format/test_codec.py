@@ -39,9 +39,11 @@ def _check_bounds(a, b, profile):
     for la, lb in zip(a.appearance.mlp, b.appearance.mlp, strict=True):
         step = np.abs(la.weight).max(axis=1, keepdims=True) / 127
         assert (np.abs(lb.weight - la.weight) <= step / 2 + 1e-6).all()
-    # soft weights: logits quantized after subtracting the strand's max, clamped at the floor
+    # soft weights: stored as exp((logit - max) / tau) in 1/levels; each weight within K / (2 levels),
+    # plus what the floor gives an entry stored as 0
     wa, wb = strand_weights(a.appearance), strand_weights(b.appearance)
-    assert np.abs(wa - wb).max() <= prof.logit_step / a.appearance.temperature + np.exp(prof.logit_floor) * 10
+    k_, tau = a.appearance.k, a.appearance.temperature
+    assert np.abs(wa - wb).max() <= k_ / (2 * prof.logit_levels) + k_ * np.exp(prof.logit_floor / tau) + 1e-6
 
 
 @settings(max_examples=25, deadline=None)
