@@ -14,14 +14,23 @@ from pathlib import Path
 from typing import BinaryIO
 
 import numpy as np
-import zstandard
 
-from . import container
+from . import container, rans
 from .asset import ACTIVATIONS, UP_AXES, WEIGHT_MODES, Appearance, Cards, HairAsset, MlpLayer
 from .errors import AssetError, InvalidContentError, LimitError
 from .geometry import card_mesh, strand_points
 from .profiles import Profile, get_profile
-from .quantize import hier_decode, hier_encode, level_plan, oct_decode, oct_encode, rows_int8_decode, rows_int8_encode
+from .quantize import (
+    hier_decode,
+    hier_encode,
+    level_plan,
+    oct_decode,
+    oct_encode,
+    rows_int8_decode,
+    rows_int8_encode,
+    zigzag,
+)
+from .residual_coder import read_residuals, write_residuals
 from .strand_coder import NEWTON_STEPS, decode_uvd, encode_uvd, neighbour_decode, neighbour_encode, neighbour_order
 from .streams import StreamReader, StreamWriter
 
@@ -92,13 +101,14 @@ def encode(asset: HairAsset, profile: str | Profile = "compact") -> tuple[bytes,
     step = None if prof.lossless else STEP_START * tol
     appearance_chunks = _appearance_chunks(asset, prof)
     for _ in range(MAX_TIGHTENINGS):
-        chunks, decoded_points = _geometry_chunks(asset, prof, step, diag)
+        meta, cards_w, residuals, decoded_points = _quantize_geometry(asset, prof, step, diag)
         err = 0.0 if decoded_points is None else float(np.linalg.norm(decoded_points - points, axis=-1).max())
         if step is None or err <= tol:
             break
         step *= TIGHTEN_TARGET * tol / err if err > 0 else TIGHTEN_TARGET
     else:
         raise AssetError(f"could not meet the position tolerance {tol:g} (error {err:g})")
+    chunks = _geometry_chunks(asset, meta, cards_w, residuals)
     data = container.pack(chunks + appearance_chunks, level=prof.zstd_level)
     _, infos = container.read_table(data)
     return data, EncodeReport(prof.name, step, err, diag, {i.type: i.stored for i in infos})
@@ -204,35 +214,42 @@ def _parse_meta(raw: bytes) -> dict:
 
 # --- chunks ---------------------------------------------------------------------------------------
 
-def _geometry_chunks(asset: HairAsset, prof: Profile, step: float | None, diag: float
-                     ) -> tuple[list[container.Chunk], np.ndarray | None]:
-    """META, CARD and STRD, which depend on the step, and (quantized profiles) the world points a
-    decoder will get."""
-    decoded_points = None
+def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag: float
+                       ) -> tuple[dict, StreamWriter, list[np.ndarray] | None, np.ndarray | None]:
+    """What depends on the step: META, the CARD streams, and (quantized profiles) the STRD residual
+    arrays and the world points a decoder will get."""
     meta = _meta(asset, prof, step, diag)
     q = meta["quant"]
-    cards_w, strd_w = StreamWriter(), StreamWriter()
-    strd_w.ints(np.diff(asset.strand_card.astype(np.int64), prepend=0))
+    cards_w = StreamWriter()
     if q["lossless"]:
         for a in (asset.cards.spine, asset.cards.normal, asset.cards.half_width):
             cards_w.array(a.astype(np.float32), shuffle=True)
+        return meta, cards_w, None, None
+    cards = _encode_cards(asset.cards, q, cards_w)
+    su, sv = _card_scales(cards, q["step"])
+    scale = _uvd_scale(su, sv, asset.strand_card, q["step"])
+    y = asset.uvd * scale[:, None, :]
+    q["newton_steps"] = _choose_newton_steps(cards, asset.strand_card, y, scale, q["base_stride"])
+    base, levels, decoded_points = encode_uvd(cards, asset.strand_card, y, scale, q["base_stride"],
+                                              q["newton_steps"])
+    return meta, cards_w, [base] + levels, decoded_points
+
+
+def _geometry_chunks(asset: HairAsset, meta: dict, cards_w: StreamWriter, residuals: list[np.ndarray] | None
+                     ) -> list[container.Chunk]:
+    """META, CARD and STRD once the step is settled: the residuals go through neighbour prediction
+    and the entropy coder (lossless: the card coordinates as float32)."""
+    strd_w = StreamWriter()
+    strd_w.ints(np.diff(asset.strand_card.astype(np.int64), prepend=0))
+    if residuals is None:
         strd_w.array(asset.uvd.astype(np.float32), shuffle=True)
     else:
-        cards = _encode_cards(asset.cards, q, cards_w)
-        su, sv = _card_scales(cards, q["step"])
-        scale = _uvd_scale(su, sv, asset.strand_card, q["step"])
-        y = asset.uvd * scale[:, None, :]
-        q["newton_steps"] = _choose_newton_steps(cards, asset.strand_card, y, scale, q["base_stride"])
-        base, levels, decoded_points = encode_uvd(cards, asset.strand_card, y, scale, q["base_stride"],
-                                                  q["newton_steps"])
-        stored, q["neighbour"] = _with_neighbour_prediction(asset.strand_card, [base] + levels)
-        for residuals in stored:
-            for ch in range(3):
-                strd_w.ints(residuals[..., ch])
+        stored, meta["quant"]["neighbour"] = _with_neighbour_prediction(asset.strand_card, residuals)
+        write_residuals(strd_w, stored)
     groups = asset.cards.group.astype(np.uint16 if asset.appearance.n_groups <= 65536 else np.uint32)
     cards_w.array(groups, shuffle=True)
     return [container.Chunk("META", json.dumps(meta, separators=(",", ":")).encode("utf-8")),
-            container.Chunk("CARD", cards_w.getvalue()), container.Chunk("STRD", strd_w.getvalue())], decoded_points
+            container.Chunk("CARD", cards_w.getvalue()), container.Chunk("STRD", strd_w.getvalue())]
 
 
 def _appearance_chunks(asset: HairAsset, prof: Profile) -> list[container.Chunk]:
@@ -269,9 +286,9 @@ def _appearance_chunks(asset: HairAsset, prof: Profile) -> list[container.Chunk]
 def _with_neighbour_prediction(strand_card: np.ndarray, residuals: list[np.ndarray]
                                ) -> tuple[list[np.ndarray], list[int]]:
     """Per residual array and channel, the plain residuals or their differences from the card
-    neighbour's (spec 4.3), whichever zstd codes smaller. Returns the arrays to store and, per array,
-    the mask of channels stored as differences (bit 0 u, bit 1 v, bit 2 delta). The roots (column 0
-    of the base array) stay plain: they define the neighbour order."""
+    neighbour's (spec 4.3), whichever the entropy coder's estimate finds smaller. Returns the arrays
+    to store and, per array, the mask of channels stored as differences (bit 0 u, bit 1 v, bit 2
+    delta). The roots (column 0 of the base array) stay plain: they define the neighbour order."""
     order, starts = neighbour_order(strand_card, residuals[0][:, 0])
     stored, masks = [], []
     for j, r in enumerate(residuals):
@@ -280,7 +297,7 @@ def _with_neighbour_prediction(strand_card: np.ndarray, residuals: list[np.ndarr
         mask = 0
         for ch in range(3):
             diff = neighbour_encode(part[..., ch], order, starts)
-            if _packed_size([diff]) < _packed_size([part[..., ch]]):
+            if _estimate(diff) < _estimate(part[..., ch]):
                 part[..., ch] = diff
                 mask |= 1 << ch
         stored.append(r)
@@ -298,12 +315,9 @@ def _undo_neighbour_prediction(strand_card: np.ndarray, stored: list[np.ndarray]
                 part[..., ch] = neighbour_decode(part[..., ch], order, starts)
 
 
-def _packed_size(arrays: list[np.ndarray], level: int = 3) -> int:
-    """zstd size of integer arrays as STRD stores them: a quick estimate for the writer's choices."""
-    w = StreamWriter()
-    for a in arrays:
-        w.ints(a)
-    return len(zstandard.ZstdCompressor(level=level).compress(w.getvalue()))
+def _estimate(residuals: np.ndarray) -> float:
+    """Bytes that STRD's entropy coder needs for these residuals, roughly: the writer's yardstick."""
+    return rans.estimate_bytes(zigzag(residuals))
 
 
 def _choose_newton_steps(cards: Cards, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray,
@@ -315,7 +329,7 @@ def _choose_newton_steps(cards: Cards, strand_card: np.ndarray, y: np.ndarray, s
     sizes = {}
     for steps in (NEWTON_STEPS, 0):
         base, levels, _ = encode_uvd(cards, strand_card[pick], y[pick], scale[pick], base_stride, steps)
-        sizes[steps] = _packed_size([base] + levels, level=9)
+        sizes[steps] = sum(_estimate(r) for r in [base] + levels)
     return min(sizes, key=sizes.get)
 
 
@@ -415,9 +429,7 @@ def _decode_chunks(meta: dict, payloads: dict[str, bytes]) -> HairAsset:
         cards = _decode_cards(rd["CARD"], c, m + 1, q)
         su, sv = _card_scales(cards, step)
         base_idx, plan = level_plan(p, stride)
-        named = [("base", base_idx)] + [(f"level {i}", lv[0]) for i, lv in enumerate(plan)]
-        residuals = [np.stack([rd["STRD"].ints((s, len(idx)), f"{name} {ch}") for ch in "uvd"], axis=-1)
-                     for name, idx in named]
+        residuals = read_residuals(rd["STRD"], s, [len(base_idx)] + [len(lv[0]) for lv in plan])
         _undo_neighbour_prediction(strand_card, residuals, q["neighbour"])
         scale = _uvd_scale(su, sv, strand_card, step)
         uvd = decode_uvd(cards, strand_card, residuals[0], residuals[1:], p, scale, stride, q["newton_steps"])

@@ -56,7 +56,7 @@ class StreamReader:
     def _fail(self, message: str, kind=InvalidContentError):
         raise kind(message, chunk=self.chunk, offset=self._pos)
 
-    def array(self, shape: tuple[int, ...], name: str, dtypes: tuple[str, ...] | None = None) -> np.ndarray:
+    def array(self, shape: tuple[int | None, ...], name: str, dtypes: tuple[str, ...] | None = None) -> np.ndarray:
         if self._pos + 4 > len(self._data):
             self._fail(f"array {name!r} is missing: the payload ends early", TruncatedError)
         code, ndim, flags = struct.unpack_from("<BBH", self._data, self._pos)
@@ -65,6 +65,8 @@ class StreamReader:
         if self._pos + 4 + 4 * ndim > len(self._data):
             self._fail(f"array {name!r} header runs past the payload", TruncatedError)
         dims = struct.unpack_from(f"<{ndim}I", self._data, self._pos + 4)
+        if len(dims) == len(shape):  # a None in ``shape`` takes any length (checked against the payload below)
+            shape = tuple(d if want is None else want for d, want in zip(dims, shape, strict=True))
         if tuple(dims) != tuple(shape):
             self._fail(f"array {name!r} has shape {tuple(dims)}, expected {tuple(shape)}")
         dtype = np.dtype(DTYPES[code])

@@ -1,0 +1,197 @@
+"""A multi-lane rANS entropy coder with static context tables, in vectorized numpy (spec 4.3.2).
+
+Unsigned integers are split into a token (coded with rANS under a frequency table that the caller
+picks per symbol: its context) and raw extra bits. ``L`` lanes each hold a rANS state and code their
+own symbols; all lanes share one stream of 16-bit words, so one step of the coder handles one
+symbol of every lane with a few array operations.
+
+Token of ``u``: ``u`` itself below ``DIRECT``; otherwise ``DIRECT + bitlen(u) - 5`` followed by the
+``bitlen(u) - 1`` bits of ``u`` below its leading one (MSB first).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .errors import InvalidContentError, TruncatedError
+
+DIRECT = 16
+ALPHABET = DIRECT + 60  # bit lengths 5 .. 64
+PROB_BITS = 12
+TOTAL = 1 << PROB_BITS
+LOW = 1 << 16  # states live in [LOW, 2^32); renormalization moves 16-bit words
+NO_SYMBOL = 255
+
+
+def bit_length(u: np.ndarray) -> np.ndarray:
+    """Bit length of unsigned integers (0 for 0), exact up to 2^64 - 1."""
+    u = np.asarray(u, np.uint64)
+    n = np.frexp(u.astype(np.float64))[1].astype(np.int64)  # exact below 2^53; above, rounding up ...
+    high = n > 53
+    if high.any():  # ... can add one: u < 2^(n-1) then
+        n[high] -= (u[high] >> (n[high] - 1).astype(np.uint64)) == 0
+    return n
+
+
+# bit length of the smallest value of each token: what contexts are built from
+TOKEN_BITS = np.r_[bit_length(np.arange(DIRECT)), np.arange(5, 65)].astype(np.int64)
+
+
+def tokens(u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Tokens, extra-bit widths and extra values of unsigned integers ``u`` (uint64)."""
+    u = np.asarray(u, np.uint64)
+    nb = bit_length(u)
+    big = u >= DIRECT
+    sym = np.where(big, DIRECT + nb - 5, u.astype(np.int64) % DIRECT)
+    width = np.where(big, nb - 1, 0)
+    extra = np.where(big, u - (np.uint64(1) << np.maximum(nb - 1, 0).astype(np.uint64)), np.uint64(0))
+    return sym.astype(np.uint8), width, extra
+
+
+def untokens(sym: np.ndarray, extra: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`tokens`: the unsigned integers (uint64)."""
+    u = sym.astype(np.uint64)
+    big = np.flatnonzero(sym.ravel() >= DIRECT)
+    lead = np.uint64(1) << (u.ravel()[big] - np.uint64(DIRECT - 4))
+    u.ravel()[big] = lead + extra.ravel()[big]
+    return u
+
+
+def token_widths(sym: np.ndarray) -> np.ndarray:
+    sym = sym.astype(np.int64)
+    return np.where(sym >= DIRECT, sym - DIRECT + 4, 0)
+
+
+def pack_bits(width: np.ndarray, value: np.ndarray) -> np.ndarray:
+    """Concatenate each value's ``width`` low bits, MSB first, into bytes (zero padded)."""
+    width = width.ravel().astype(np.int64)
+    value = value.ravel().astype(np.uint64)
+    total = int(width.sum())
+    if total == 0:
+        return np.zeros(0, np.uint8)
+    owner = np.repeat(np.arange(len(width)), width)
+    pos = np.arange(total) - np.repeat(np.cumsum(width) - width, width)
+    bits = (value[owner] >> (width[owner] - 1 - pos).astype(np.uint64)) & np.uint64(1)
+    return np.packbits(bits.astype(np.uint8))
+
+
+def unpack_bits(data: np.ndarray, width: np.ndarray, where: str) -> np.ndarray:
+    """Inverse of :func:`pack_bits`: one uint64 per width (0 where the width is 0)."""
+    width = width.ravel().astype(np.int64)
+    total = int(width.sum())
+    if (total + 7) // 8 != len(data):
+        raise InvalidContentError(f"{where}: {len(data)} bytes of extra bits, the tokens need {(total + 7) // 8}")
+    out = np.zeros(len(width), np.uint64)
+    if total == 0:
+        return out
+    bits = np.unpackbits(data)[:total].astype(np.uint64)
+    has = np.flatnonzero(width)
+    owner = np.repeat(np.arange(len(width)), width)
+    pos = np.arange(total) - np.repeat(np.cumsum(width) - width, width)
+    shifted = bits << (width[owner] - 1 - pos).astype(np.uint64)
+    out[has] = np.add.reduceat(shifted, (np.cumsum(width) - width)[has])
+    return out
+
+
+def normalize(counts: np.ndarray) -> np.ndarray:
+    """Frequency tables ``[T, ALPHABET]`` summing to ``TOTAL`` (all-zero rows stay zero), every
+    counted symbol at least 1: the writer's choice (any such table decodes)."""
+    counts = np.asarray(counts, np.int64)
+    total = counts.sum(axis=1, keepdims=True)
+    freq = np.where(counts > 0, np.maximum(1, counts * TOTAL // np.maximum(total, 1)), 0)
+    for t in np.flatnonzero(total[:, 0]):  # hand the rounding difference to the largest entries
+        row = freq[t]
+        diff = TOTAL - int(row.sum())
+        order = np.argsort(-row, kind="stable")
+        while diff != 0:
+            for j in order:
+                if diff == 0:
+                    break
+                if diff > 0:
+                    row[j] += 1
+                    diff -= 1
+                elif row[j] > 1:
+                    row[j] -= 1
+                    diff += 1
+    return freq
+
+
+def estimate_bytes(u: np.ndarray) -> float:
+    """Order-0 size estimate of unsigned integers under this coder: token entropy plus extra bits."""
+    sym, width, _ = tokens(u)
+    counts = np.bincount(sym.ravel(), minlength=ALPHABET)
+    p = counts[counts > 0] / sym.size
+    return float(-(counts[counts > 0] * np.log2(p)).sum() + width.sum()) / 8
+
+
+class Tables:
+    """Frequency tables ``[T, ALPHABET]`` with their cumulative starts and slot lookup, flattened."""
+
+    def __init__(self, freq: np.ndarray, where: str) -> None:
+        freq = np.asarray(freq, np.int64)
+        sums = freq.sum(axis=1)
+        if freq.min(initial=0) < 0 or not np.isin(sums, (0, TOTAL)).all():
+            raise InvalidContentError(f"{where}: every frequency table must sum to {TOTAL} or be empty")
+        self.freq = freq.astype(np.uint32)
+        self.flat_freq = self.freq.ravel()
+        self.flat_start = (np.cumsum(freq, axis=1) - freq).astype(np.uint32).ravel()
+        slot = np.full((len(freq), TOTAL), NO_SYMBOL, np.uint8)
+        for t in np.flatnonzero(sums):
+            slot[t] = np.repeat(np.arange(ALPHABET, dtype=np.uint8), freq[t])
+        self.flat_slot = slot.ravel()
+
+
+def encode(sym: np.ndarray, table: np.ndarray, active: np.ndarray, tables: Tables) -> tuple[np.ndarray, np.ndarray]:
+    """Code steps of symbols ``sym [N, L]`` under ``table [N, L]``; lanes ``>= active[n]`` are idle at
+    step ``n``. Returns the lanes' initial states for the decoder (uint32 ``[L]``) and the words."""
+    n_steps, lanes = sym.shape
+    x = np.full(lanes, LOW, np.uint64)
+    flat = table.astype(np.int64) * ALPHABET + sym
+    out = []
+    for n in range(n_steps - 1, -1, -1):
+        a = int(active[n])
+        xs = x[:a]
+        f = tables.flat_freq[flat[n, :a]].astype(np.uint64)
+        emit = xs >= f << np.uint64(20)  # ((LOW >> PROB_BITS) << 16) * f
+        if emit.any():
+            out.append((xs[emit] & np.uint64(0xFFFF))[::-1])
+            xs[emit] >>= np.uint64(16)
+        x[:a] = ((xs // f) << np.uint64(PROB_BITS)) + xs % f + tables.flat_start[flat[n, :a]]
+    words = np.concatenate(out)[::-1] if out else np.zeros(0, np.uint64)
+    return x.astype(np.uint32), words.astype(np.uint16)
+
+
+class Decoder:
+    """Step-by-step decoding of what :func:`encode` wrote; the caller supplies each step's tables.
+    States stay below 2^32 and every product below it, so the arithmetic is uint32."""
+
+    def __init__(self, states: np.ndarray, words: np.ndarray, tables: Tables, where: str) -> None:
+        self.x = states.astype(np.uint32)
+        if (self.x < LOW).any():
+            raise InvalidContentError(f"{where}: a lane's initial rANS state is below {LOW}")
+        self.words = words.astype(np.uint32)
+        self.pos = 0
+        self.tables = tables
+        self.where = where
+
+    def step(self, table: np.ndarray, active: int) -> np.ndarray:
+        x = self.x[:active]
+        slot = x & np.uint32(TOTAL - 1)
+        sym = self.tables.flat_slot[table * TOTAL + slot]
+        if (sym == NO_SYMBOL).any():
+            raise InvalidContentError(f"{self.where}: a symbol is coded with an empty frequency table")
+        k = table * ALPHABET + sym
+        x = self.tables.flat_freq[k] * (x >> np.uint32(PROB_BITS)) + slot - self.tables.flat_start[k]
+        need = x < LOW
+        n = int(np.count_nonzero(need))
+        if n:
+            if self.pos + n > len(self.words):
+                raise TruncatedError(f"{self.where}: the rANS word stream ends early")
+            x[need] = (x[need] << np.uint32(16)) | self.words[self.pos:self.pos + n]
+            self.pos += n
+        self.x[:active] = x
+        return sym
+
+    def finish(self) -> None:
+        if self.pos != len(self.words) or (self.x != LOW).any():
+            raise InvalidContentError(f"{self.where}: the rANS stream does not end where its symbols do")

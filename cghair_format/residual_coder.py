@@ -1,0 +1,103 @@
+"""Entropy coding of the STRD residuals with context tables and rANS (spec 4.3.2).
+
+The residual arrays (base, then each level; ``[S, n_a, 3]`` integers each) are zigzag-coded and
+split into tokens and extra bits (:mod:`.rans`). A token's table depends on its array, its channel
+and a context: the bit length of the previous token of the same strand, array and channel, and the
+largest bit length among the channels already coded at the same sample. Strands are coded in
+blocks of ``L`` lanes, one strand per lane; within a block, column by column, channel u, v, delta.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import rans
+from .errors import InvalidContentError
+from .quantize import unzigzag, zigzag
+from .streams import StreamReader, StreamWriter
+
+LANES = 4096
+PREV_CLASSES, OTHER_CLASSES = 8, 4
+CONTEXTS = PREV_CLASSES * OTHER_CLASSES
+
+
+def _plan(widths: list[int], strands: int):
+    """Per column: its array and whether it starts one; the lanes; the blocks' active lane counts."""
+    column_array = np.repeat(np.arange(len(widths)), widths)
+    first = np.r_[True, column_array[1:] != column_array[:-1]]
+    lanes = min(LANES, strands)
+    blocks = -(-strands // lanes)
+    active = np.minimum(lanes, strands - lanes * np.arange(blocks))
+    return column_array, first, lanes, active
+
+
+def _table(array: np.ndarray | int, ch: int, prev: np.ndarray, other: np.ndarray) -> np.ndarray:
+    return ((array * 3 + ch) * CONTEXTS + np.minimum(prev, PREV_CLASSES - 1) * OTHER_CLASSES
+            + np.minimum(other, OTHER_CLASSES - 1))
+
+
+def _to_steps(a: np.ndarray, lanes: int, blocks: int) -> np.ndarray:
+    """``[S, N, 3]`` -> ``[blocks, N, 3, lanes]`` (strand ``b * lanes + lane``), zero padded."""
+    s, n = a.shape[:2]
+    pad = np.zeros((blocks * lanes, n, 3), a.dtype)
+    pad[:s] = a
+    return pad.reshape(blocks, lanes, n, 3).transpose(0, 2, 3, 1)
+
+
+def write_residuals(w: StreamWriter, arrays: list[np.ndarray]) -> None:
+    """Append the coded residual arrays to ``w``: tables, lane states, words, extra bits."""
+    s = arrays[0].shape[0]
+    widths = [a.shape[1] for a in arrays]
+    column_array, first, lanes, active = _plan(widths, s)
+    sym, width, extra = rans.tokens(zigzag(np.concatenate(arrays, axis=1)))
+    bits = rans.TOKEN_BITS[sym]
+    prev = np.zeros_like(bits)
+    prev[:, 1:] = bits[:, :-1]
+    prev[:, first] = 0
+    other = np.zeros_like(bits)
+    other[..., 1] = bits[..., 0]
+    other[..., 2] = np.maximum(bits[..., 0], bits[..., 1])
+    table = _table(column_array[None, :, None], np.arange(3)[None, None, :], prev, other)
+    n_tables = len(widths) * 3 * CONTEXTS
+    counts = np.bincount((table * rans.ALPHABET + sym).ravel(), minlength=n_tables * rans.ALPHABET)
+    tables = rans.Tables(rans.normalize(counts.reshape(n_tables, rans.ALPHABET)), "STRD")
+    blocks = len(active)
+    step_sym = _to_steps(sym, lanes, blocks).reshape(-1, lanes)
+    step_table = _to_steps(table, lanes, blocks).reshape(-1, lanes)
+    step_active = np.repeat(active, step_sym.shape[0] // blocks)
+    states, words = rans.encode(step_sym, step_table, step_active, tables)
+    w.array(tables.freq.astype(np.uint16), shuffle=True)
+    w.array(states)
+    w.array(words)
+    # in step order; the padding lanes of the last block have width 0 and add no bits
+    w.array(rans.pack_bits(_to_steps(width, lanes, blocks), _to_steps(extra, lanes, blocks)))
+
+
+def read_residuals(r: StreamReader, strands: int, widths: list[int]) -> list[np.ndarray]:
+    """Inverse of :func:`write_residuals`: the residual arrays ``[S, n_a, 3]`` (int64)."""
+    column_array, first, lanes, active = _plan(widths, strands)
+    n_tables = len(widths) * 3 * CONTEXTS
+    tables = rans.Tables(r.array((n_tables, rans.ALPHABET), "token tables", ("<u2",)), "STRD token tables")
+    states = r.array((lanes,), "rANS states", ("<u4",))
+    words = r.array((None,), "rANS words", ("<u2",))
+    extra_bits = r.array((None,), "extra bits", ("|u1",))
+    dec = rans.Decoder(states, words, tables, "STRD")
+    n = len(column_array)
+    sym = np.zeros((len(active), n, 3, lanes), np.uint8)
+    for b, act in enumerate(active):
+        prev = np.zeros((3, act), np.int64)
+        for col in range(n):
+            if first[col]:
+                prev[:] = 0
+            other = np.zeros(act, np.int64)
+            for ch in range(3):
+                got = dec.step(_table(int(column_array[col]), ch, prev[ch], other), act)
+                sym[b, col, ch, :act] = got
+                prev[ch] = rans.TOKEN_BITS[got]
+                other = np.maximum(other, prev[ch])
+    dec.finish()
+    if sym.size and int(sym.max()) >= rans.DIRECT + 53 - 4:  # z >= 2^53
+        raise InvalidContentError("STRD: a residual is too large to reconstruct exactly in float64", chunk="STRD")
+    u = rans.untokens(sym, rans.unpack_bits(extra_bits, rans.token_widths(sym), "STRD").reshape(sym.shape))
+    values = unzigzag(u.transpose(0, 3, 1, 2).reshape(-1, n, 3)[:strands])
+    return np.split(values, np.cumsum(widths)[:-1], axis=1)

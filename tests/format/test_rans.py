@@ -1,0 +1,120 @@
+"""The STRD entropy coder (spec 4.3.2): tokens, extra bits, multi-lane rANS and the context layout."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from cghair_format import rans, residual_coder
+from cghair_format.errors import CghFormatError, InvalidContentError, TruncatedError
+from cghair_format.streams import StreamReader, StreamWriter
+
+
+@given(st.lists(st.integers(0, 2**64 - 1), min_size=1, max_size=60))
+def test_tokens_and_extra_bits_are_exact(values):
+    u = np.array(values, np.uint64)
+    sym, width, extra = rans.tokens(u)
+    assert sym.max() < rans.ALPHABET
+    assert np.array_equal(rans.token_widths(sym), width)
+    assert np.array_equal(rans.bit_length(u), [int(v).bit_length() for v in values])
+    packed = rans.pack_bits(width, extra)
+    assert len(packed) == (int(width.sum()) + 7) // 8
+    assert np.array_equal(rans.untokens(sym, rans.unpack_bits(packed, width, "test")), u)
+
+
+def test_token_layout_matches_the_spec():
+    sym, width, extra = rans.tokens(np.array([0, 15, 16, 31, 32, 2**63], np.uint64))
+    assert sym.tolist() == [0, 15, 16, 16, 17, 75]
+    assert width.tolist() == [0, 0, 4, 4, 5, 63]
+    assert extra.tolist() == [0, 0, 0, 15, 0, 0]
+    assert rans.TOKEN_BITS[[0, 1, 2, 3, 8, 15, 16, 75]].tolist() == [0, 1, 2, 2, 4, 4, 5, 64]
+
+
+def _round_trip(arrays):
+    w = StreamWriter()
+    residual_coder.write_residuals(w, arrays)
+    r = StreamReader(w.getvalue(), "STRD")
+    out = residual_coder.read_residuals(r, arrays[0].shape[0], [a.shape[1] for a in arrays])
+    r.finish()
+    return out, w.getvalue()
+
+
+@settings(max_examples=40, deadline=None)
+@given(strands=st.integers(1, 40), widths=st.lists(st.integers(1, 9), min_size=1, max_size=4),
+       lanes=st.sampled_from([1, 3, 4096]), spread=st.sampled_from([1, 40, 2**20, 2**40]),
+       seed=st.integers(0, 10**6))
+def test_residual_coder_round_trips(strands, widths, lanes, spread, seed):
+    rng = np.random.default_rng(seed)
+    arrays = [np.rint(rng.laplace(0, 1, (strands, n, 3)) * rng.integers(1, spread + 1)).astype(np.int64)
+              for n in widths]
+    original = residual_coder.LANES
+    residual_coder.LANES = lanes  # several blocks and a partial last block
+    try:
+        out, _ = _round_trip(arrays)
+    finally:
+        residual_coder.LANES = original
+    for a, b in zip(arrays, out, strict=True):
+        assert np.array_equal(a, b)
+
+
+def test_residuals_beyond_float64_integers_are_refused():
+    w = StreamWriter()
+    residual_coder.write_residuals(w, [np.array([[[0, -2**52 - 1, 0]]], np.int64)])  # z = 2^53 + 1
+    with pytest.raises(InvalidContentError, match="float64"):
+        residual_coder.read_residuals(StreamReader(w.getvalue(), "STRD"), 1, [1])
+
+
+def test_skewed_residuals_cost_less_than_a_bit_each():
+    rng = np.random.default_rng(0)
+    arrays = [(rng.random((3000, 30, 3)) < 0.05).astype(np.int64) * rng.choice([-1, 1], (3000, 30, 3))]
+    _, data = _round_trip(arrays)
+    entropy = 3000 * 30 * 3 * (-(0.95 * np.log2(0.95) + 0.05 * np.log2(0.025))) / 8
+    assert len(data) < 1.1 * entropy + 4 * 3000 + 30_000  # tables, lane states and record headers aside
+
+
+def _coded(strands=50):
+    rng = np.random.default_rng(1)
+    arrays = [rng.integers(-300, 300, (strands, 4, 3)), rng.integers(-2, 3, (strands, 7, 3))]
+    w = StreamWriter()
+    residual_coder.write_residuals(w, arrays)
+    return w.getvalue(), arrays
+
+
+def _records(data):
+    r = StreamReader(data, "STRD")
+    tables = r.array((2 * 96, rans.ALPHABET), "t")
+    states = r.array((50,), "s")
+    words = r.array((None,), "w")
+    extra = r.array((None,), "e")
+    return tables, states, words, extra
+
+
+def _rebuild(tables, states, words, extra):
+    w = StreamWriter()
+    for a, shuffle in ((tables, True), (states, False), (words, False), (extra, False)):
+        w.array(a, shuffle=shuffle)
+    return w.getvalue()
+
+
+@pytest.mark.parametrize("damage, error", [
+    ("state_low", InvalidContentError), ("words_short", TruncatedError), ("words_long", InvalidContentError),
+    ("state_changed", CghFormatError), ("extra_short", InvalidContentError), ("table_sum", InvalidContentError),
+])
+def test_damaged_streams_are_refused(damage, error):
+    data, _ = _coded()
+    tables, states, words, extra = (a.copy() for a in _records(data))
+    if damage == "state_low":
+        states[3] = 5
+    elif damage == "words_short":
+        words = words[:-40]
+    elif damage == "words_long":
+        words = np.r_[words, np.uint16(7)]
+    elif damage == "state_changed":
+        states[0] ^= 1 << 20
+    elif damage == "extra_short":
+        extra = extra[:-1]
+    else:
+        tables[np.flatnonzero(tables.sum(axis=1))[0], 0] += 1
+    with pytest.raises(error) as info:
+        residual_coder.read_residuals(StreamReader(_rebuild(tables, states, words, extra), "STRD"), 50, [4, 7])
+    assert isinstance(info.value, CghFormatError) and "STRD" in str(info.value)
