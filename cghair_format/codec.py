@@ -38,11 +38,14 @@ REQUIRED_CHUNKS = ("META", "CARD", "STRD", "OPAC", "LOGT", "CBKS", "MLPW")
 OPTIONAL_CHUNKS = ("SIDS", "ROOT", "SCOL", "XMET")
 LIMITS = {"strands": 1 << 24, "points": 4096, "cards": 1 << 20, "segments": 1024, "groups": 1 << 16,
           "k": 256, "latent_dim": 4096, "mlp_layers": 16, "mlp_width": 1 << 20, "meta_bytes": 1 << 20}
-CARD_STEP_FRACTION = 1 / 8  # card geometry is quantized 8x finer than strand points
+CARD_STEP_FRACTION = 1 / 8  # card geometry is quantized at least 8x finer than strand points ...
+CARD_ERROR_SHARE = 0.25  # ... and finer still until the cards alone move no point by more than this x tol
+MIN_CARD_STEP_FRACTION = 1 / 1024
 MIN_NORMAL_BITS, MAX_NORMAL_BITS = 16, 24
 MAX_TIGHTENINGS = 8
 STEP_START = 0.95  # first step, as a fraction of the position tolerance
-TIGHTEN_TARGET = 0.97  # a retry aims the measured error at this fraction of the tolerance
+TIGHTEN_TARGET = 0.97  # a retry aims the measured error at this fraction of the tolerance ...
+GROW_BELOW = 0.9  # ... and a first step whose error is below this fraction is retried larger, once
 
 
 @dataclass
@@ -100,14 +103,24 @@ def encode(asset: HairAsset, profile: str | Profile = "compact") -> tuple[bytes,
     # each of u, v, delta, plus the card's own error): start just under the bound, then tighten
     step = None if prof.lossless else STEP_START * tol
     appearance_chunks = _appearance_chunks(asset, prof)
-    for _ in range(MAX_TIGHTENINGS):
-        meta, cards_w, residuals, decoded_points = _quantize_geometry(asset, prof, step, diag)
-        err = 0.0 if decoded_points is None else float(np.linalg.norm(decoded_points - points, axis=-1).max())
-        if step is None or err <= tol:
+    card_fraction = _card_step_fraction(asset, prof, step, diag, points, tol)
+    passed = None  # (step, error, quantized geometry) of the largest step that met the bound so far
+    for attempt in range(MAX_TIGHTENINGS):
+        geometry = _quantize_geometry(asset, prof, step, diag, card_fraction)
+        err = 0.0 if geometry[3] is None else float(np.linalg.norm(geometry[3] - points, axis=-1).max())
+        if step is None:
+            passed = (step, err, geometry)
             break
-        step *= TIGHTEN_TARGET * tol / err if err > 0 else TIGHTEN_TARGET
-    else:
+        if err <= tol:
+            passed = (step, err, geometry)
+            if attempt > 0 or err >= GROW_BELOW * tol:
+                break  # only a first step well inside the bound is retried larger
+        elif passed is not None:
+            break
+        step *= TIGHTEN_TARGET * tol / err if err > 0 else 1 / GROW_BELOW
+    if passed is None:
         raise AssetError(f"could not meet the position tolerance {tol:g} (error {err:g})")
+    step, err, (meta, cards_w, residuals, _) = passed
     chunks = _geometry_chunks(asset, meta, cards_w, residuals)
     data = container.pack(chunks + appearance_chunks, level=prof.zstd_level)
     _, infos = container.read_table(data)
@@ -130,7 +143,7 @@ def decode(data: bytes) -> HairAsset:
 
 # --- META ----------------------------------------------------------------------------------------
 
-def _meta(asset: HairAsset, prof: Profile, step: float | None, diag: float) -> dict:
+def _meta(asset: HairAsset, prof: Profile, step: float | None, diag: float, card_fraction: float) -> dict:
     app = asset.appearance
     return {
         "strands": asset.n_strands, "points": asset.points_per_strand, "cards": asset.cards.count,
@@ -141,7 +154,7 @@ def _meta(asset: HairAsset, prof: Profile, step: float | None, diag: float) -> d
         "up_axis": asset.up_axis, "generator": asset.generator, "attribution": asset.attribution,
         "bbox_diagonal": diag, "profile": prof.name,
         "quant": {"lossless": True} if step is None else {
-            "lossless": False, "step": step, "card_step": step * CARD_STEP_FRACTION,
+            "lossless": False, "step": step, "card_step": step * card_fraction,
             "normal_bits": _normal_bits(asset.uvd, step), "base_stride": prof.base_stride, "newton_steps": NEWTON_STEPS,
             "opacity_scale": prof.opacity_scale,
             "logit_levels": prof.logit_levels, "logit_floor": prof.logit_floor, "half_bias": prof.half_bias},
@@ -214,11 +227,26 @@ def _parse_meta(raw: bytes) -> dict:
 
 # --- chunks ---------------------------------------------------------------------------------------
 
-def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag: float
+def _card_step_fraction(asset: HairAsset, prof: Profile, step: float | None, diag: float, points: np.ndarray,
+                        tol: float) -> float:
+    """The card step as a fraction of the point step: CARD_STEP_FRACTION, halved while the quantized
+    cards alone (exact card coordinates) move some point by more than CARD_ERROR_SHARE of the
+    tolerance. Short card segments and wide cards magnify spine errors through the strip's bitangent."""
+    fraction = CARD_STEP_FRACTION
+    while step is not None and fraction > MIN_CARD_STEP_FRACTION:
+        cards = _encode_cards(asset.cards, _meta(asset, prof, step, diag, fraction)["quant"], StreamWriter())
+        moved = strand_points(cards, asset.strand_card, asset.uvd).astype(np.float64) - points
+        if np.sqrt(np.max(np.sum(moved * moved, axis=-1))) <= CARD_ERROR_SHARE * tol:
+            break
+        fraction /= 2
+    return fraction
+
+
+def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag: float, card_fraction: float
                        ) -> tuple[dict, StreamWriter, list[np.ndarray] | None, np.ndarray | None]:
     """What depends on the step: META, the CARD streams, and (quantized profiles) the STRD residual
     arrays and the world points a decoder will get."""
-    meta = _meta(asset, prof, step, diag)
+    meta = _meta(asset, prof, step, diag, card_fraction)
     q = meta["quant"]
     cards_w = StreamWriter()
     if q["lossless"]:

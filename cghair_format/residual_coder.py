@@ -16,7 +16,8 @@ from .errors import InvalidContentError
 from .quantize import unzigzag, zigzag
 from .streams import StreamReader, StreamWriter
 
-LANES = 4096
+LANES = 4096  # at most; each lane costs its 4-byte state ...
+MIN_BLOCKS = 8  # ... so smaller assets use fewer lanes, S / 8 rounded up
 PREV_CLASSES, OTHER_CLASSES = 8, 4
 CONTEXTS = PREV_CLASSES * OTHER_CLASSES
 
@@ -25,7 +26,7 @@ def _plan(widths: list[int], strands: int):
     """Per column: its array and whether it starts one; the lanes; the blocks' active lane counts."""
     column_array = np.repeat(np.arange(len(widths)), widths)
     first = np.r_[True, column_array[1:] != column_array[:-1]]
-    lanes = min(LANES, strands)
+    lanes = min(LANES, -(-strands // MIN_BLOCKS))
     blocks = -(-strands // lanes)
     active = np.minimum(lanes, strands - lanes * np.arange(blocks))
     return column_array, first, lanes, active

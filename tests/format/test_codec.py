@@ -146,3 +146,21 @@ def test_points_far_from_their_card_get_finer_normals():
     assert meta["quant"]["normal_bits"] > 16
     b = cgh.decode(data)
     assert np.linalg.norm(cgh.decode_points(b) - cgh.decode_points(a), axis=-1).max() <= 2e-5 * report.bbox_diagonal
+
+
+def test_cards_that_magnify_their_own_error_get_a_finer_card_step():
+    """A very short first card segment turns small spine errors into large bitangent (rail) errors;
+    the writer quantizes such cards finer than 1/8 of the point step and still meets the bound."""
+    import json
+
+    from cghair_format import container
+
+    a = example_asset(7)
+    spine = a.cards.spine.astype(np.float64)
+    spine[:, 0] = spine[:, 1] - 1e-2 * (spine[:, 1] - spine[:, 0])
+    a.cards.spine = spine.astype(np.float32)
+    data, report = cgh.encode(a, "compact")
+    quant = json.loads(container.unpack(data, set(cgh.codec.REQUIRED_CHUNKS))[2]["META"])["quant"]
+    assert quant["card_step"] < quant["step"] / 8
+    decoded = cgh.decode_points(cgh.decode(data))
+    assert np.linalg.norm(decoded - cgh.decode_points(a), axis=-1).max() <= 2e-4 * report.bbox_diagonal

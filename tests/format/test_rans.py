@@ -83,7 +83,7 @@ def _coded(strands=50):
 def _records(data):
     r = StreamReader(data, "STRD")
     tables = r.array((2 * 96, rans.ALPHABET), "t")
-    states = r.array((50,), "s")
+    states = r.array((None,), "s")  # ceil(50 / 8) lanes
     words = r.array((None,), "w")
     extra = r.array((None,), "e")
     return tables, states, words, extra
