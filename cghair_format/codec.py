@@ -298,11 +298,11 @@ def _appearance_chunks(asset: HairAsset, prof: Profile) -> list[container.Chunk]
         else:
             z = (app.logits.astype(np.float64) - app.logits.max(axis=1, keepdims=True)) / app.temperature
             logt_w.ints(np.rint(prof.logit_levels * np.exp(z)))  # the strand's largest logit -> levels
-        qc, sc = rows_int8_encode(app.codebooks.reshape(-1, app.latent_dim))
+        qc, sc = rows_int8_encode(app.codebooks.reshape(-1, app.latent_dim), prof.weight_bits)
         cbks_w.array(qc)
         cbks_w.array(sc)
         for layer in app.mlp:
-            qw, sw = rows_int8_encode(layer.weight)
+            qw, sw = rows_int8_encode(layer.weight, prof.weight_bits)
             mlp_w.array(qw)
             mlp_w.array(sw)
             mlp_w.array(layer.bias.astype(np.float16 if prof.half_bias else np.float32))

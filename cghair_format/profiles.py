@@ -17,6 +17,7 @@ class Profile:
     opacity_scale: float = 127.5  # opacity = round(o * scale) / scale: max error 0.5 / scale
     logit_levels: int = 1023  # soft logits stored as round(levels * exp((logit - max) / temperature)) ...
     logit_floor: float = -16.0  # ... and a stored 0 decodes to this logit
+    weight_bits: int = 6  # codebook and MLP weights: this many bits of symmetric levels per row (in int8)
     half_bias: bool = True  # MLP biases as float16 (else float32)
     base_stride: int = 16  # hierarchical predictor: coarse samples every this many points
     zstd_level: int = 19
@@ -31,10 +32,10 @@ PROFILES: dict[str, Profile] = {
     "lossless": Profile("lossless", lossless=True, zstd_level=9,
                         description="every float32 value stored exactly (byte-shuffled + zstd)"),
     "high": Profile("high", position_tolerance=2e-5, opacity_scale=1023.5, logit_levels=8191,
-                    logit_floor=-24.0, half_bias=False,
+                    logit_floor=-24.0, weight_bits=8, half_bias=False,
                     description="points within 2e-5 of the bbox diagonal, opacity within 1/2047"),
     "compact": Profile("compact", description="the default: points within 2e-4 of the bbox diagonal, "
-                                              "opacity within 1/255, int8 weights"),
+                                              "opacity within 1/255, 6-bit weights"),
 }
 DEFAULT_PROFILE = "compact"
 

@@ -142,12 +142,14 @@ def oct_decode(q: np.ndarray, bits: int = 16) -> np.ndarray:
 
 # --- weights -----------------------------------------------------------------------------------
 
-def rows_int8_encode(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Symmetric int8 per row of ``[R, C]``: ``w ~ q * scale[row]``, ``scale = absmax / 127``."""
+def rows_int8_encode(w: np.ndarray, bits: int = 8) -> tuple[np.ndarray, np.ndarray]:
+    """Symmetric ``bits``-bit levels (2..8) per row of ``[R, C]`` in int8: ``w ~ q * scale[row]``,
+    ``scale = absmax / (2^(bits-1) - 1)``."""
     w = np.asarray(w, np.float64)
-    scale = np.abs(w).max(axis=1) / 127.0
+    top = (1 << (bits - 1)) - 1
+    scale = np.abs(w).max(axis=1) / top
     scale = np.where(scale > 0, scale, 1.0).astype(np.float32)
-    q = np.clip(np.rint(w / scale[:, None].astype(np.float64)), -127, 127).astype(np.int8)
+    q = np.clip(np.rint(w / scale[:, None].astype(np.float64)), -top, top).astype(np.int8)
     return q, scale
 
 

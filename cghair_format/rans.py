@@ -40,12 +40,16 @@ TOKEN_BITS = np.r_[bit_length(np.arange(DIRECT)), np.arange(5, 65)].astype(np.in
 def tokens(u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Tokens, extra-bit widths and extra values of unsigned integers ``u`` (uint64)."""
     u = np.asarray(u, np.uint64)
-    nb = bit_length(u)
-    big = u >= DIRECT
-    sym = np.where(big, DIRECT + nb - 5, u.astype(np.int64) % DIRECT)
-    width = np.where(big, nb - 1, 0)
-    extra = np.where(big, u - (np.uint64(1) << np.maximum(nb - 1, 0).astype(np.uint64)), np.uint64(0))
-    return sym.astype(np.uint8), width, extra
+    sym = np.where(u < DIRECT, u, 0).astype(np.uint8)
+    width = np.zeros(u.shape, np.int64)
+    extra = np.zeros(u.shape, np.uint64)
+    big = np.flatnonzero(u.ravel() >= DIRECT)  # few: the work below is on them alone
+    ub = u.ravel()[big]
+    nb = bit_length(ub)
+    sym.ravel()[big] = DIRECT + nb - 5
+    width.ravel()[big] = nb - 1
+    extra.ravel()[big] = ub - (np.uint64(1) << (nb - 1).astype(np.uint64))
+    return sym, width, extra
 
 
 def untokens(sym: np.ndarray, extra: np.ndarray) -> np.ndarray:
@@ -64,8 +68,9 @@ def token_widths(sym: np.ndarray) -> np.ndarray:
 
 def pack_bits(width: np.ndarray, value: np.ndarray) -> np.ndarray:
     """Concatenate each value's ``width`` low bits, MSB first, into bytes (zero padded)."""
-    width = width.ravel().astype(np.int64)
-    value = value.ravel().astype(np.uint64)
+    has = np.flatnonzero(width.ravel())
+    width = width.ravel()[has].astype(np.int64)
+    value = value.ravel()[has].astype(np.uint64)
     total = int(width.sum())
     if total == 0:
         return np.zeros(0, np.uint8)
@@ -77,19 +82,19 @@ def pack_bits(width: np.ndarray, value: np.ndarray) -> np.ndarray:
 
 def unpack_bits(data: np.ndarray, width: np.ndarray, where: str) -> np.ndarray:
     """Inverse of :func:`pack_bits`: one uint64 per width (0 where the width is 0)."""
-    width = width.ravel().astype(np.int64)
+    out = np.zeros(width.size, np.uint64)
+    has = np.flatnonzero(width.ravel())
+    width = width.ravel()[has].astype(np.int64)
     total = int(width.sum())
     if (total + 7) // 8 != len(data):
         raise InvalidContentError(f"{where}: {len(data)} bytes of extra bits, the tokens need {(total + 7) // 8}")
-    out = np.zeros(len(width), np.uint64)
     if total == 0:
         return out
     bits = np.unpackbits(data)[:total].astype(np.uint64)
-    has = np.flatnonzero(width)
     owner = np.repeat(np.arange(len(width)), width)
-    pos = np.arange(total) - np.repeat(np.cumsum(width) - width, width)
-    shifted = bits << (width[owner] - 1 - pos).astype(np.uint64)
-    out[has] = np.add.reduceat(shifted, (np.cumsum(width) - width)[has])
+    starts = np.cumsum(width) - width
+    shifted = bits << (width[owner] - 1 - (np.arange(total) - starts[owner])).astype(np.uint64)
+    out[has] = np.add.reduceat(shifted, starts)
     return out
 
 

@@ -1,6 +1,7 @@
 """The quantizers alone: exact inverses and their error bounds."""
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -55,9 +56,12 @@ def test_octahedral_normals_within_bound(seed):
     assert np.allclose(np.linalg.norm(back, axis=1), 1.0)
 
 
-def test_int8_rows_error_is_half_a_step_per_row():
+@pytest.mark.parametrize("bits", [8, 6, 4])
+def test_int8_rows_error_is_half_a_step_per_row(bits):
     w = np.random.default_rng(0).normal(size=(40, 30))
-    q, scale = rows_int8_encode(w)
-    assert q.dtype == np.int8 and scale.shape == (40,)
+    q, scale = rows_int8_encode(w, bits)
+    top = (1 << (bits - 1)) - 1
+    assert q.dtype == np.int8 and scale.shape == (40,) and np.abs(q).max() == top
+    assert np.allclose(scale, np.abs(w).max(axis=1) / top)
     err = np.abs(rows_int8_decode(q, scale) - w)
     assert (err <= scale[:, None] / 2 + 1e-6).all()
