@@ -1,0 +1,34 @@
+"""``python -m training.precision``: render PSNR of each profile and weight depth against lossless."""
+
+from __future__ import annotations
+
+from training_helpers import hair_cap
+
+import cghair_format as cgh
+from cghair_format.cards import build_cards
+from training.dataset import render_dataset
+from training.precision import main, measure, with_weight_bits
+
+
+def test_coarser_weights_and_profiles_cost_picture_quality(tmp_path, capsys):
+    strands = hair_cap(60, 10, seed=2)
+    asset = build_cards(strands, n_cards=8, n_groups=2, points=10, seed=0, progress=False).asset
+    render_dataset(strands, tmp_path / "ds", views=4, res=24, engine="splat")
+    from training.dataset import read_dataset
+
+    views = read_dataset(tmp_path / "ds").split("test")
+    rows = {r["what"]: r for r in measure(asset, views, bits=(8, 4))}
+    assert rows["high file"]["psnr"] > rows["compact file"]["psnr"] > 30
+    assert rows["8-bit weights only"]["psnr"] > rows["4-bit weights only"]["psnr"]
+    assert rows["compact file"]["bytes"] < rows["high file"]["bytes"]
+    # only the weights change
+    coarse = with_weight_bits(asset, 4)
+    assert (coarse.uvd == asset.uvd).all() and (coarse.opacity == asset.opacity).all()
+    assert not (coarse.appearance.mlp[-1].weight == asset.appearance.mlp[-1].weight).all()
+
+    cgh.write(asset, tmp_path / "ref.cgh", "lossless")
+    assert main([str(tmp_path / "ref.cgh"), str(tmp_path / "ds"), "--bits", "6"]) == 0
+    out = capsys.readouterr().out
+    assert "compact file" in out and "6-bit weights only" in out
+    assert main([str(tmp_path / "missing.cgh"), str(tmp_path / "ds")]) == 1
+    assert "error" in capsys.readouterr().err

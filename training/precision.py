@@ -1,0 +1,89 @@
+"""How much each quantization costs in the picture: render PSNR against the unquantized asset.
+
+    python -m training.precision MODEL.cgh DATASET_DIR [--split test] [--bits 8,7,6,5,4]
+
+``MODEL.cgh`` is the reference (write it with ``--profile lossless`` to measure every profile);
+the cameras come from the dataset's split. For each profile the file is encoded, decoded and
+rendered; for each bit depth only the codebook and MLP weights are quantized (per row, as the
+writer does), which isolates their share of the error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import sys
+
+import numpy as np
+
+from cghair_format import decode, decode_gaussians, encode, read
+from cghair_format.asset import HairAsset
+from cghair_format.quantize import rows_int8_decode, rows_int8_encode
+
+from .dataset import View, read_dataset
+from .splatter import render_gaussians
+
+
+def render_views(asset: HairAsset, views: list[View]) -> np.ndarray:
+    g = decode_gaussians(asset)
+    return np.stack([render_gaussians(g, v.camera)["rgb"] for v in views])
+
+
+def psnr(a: np.ndarray, b: np.ndarray) -> float:
+    mse = float(np.mean((a.astype(np.float64) - b) ** 2))
+    return float("inf") if mse == 0 else 10 * np.log10(1 / mse)
+
+
+def with_weight_bits(asset: HairAsset, bits: int) -> HairAsset:
+    """A copy with codebooks and MLP weights on ``bits``-bit levels per row, everything else exact."""
+    out = copy.deepcopy(asset)
+    app = out.appearance
+    app.codebooks = rows_int8_decode(*rows_int8_encode(app.codebooks.reshape(-1, app.latent_dim), bits)
+                                     ).reshape(app.codebooks.shape)
+    for layer in app.mlp:
+        layer.weight = rows_int8_decode(*rows_int8_encode(layer.weight, bits))
+    return out
+
+
+def measure(asset: HairAsset, views: list[View], profiles=("high", "compact"), bits=(8, 7, 6, 5, 4)) -> list[dict]:
+    reference = render_views(asset, views)
+    rows = []
+    for profile in profiles:
+        data, _ = encode(asset, profile)
+        rows.append({"what": f"{profile} file", "bytes": len(data),
+                     "psnr": psnr(render_views(decode(data), views), reference)})
+    for b in bits:
+        rows.append({"what": f"{b}-bit weights only", "bytes": None,
+                     "psnr": psnr(render_views(with_weight_bits(asset, b), views), reference)})
+    return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m training.precision", description=__doc__.split("\n\n")[0])
+    p.add_argument("cgh", help="the reference asset (.cgh, ideally lossless)")
+    p.add_argument("dataset", help="a NeRF-synthetic dataset folder, for its cameras")
+    p.add_argument("--split", default="test", choices=("train", "test"))
+    p.add_argument("--bits", default="8,7,6,5,4", help="weight bit depths to try (2..8)")
+    args = p.parse_args(argv)
+    try:
+        bits = tuple(int(b) for b in args.bits.split(","))
+    except ValueError:
+        p.error(f"--bits takes comma-separated integers, got {args.bits!r}")
+    if not all(2 <= b <= 8 for b in bits):
+        p.error("--bits must lie in 2..8")
+    from cghair_format.errors import CghError
+
+    try:
+        asset, views = read(args.cgh), read_dataset(args.dataset).split(args.split)
+    except (CghError, OSError) as exc:
+        print(f"python -m training.precision: error: {exc}", file=sys.stderr)
+        return 1
+    print(f"render PSNR against {args.cgh} on {len(views)} {args.split} views")
+    for row in measure(asset, views, bits=bits):
+        size = f"{row['bytes']:>10,} B" if row["bytes"] is not None else " " * 12
+        print(f"{row['what']:<22} {size}  {row['psnr']:7.2f} dB")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
