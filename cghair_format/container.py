@@ -6,8 +6,10 @@ every size against the file length before allocating and every checksum before d
 
 from __future__ import annotations
 
+import os
 import struct
 import zlib
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import zstandard
@@ -53,15 +55,18 @@ def pack(chunks: list[Chunk], level: int = 19) -> bytes:
     """Serialise chunks: header, table, then each chunk (zstd when smaller) aligned to 8 bytes."""
     if len(chunks) > MAX_CHUNKS:
         raise LimitError(f"{len(chunks)} chunks exceed the limit of {MAX_CHUNKS}")
-    bodies = []
     for c in chunks:
         if len(c.type) != 4 or not c.type.isascii():
             raise ValueError(f"chunk type must be 4 ASCII characters, got {c.type!r}")
         if len(c.payload) > MAX_RAW_CHUNK:
             raise LimitError(f"chunk {c.type!r} of {len(c.payload)} bytes exceeds {MAX_RAW_CHUNK}")
+
+    def body(c: Chunk) -> tuple[Chunk, int, bytes]:
         z = zstandard.ZstdCompressor(level=level, write_content_size=True).compress(c.payload)
-        codec, stored = (CODEC_ZSTD, z) if len(z) < len(c.payload) else (CODEC_RAW, c.payload)
-        bodies.append((c, codec, stored))
+        return (c, CODEC_ZSTD, z) if len(z) < len(c.payload) else (c, CODEC_RAW, c.payload)
+
+    with ThreadPoolExecutor(max_workers=os.cpu_count() or 1) as pool:  # zstd releases the GIL
+        bodies = list(pool.map(body, chunks))
     offset = _align(HEADER_SIZE + ENTRY_SIZE * len(chunks))
     table, layout = b"", []
     for c, codec, stored in bodies:
