@@ -20,6 +20,7 @@ ALPHABET = DIRECT + 60  # bit lengths 5 .. 64
 PROB_BITS = 12
 TOTAL = 1 << PROB_BITS
 LOW = 1 << 16  # states live in [LOW, 2^32); renormalization moves 16-bit words
+MAX_FREQ = TOTAL - 16  # every symbol costs at least log2(TOTAL / MAX_FREQ) bits: no free symbols
 NO_SYMBOL = 255
 
 
@@ -100,24 +101,27 @@ def unpack_bits(data: np.ndarray, width: np.ndarray, where: str) -> np.ndarray:
 
 def normalize(counts: np.ndarray) -> np.ndarray:
     """Frequency tables ``[T, ALPHABET]`` summing to ``TOTAL`` (all-zero rows stay zero), every
-    counted symbol at least 1: the writer's choice (any such table decodes)."""
+    counted symbol at least 1 and none above ``MAX_FREQ``: the writer's choice (any such table decodes)."""
     counts = np.asarray(counts, np.int64)
     total = counts.sum(axis=1, keepdims=True)
     freq = np.where(counts > 0, np.maximum(1, counts * TOTAL // np.maximum(total, 1)), 0)
-    for t in np.flatnonzero(total[:, 0]):  # hand the rounding difference to the largest entries
+    for t in np.flatnonzero(total[:, 0]):
         row = freq[t]
-        diff = TOTAL - int(row.sum())
         order = np.argsort(-row, kind="stable")
-        while diff != 0:
-            for j in order:
-                if diff == 0:
-                    break
-                if diff > 0:
-                    row[j] += 1
-                    diff -= 1
-                elif row[j] > 1:
-                    row[j] -= 1
-                    diff += 1
+        diff = TOTAL - int(row.sum())  # rounding: the largest entries absorb it
+        if diff > 0:
+            row[order[0]] += diff
+        for j in order:
+            if diff >= 0:
+                break
+            take = min(int(row[j]) - 1, -diff)
+            row[j] -= take
+            diff += take
+        top = order[0]
+        if row[top] > MAX_FREQ:  # no symbol may be (nearly) free: see Decoder.check_budget
+            other = order[1] if row[order[1]] > 0 else (top + 1) % ALPHABET
+            row[other] += row[top] - MAX_FREQ
+            row[top] = MAX_FREQ
     return freq
 
 
@@ -135,8 +139,12 @@ class Tables:
     def __init__(self, freq: np.ndarray, where: str) -> None:
         freq = np.asarray(freq, np.int64)
         sums = freq.sum(axis=1)
-        if freq.min(initial=0) < 0 or not np.isin(sums, (0, TOTAL)).all():
-            raise InvalidContentError(f"{where}: every frequency table must sum to {TOTAL} or be empty")
+        if freq.min(initial=0) < 0 or freq.max(initial=0) > MAX_FREQ or not np.isin(sums, (0, TOTAL)).all():
+            raise InvalidContentError(f"{where}: every frequency table must sum to {TOTAL} (or be empty) with no "
+                                      f"entry above {MAX_FREQ}")
+        # the fewest bits any symbol can cost: what bounds the symbols a stream of a given size holds
+        used = freq.max(axis=1)[sums > 0]
+        self.min_bits = float(np.log2(TOTAL / used.max())) if used.size else float("inf")
         self.freq = freq.astype(np.uint32)
         self.flat_freq = self.freq.ravel()
         self.flat_start = (np.cumsum(freq, axis=1) - freq).astype(np.uint32).ravel()
@@ -178,6 +186,13 @@ class Decoder:
         self.pos = 0
         self.tables = tables
         self.where = where
+
+    def check_budget(self, symbols: int) -> None:
+        """Refuse, before decoding, more symbols than the lane states and words can hold: each costs
+        at least ``tables.min_bits``. A crafted stream can thus not make the decoder loop for long."""
+        held = 16 * len(self.words) + 32 * len(self.x)
+        if symbols * self.tables.min_bits > held + 64:
+            raise InvalidContentError(f"{self.where}: {symbols} symbols cannot fit in {held} bits of rANS stream")
 
     def step(self, table: np.ndarray, active: int) -> np.ndarray:
         x = self.x[:active]

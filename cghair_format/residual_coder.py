@@ -84,6 +84,7 @@ def read_residuals(r: StreamReader, strands: int, widths: list[int]) -> list[np.
     extra_bits = r.array((None,), "extra bits", ("|u1",))
     dec = rans.Decoder(states, words, tables, "STRD")
     n = len(column_array)
+    dec.check_budget(strands * n * 3)
     sym = np.zeros((len(active), n, 3, lanes), np.uint8)
     for b, act in enumerate(active):
         prev = np.zeros((3, act), np.int64)

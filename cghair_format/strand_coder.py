@@ -28,8 +28,8 @@ def _run(cmap: CardMap, strand_card: np.ndarray, scale: np.ndarray, n: int, base
          y: np.ndarray | None = None, residuals: tuple[np.ndarray, list[np.ndarray]] | None = None):
     """Encode (``y`` given, scaled card coordinates ``[S, n, 3]``) or decode (``residuals`` given).
 
-    Returns the reconstruction ``[S, n, 3]`` (scaled units), its world points ``[S, n, 3]`` and the
-    residuals (base ``[S, nb, 3]``, levels ``[S, L, 3]``)."""
+    Returns the reconstruction ``[S, n, 3]`` (scaled units), its world points ``[S, n, 3]`` (when
+    decoding, all but the last level's) and the residuals (base ``[S, nb, 3]``, levels ``[S, L, 3]``)."""
     base, levels = level_plan(n, base_stride)
     s = len(strand_card)
     rec = np.zeros((s, n, 3))
@@ -52,7 +52,8 @@ def _run(cmap: CardMap, strand_card: np.ndarray, scale: np.ndarray, n: int, base
         else:
             r = residuals[1][li]
         rec[:, idx] = pred + r
-        world[:, idx] = _to_world(cmap, strand_card, rec[:, idx], scale)
+        if y is not None or li < len(levels) - 1:  # the decoder needs no world points after the last level
+            world[:, idx] = _to_world(cmap, strand_card, rec[:, idx], scale)
         out_levels.append(r)
     return rec, world, (out_base, out_levels)
 

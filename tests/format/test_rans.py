@@ -118,3 +118,26 @@ def test_damaged_streams_are_refused(damage, error):
     with pytest.raises(error) as info:
         residual_coder.read_residuals(StreamReader(_rebuild(tables, states, words, extra), "STRD"), 50, [4, 7])
     assert isinstance(info.value, CghFormatError) and "STRD" in str(info.value)
+
+
+def test_a_stream_claiming_more_symbols_than_it_can_hold_is_refused_at_once():
+    """Every symbol costs at least log2(4096 / 4080) bits, so a short stream cannot stand for an
+    enormous asset: the decoder refuses before looping over it."""
+    import time
+
+    w = StreamWriter()
+    residual_coder.write_residuals(w, [np.zeros((8 * 4096, 1, 3), np.int64)])
+    assert (rans.Tables(StreamReader(w.getvalue(), "STRD").array((96, rans.ALPHABET), "t"), "t").freq
+            <= rans.MAX_FREQ).all()
+    start = time.perf_counter()
+    with pytest.raises(InvalidContentError, match="cannot fit"):
+        residual_coder.read_residuals(StreamReader(w.getvalue(), "STRD"), 8 * 4096, [4000])
+    assert time.perf_counter() - start < 1
+
+
+def test_tables_with_a_free_symbol_are_refused():
+    freq = np.zeros((1, rans.ALPHABET), np.int64)
+    freq[0, 0] = rans.TOTAL
+    with pytest.raises(InvalidContentError, match="above"):
+        rans.Tables(freq, "STRD")
+    assert rans.normalize(np.eye(1, rans.ALPHABET, 0, dtype=np.int64) * 1000).max() == rans.MAX_FREQ
