@@ -207,6 +207,10 @@ def _parse_meta(raw: bytes) -> dict:
     quant = meta.get("quant")
     if not isinstance(quant, dict):
         raise InvalidContentError("META quant must be an object", chunk="META")
+    if "logit_step" in quant and "logit_levels" not in quant:
+        raise InvalidContentError("written by a pre-release draft of .cgh 1.0 (before the rANS strand coder), which "
+                                  "this reader cannot decode: write the asset again from its source (cgh encode, "
+                                  "or cgh train --resume CHECKPOINT)", chunk="META")
     if not need("lossless", bool, src=quant):
         for key in ("step", "card_step", "opacity_scale"):
             need(key, (int, float), 1e-30, src=quant)

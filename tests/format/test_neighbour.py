@@ -68,3 +68,16 @@ def test_bad_neighbour_masks_are_refused(masks):
     bad = container.pack([container.Chunk(i.type, payloads[i.type], i.required) for i in infos])
     with pytest.raises(InvalidContentError, match="neighbour"):
         cgh.decode(bad)
+
+
+def test_a_pre_release_draft_file_gets_a_clear_error():
+    """Drafts of 1.0 written before the rANS strand coder stored ``logit_step``; say so, and what to do."""
+    data = (codec.Path(__file__).parents[2] / "spec" / "vectors" / "small_compact.cgh").read_bytes()
+    _, infos = container.read_table(data)
+    payloads = container.unpack(data, set(codec.REQUIRED_CHUNKS))[2]
+    meta = json.loads(payloads["META"])
+    meta["quant"]["logit_step"] = meta["quant"].pop("logit_levels") / 16384
+    payloads["META"] = json.dumps(meta).encode()
+    old = container.pack([container.Chunk(i.type, payloads[i.type], i.required) for i in infos])
+    with pytest.raises(InvalidContentError, match="pre-release draft.*write the asset again"):
+        cgh.decode(old)
