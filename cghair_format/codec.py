@@ -31,7 +31,16 @@ from .quantize import (
     zigzag,
 )
 from .residual_coder import read_residuals, write_residuals
-from .strand_coder import NEWTON_STEPS, decode_uvd, encode_uvd, neighbour_decode, neighbour_encode, neighbour_order
+from .strand_coder import (
+    NEWTON_STEPS,
+    Prediction,
+    code_base,
+    decode_uvd,
+    encode_uvd,
+    neighbour_decode,
+    neighbour_encode,
+    neighbour_order,
+)
 from .streams import StreamReader, StreamWriter
 
 REQUIRED_CHUNKS = ("META", "CARD", "STRD", "OPAC", "LOGT", "CBKS", "MLPW")
@@ -155,8 +164,8 @@ def _meta(asset: HairAsset, prof: Profile, step: float | None, diag: float, card
         "bbox_diagonal": diag, "profile": prof.name,
         "quant": {"lossless": True} if step is None else {
             "lossless": False, "step": step, "card_step": step * card_fraction,
-            "normal_bits": _normal_bits(asset.uvd, step), "base_stride": prof.base_stride, "newton_steps": NEWTON_STEPS,
-            "opacity_scale": prof.opacity_scale,
+            "normal_bits": _normal_bits(asset.uvd, step), "base_stride": prof.base_stride, "base_order": 2,
+            "newton_steps": NEWTON_STEPS, "opacity_scale": prof.opacity_scale,
             "logit_levels": prof.logit_levels, "logit_floor": prof.logit_floor, "half_bias": prof.half_bias},
     }
 
@@ -219,6 +228,7 @@ def _parse_meta(raw: bytes) -> dict:
         need("normal_bits", int, 8, 24, src=quant)
         need("base_stride", int, 1, 256, src=quant)
         need("newton_steps", int, 0, 8, src=quant)
+        need("base_order", int, 1, 2, src=quant)
         need("half_bias", bool, src=quant)
         arrays = 1 + len(level_plan(meta["points"], quant["base_stride"])[1])
         masks = quant.get("neighbour")
@@ -261,9 +271,10 @@ def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag
     su, sv = _card_scales(cards, q["step"])
     scale = _uvd_scale(su, sv, asset.strand_card, q["step"])
     y = asset.uvd * scale[:, None, :]
-    q["newton_steps"] = _choose_newton_steps(cards, asset.strand_card, y, scale, q["base_stride"])
-    base, levels, decoded_points = encode_uvd(cards, asset.strand_card, y, scale, q["base_stride"],
-                                              q["newton_steps"])
+    q["base_order"] = _choose_base_order(asset.strand_card, y, q["base_stride"])
+    q["newton_steps"] = _choose_newton_steps(cards, asset.strand_card, y, scale,
+                                             Prediction(q["base_stride"], q["base_order"], NEWTON_STEPS))
+    base, levels, decoded_points = encode_uvd(cards, asset.strand_card, y, scale, _prediction(q))
     return meta, cards_w, [base] + levels, decoded_points
 
 
@@ -352,15 +363,34 @@ def _estimate(residuals: np.ndarray) -> float:
     return rans.estimate_bytes(zigzag(residuals))
 
 
+def _prediction(q: dict) -> Prediction:
+    return Prediction(q["base_stride"], q["base_order"], q["newton_steps"])
+
+
+def _choose_base_order(strand_card: np.ndarray, y: np.ndarray, base_stride: int) -> int:
+    """The base samples' predictor, linear extrapolation (2) or the previous sample (1), whichever the
+    coder's estimate finds smaller once neighbour prediction has had its say: strands of a card that
+    run parallel share their steps more than their bends, which favours 1."""
+    base, _ = level_plan(y.shape[1], base_stride)
+    order, starts = neighbour_order(strand_card, np.rint(y[:, 0]).astype(np.int64))
+    sizes = {}
+    for k in (2, 1):
+        r = code_base(np.zeros(y.shape), base, k, y)[:, 1:]
+        sizes[k] = sum(min(_estimate(r[..., ch]), _estimate(neighbour_encode(r[..., ch], order, starts)))
+                       for ch in range(3))
+    return min(sizes, key=sizes.get)
+
+
 def _choose_newton_steps(cards: Cards, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray,
-                         base_stride: int, sample: int = 512) -> int:
-    """World-guided prediction (NEWTON_STEPS) or plain card-space prediction (0), whichever codes an
-    evenly spaced sample of strands smaller. Strands smooth in the world (real hair) favour the
-    former; strands smooth on their card (procedural examples) the latter."""
+                         plan: Prediction, sample: int = 512) -> int:
+    """World-guided prediction (``plan.newton_steps``) or plain card-space prediction (0), whichever
+    codes an evenly spaced sample of strands smaller. Strands smooth in the world (real hair) favour
+    the former; strands smooth on their card (procedural examples) the latter."""
     pick = np.linspace(0, len(strand_card) - 1, min(sample, len(strand_card))).astype(np.int64)
     sizes = {}
-    for steps in (NEWTON_STEPS, 0):
-        base, levels, _ = encode_uvd(cards, strand_card[pick], y[pick], scale[pick], base_stride, steps)
+    for steps in (plan.newton_steps, 0):
+        trial = Prediction(plan.base_stride, plan.base_order, steps)
+        base, levels, _ = encode_uvd(cards, strand_card[pick], y[pick], scale[pick], trial)
         sizes[steps] = sum(_estimate(r) for r in [base] + levels)
     return min(sizes, key=sizes.get)
 
@@ -464,7 +494,7 @@ def _decode_chunks(meta: dict, payloads: dict[str, bytes]) -> HairAsset:
         residuals = read_residuals(rd["STRD"], s, [len(base_idx)] + [len(lv[0]) for lv in plan])
         _undo_neighbour_prediction(strand_card, residuals, q["neighbour"])
         scale = _uvd_scale(su, sv, strand_card, step)
-        uvd = decode_uvd(cards, strand_card, residuals[0], residuals[1:], p, scale, stride, q["newton_steps"])
+        uvd = decode_uvd(cards, strand_card, residuals[0], residuals[1:], p, scale, _prediction(q))
         opacity = np.clip(_get_hier(rd["OPAC"], s, p - 1, stride, "opacity") / q["opacity_scale"], 0, 1)
         if meta["weight_mode"] == "hard":
             idx = rd["LOGT"].ints((s,), "assignment")

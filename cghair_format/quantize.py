@@ -102,11 +102,13 @@ def hier_decode(base_res: np.ndarray, level_res: list[np.ndarray], n: int, base_
     return rec
 
 
-def base_prediction(rec: np.ndarray, base: np.ndarray, j: int) -> np.ndarray | float:
+def base_prediction(rec: np.ndarray, base: np.ndarray, j: int, order: int = 2) -> np.ndarray | float:
+    """Prediction of base sample ``j``: 0 for the first, then the previous base sample (order 1) or
+    the linear extrapolation of the previous two (order 2, from the third on)."""
     if j == 0:
         return 0.0
-    if j == 1:
-        return rec[:, base[0]]
+    if j == 1 or order == 1:
+        return rec[:, base[j - 1]]
     a, b, c = base[j - 2], base[j - 1], base[j]
     return rec[:, b] + (rec[:, b] - rec[:, a]) * ((c - b) / (b - a))
 

@@ -13,6 +13,8 @@ the card (ordered by root position), level by level and channel by channel where
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from .asset import Cards
@@ -24,22 +26,41 @@ NEWTON_STEPS = 2
 MAX_STEP_RATIO = 64.0
 
 
-def _run(cmap: CardMap, strand_card: np.ndarray, scale: np.ndarray, n: int, base_stride: int, newton: int,
+@dataclass(frozen=True)
+class Prediction:
+    """How strand points are predicted (META quant): the base stride, the base samples' predictor
+    order (1: the previous base sample, 2: linear extrapolation) and the Newton steps per level."""
+
+    base_stride: int
+    base_order: int
+    newton_steps: int
+
+
+def code_base(rec: np.ndarray, base: np.ndarray, order: int, y: np.ndarray | None = None,
+              residuals: np.ndarray | None = None) -> np.ndarray:
+    """Fill the base samples of ``rec [S, n, 3]``, encoding ``y`` or decoding ``residuals [S, nb, 3]``;
+    returns the residuals."""
+    out = np.zeros((len(rec), len(base), 3), np.int64) if residuals is None else residuals
+    for j, i in enumerate(base):
+        pred = base_prediction(rec, base, j, order)
+        if residuals is None:
+            out[:, j] = np.rint(y[:, i] - pred)
+        rec[:, i] = pred + out[:, j]
+    return out
+
+
+def _run(cmap: CardMap, strand_card: np.ndarray, scale: np.ndarray, n: int, plan: Prediction,
          y: np.ndarray | None = None, residuals: tuple[np.ndarray, list[np.ndarray]] | None = None):
     """Encode (``y`` given, scaled card coordinates ``[S, n, 3]``) or decode (``residuals`` given).
 
     Returns the reconstruction ``[S, n, 3]`` (scaled units), its world points ``[S, n, 3]`` (when
     decoding, all but the last level's) and the residuals (base ``[S, nb, 3]``, levels ``[S, L, 3]``)."""
-    base, levels = level_plan(n, base_stride)
+    base, levels = level_plan(n, plan.base_stride)
+    newton = plan.newton_steps
     s = len(strand_card)
     rec = np.zeros((s, n, 3))
     world = np.zeros((s, n, 3))
-    out_base = np.zeros((s, len(base), 3), np.int64) if y is not None else residuals[0]
-    for j, i in enumerate(base):
-        pred = base_prediction(rec, base, j)
-        if y is not None:
-            out_base[:, j] = np.rint(y[:, i] - pred)
-        rec[:, i] = pred + out_base[:, j]
+    out_base = code_base(rec, base, plan.base_order, y, None if residuals is None else residuals[0])
     world[:, base] = _to_world(cmap, strand_card, rec[:, base], scale)
     out_levels = []
     for li, (idx, nb, wt) in enumerate(levels):
@@ -96,31 +117,29 @@ def solve3(a: np.ndarray, b: np.ndarray, c: np.ndarray, r: np.ndarray) -> np.nda
     return np.stack([np.sum(r * bc, axis=1), np.sum(r * ca, axis=1), np.sum(r * ab, axis=1)], axis=1) * inv
 
 
-def encode_uvd(cards: Cards, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray, base_stride: int,
-               newton: int = NEWTON_STEPS):
+def encode_uvd(cards: Cards, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray, plan: Prediction):
     """Residuals (base, levels) of scaled card coordinates ``y [S, P, 3]`` (``uvd * scale``), and the
     world points ``[S, P, 3]`` the decoder will reconstruct. Every reconstructed value is within 0.5
     of ``y``."""
-    _, world, (base, levels) = _in_chunks(cards, strand_card, scale, y.shape[1], base_stride, newton, y=y)
+    _, world, (base, levels) = _in_chunks(cards, strand_card, scale, y.shape[1], plan, y=y)
     return base, levels, world
 
 
 def decode_uvd(cards: Cards, strand_card: np.ndarray, base: np.ndarray, levels: list[np.ndarray], n: int,
-               scale: np.ndarray, base_stride: int, newton: int = NEWTON_STEPS) -> np.ndarray:
+               scale: np.ndarray, plan: Prediction) -> np.ndarray:
     """Card coordinates ``[S, n, 3]`` (float64) from the residuals of :func:`encode_uvd`."""
-    rec, _, _ = _in_chunks(cards, strand_card, scale, n, base_stride, newton, residuals=(base, levels))
+    rec, _, _ = _in_chunks(cards, strand_card, scale, n, plan, residuals=(base, levels))
     return rec / scale[:, None, :]
 
 
-def _in_chunks(cards: Cards, strand_card: np.ndarray, scale: np.ndarray, n: int, base_stride: int, newton: int,
+def _in_chunks(cards: Cards, strand_card: np.ndarray, scale: np.ndarray, n: int, plan: Prediction,
                y: np.ndarray | None = None, residuals=None):
     """:func:`_run` over blocks of strands, which are independent of each other, in parallel."""
     cmap = CardMap(cards)
 
     def one(b: slice):
         part = None if residuals is None else (residuals[0][b], [r[b] for r in residuals[1]])
-        return _run(cmap, strand_card[b], scale[b], n, base_stride, newton,
-                    y=None if y is None else y[b], residuals=part)
+        return _run(cmap, strand_card[b], scale[b], n, plan, y=None if y is None else y[b], residuals=part)
 
     parts = map_blocks(one, len(strand_card))
     rec = np.concatenate([p[0] for p in parts])

@@ -81,3 +81,26 @@ def test_a_pre_release_draft_file_gets_a_clear_error():
     old = container.pack([container.Chunk(i.type, payloads[i.type], i.required) for i in infos])
     with pytest.raises(InvalidContentError, match="pre-release draft.*write the asset again"):
         cgh.decode(old)
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_both_base_predictors_decode_within_the_bound(order, monkeypatch):
+    """The writer picks the base samples' predictor per file (spec 4.3); either decodes."""
+    from cghair_format.examples import example_asset
+
+    monkeypatch.setattr(codec, "_choose_base_order", lambda *_: order)
+    asset = example_asset(5)
+    data, report = cgh.encode(asset, "compact")
+    assert json.loads(container.unpack(data, set(codec.REQUIRED_CHUNKS))[2]["META"])["quant"]["base_order"] == order
+    decoded = cgh.decode_points(cgh.decode(data))
+    assert np.linalg.norm(decoded - cgh.decode_points(asset), axis=-1).max() <= 2e-4 * report.bbox_diagonal
+
+
+def test_parallel_strands_choose_the_previous_sample_as_base_predictor():
+    """Strands that run side by side with the same steps but different bends code best as steps."""
+    rng = np.random.default_rng(0)
+    steps = np.cumsum(rng.normal(0, 30, (1, 64, 3)), axis=1)  # one shared wiggly path ...
+    y = steps + rng.normal(0, 0.3, (200, 1, 3)) * 100  # ... offset per strand
+    assert codec._choose_base_order(np.zeros(200, np.int64), y, 16) == 1
+    smooth = np.linspace(0, 1, 64)[None, :, None] ** 2 * rng.normal(0, 5000, (200, 1, 3))  # bends differ
+    assert codec._choose_base_order(np.zeros(200, np.int64), smooth, 16) == 2
