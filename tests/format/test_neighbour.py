@@ -59,28 +59,26 @@ def test_real_hair_stores_neighbour_differences_and_decodes_the_same_points(monk
 
 @pytest.mark.parametrize("masks", [[0], [8, 0, 0, 0, 0], [0, 0, 0, 0, -1], "7", None, [True, 0, 0, 0, 0]])
 def test_bad_neighbour_masks_are_refused(masks):
+    with pytest.raises(InvalidContentError, match="neighbour"):
+        cgh.decode(_vector_with_quant(lambda quant: quant.update(neighbour=masks)))
+
+
+def _vector_with_quant(edit) -> bytes:
+    """spec/vectors/small_compact.cgh with its META quant changed by ``edit`` (checksums redone)."""
     data = (codec.Path(__file__).parents[2] / "spec" / "vectors" / "small_compact.cgh").read_bytes()
     _, infos = container.read_table(data)
     payloads = container.unpack(data, set(codec.REQUIRED_CHUNKS))[2]
     meta = json.loads(payloads["META"])
-    meta["quant"]["neighbour"] = masks
+    edit(meta["quant"])
     payloads["META"] = json.dumps(meta).encode()
-    bad = container.pack([container.Chunk(i.type, payloads[i.type], i.required) for i in infos])
-    with pytest.raises(InvalidContentError, match="neighbour"):
-        cgh.decode(bad)
+    return container.pack([container.Chunk(i.type, payloads[i.type], i.required) for i in infos])
 
 
 def test_a_pre_release_draft_file_gets_a_clear_error():
     """Drafts of 1.0 written before the rANS strand coder stored ``logit_step``; say so, and what to do."""
-    data = (codec.Path(__file__).parents[2] / "spec" / "vectors" / "small_compact.cgh").read_bytes()
-    _, infos = container.read_table(data)
-    payloads = container.unpack(data, set(codec.REQUIRED_CHUNKS))[2]
-    meta = json.loads(payloads["META"])
-    meta["quant"]["logit_step"] = meta["quant"].pop("logit_levels") / 16384
-    payloads["META"] = json.dumps(meta).encode()
-    old = container.pack([container.Chunk(i.type, payloads[i.type], i.required) for i in infos])
+    draft = _vector_with_quant(lambda quant: quant.update(logit_step=quant.pop("logit_levels") / 16384))
     with pytest.raises(InvalidContentError, match="pre-release draft.*write the asset again"):
-        cgh.decode(old)
+        cgh.decode(draft)
 
 
 @pytest.mark.parametrize("order", [1, 2])
