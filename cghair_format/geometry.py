@@ -122,7 +122,7 @@ class CardMap:
         fr = self.frames[card.astype(np.int64) * 2 * m + 2 * k.astype(np.int64) + upper]
         ef, ev, nf, nv = fr[:, 3:6], fr[:, 6:9], fr[:, 12:15], fr[:, 15:18]
         n = fr[:, 9:12] + f * nf + g * nv
-        length = np.sqrt(np.sum(n * n, axis=1, keepdims=True))
+        length = np.sqrt(np.einsum("ij,ij->i", n, n))[:, None]
         np.maximum(length, 1e-30, out=length)
         nh = n / length
         delta = uvd[:, 2:3]
@@ -131,7 +131,7 @@ class CardMap:
             return x
 
         def d_normal(dn):
-            return (dn - nh * np.sum(nh * dn, axis=1, keepdims=True)) / length
+            return (dn - nh * np.einsum("ij,ij->i", nh, dn)[:, None]) / length
 
         return x, (m * (ef + delta * d_normal(nf)), ev + delta * d_normal(nv), nh)
 

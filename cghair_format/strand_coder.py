@@ -100,7 +100,7 @@ def _newton(cmap: CardMap, strand_card: np.ndarray, start: np.ndarray, target: n
         # keep a step only where it is finite and in proportion to the world-space miss (a step of
         # one unit moves a point by at most one quantization step, so a sane step is not much longer
         # than the miss in steps); near-singular Jacobians give neither
-        bound = MAX_STEP_RATIO * np.sqrt(np.sum(miss * miss, axis=1)) * sc[:, 2] + 1.0
+        bound = MAX_STEP_RATIO * np.sqrt(np.einsum("ij,ij->i", miss, miss)) * sc[:, 2] + 1.0
         ok = np.isfinite(delta).all(axis=1) & (np.abs(delta).max(axis=1) <= bound)
         c = c + np.where(ok[:, None], delta, 0.0) / sc
     out = (c * sc).reshape(s, n, 3)
@@ -111,10 +111,11 @@ def solve3(a: np.ndarray, b: np.ndarray, c: np.ndarray, r: np.ndarray) -> np.nda
     """Solve ``[a b c] x = r`` for many 3x3 systems given by columns ``[N, 3]`` (Cramer's rule);
     a singular system (|det| <= 1e-30) gives x = 0."""
     bc, ca, ab = np.cross(b, c), np.cross(c, a), np.cross(a, b)
-    det = np.sum(a * bc, axis=1)
+    det = np.einsum("ij,ij->i", a, bc)
     ok = np.abs(det) > 1e-30
-    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)[:, None]
-    return np.stack([np.sum(r * bc, axis=1), np.sum(r * ca, axis=1), np.sum(r * ab, axis=1)], axis=1) * inv
+    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+    return np.stack([np.einsum("ij,ij->i", r, bc), np.einsum("ij,ij->i", r, ca), np.einsum("ij,ij->i", r, ab)],
+                    axis=1) * inv[:, None]
 
 
 def encode_uvd(cards: Cards, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray, plan: Prediction):
