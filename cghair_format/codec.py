@@ -55,6 +55,7 @@ MAX_TIGHTENINGS = 8
 STEP_START = 0.93  # first step, as a fraction of the position tolerance
 TIGHTEN_TARGET = 0.97  # a retry aims the measured error at this fraction of the tolerance ...
 GROW_BELOW = 0.9  # ... and a first step whose error is below this fraction is retried larger, once
+DEAD_ZONE = 0.97  # a refinement residual stays zero where the prediction is this close to the input (x tol)
 
 
 @dataclass
@@ -115,7 +116,7 @@ def encode(asset: HairAsset, profile: str | Profile = "compact") -> tuple[bytes,
     card_fraction = _card_step_fraction(asset, prof, step, diag, points, tol)
     passed = None  # (step, error, quantized geometry) of the largest step that met the bound so far
     for attempt in range(MAX_TIGHTENINGS):
-        geometry = _quantize_geometry(asset, prof, step, diag, card_fraction)
+        geometry = _quantize_geometry(asset, prof, step, diag, card_fraction, points)
         err = 0.0 if geometry[3] is None else float(np.linalg.norm(geometry[3] - points, axis=-1).max())
         if step is None:
             passed = (step, err, geometry)
@@ -256,10 +257,10 @@ def _card_step_fraction(asset: HairAsset, prof: Profile, step: float | None, dia
     return fraction
 
 
-def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag: float, card_fraction: float
-                       ) -> tuple[dict, StreamWriter, list[np.ndarray] | None, np.ndarray | None]:
+def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag: float, card_fraction: float,
+                       points: np.ndarray) -> tuple[dict, StreamWriter, list[np.ndarray] | None, np.ndarray | None]:
     """What depends on the step: META, the CARD streams, and (quantized profiles) the STRD residual
-    arrays and the world points a decoder will get."""
+    arrays and the world points a decoder will get (``points``: the input's)."""
     meta = _meta(asset, prof, step, diag, card_fraction)
     q = meta["quant"]
     cards_w = StreamWriter()
@@ -274,7 +275,8 @@ def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag
     q["base_order"] = _choose_base_order(asset.strand_card, y, q["base_stride"])
     q["newton_steps"] = _choose_newton_steps(cards, asset.strand_card, y, scale,
                                              Prediction(q["base_stride"], q["base_order"], NEWTON_STEPS))
-    base, levels, decoded_points = encode_uvd(cards, asset.strand_card, y, scale, _prediction(q))
+    base, levels, decoded_points = encode_uvd(cards, asset.strand_card, y, scale, _prediction(q),
+                                              dead_zone=(points, DEAD_ZONE * prof.position_tolerance * diag))
     return meta, cards_w, [base] + levels, decoded_points
 
 

@@ -50,8 +50,14 @@ def code_base(rec: np.ndarray, base: np.ndarray, order: int, y: np.ndarray | Non
 
 
 def _run(cmap: CardMap, strand_card: np.ndarray, scale: np.ndarray, n: int, plan: Prediction,
-         y: np.ndarray | None = None, residuals: tuple[np.ndarray, list[np.ndarray]] | None = None):
+         y: np.ndarray | None = None, residuals: tuple[np.ndarray, list[np.ndarray]] | None = None,
+         dead_zone: tuple[np.ndarray, float] | None = None):
     """Encode (``y`` given, scaled card coordinates ``[S, n, 3]``) or decode (``residuals`` given).
+
+    ``dead_zone`` (encoding): the input's world points ``[S, n, 3]`` and a distance. A refinement
+    sample's residual is left at zero wherever its prediction alone lies within that distance of
+    the input point: the error stays bounded, zeros cost the least, and as the decoder predicts
+    from what it reconstructs, later samples simply see that reconstruction.
 
     Returns the reconstruction ``[S, n, 3]`` (scaled units), its world points ``[S, n, 3]`` (when
     decoding, all but the last level's) and the residuals (base ``[S, nb, 3]``, levels ``[S, L, 3]``)."""
@@ -70,6 +76,9 @@ def _run(cmap: CardMap, strand_card: np.ndarray, scale: np.ndarray, n: int, plan
             pred = _newton(cmap, strand_card, pred, target, scale, newton)
         if y is not None:
             r = np.rint(y[:, idx] - pred).astype(np.int64)
+            if dead_zone is not None:
+                miss = _to_world(cmap, strand_card, pred, scale) - dead_zone[0][:, idx]
+                r[np.einsum("slc,slc->sl", miss, miss) <= dead_zone[1] ** 2] = 0
         else:
             r = residuals[1][li]
         rec[:, idx] = pred + r
@@ -118,11 +127,12 @@ def solve3(a: np.ndarray, b: np.ndarray, c: np.ndarray, r: np.ndarray) -> np.nda
                     axis=1) * inv[:, None]
 
 
-def encode_uvd(cards: Cards, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray, plan: Prediction):
+def encode_uvd(cards: Cards, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray, plan: Prediction,
+               dead_zone: tuple[np.ndarray, float] | None = None):
     """Residuals (base, levels) of scaled card coordinates ``y [S, P, 3]`` (``uvd * scale``), and the
     world points ``[S, P, 3]`` the decoder will reconstruct. Every reconstructed value is within 0.5
-    of ``y``."""
-    _, world, (base, levels) = _in_chunks(cards, strand_card, scale, y.shape[1], plan, y=y)
+    of ``y``, except refinement samples where ``dead_zone`` (see :func:`_run`) lets a zero residual stand."""
+    _, world, (base, levels) = _in_chunks(cards, strand_card, scale, y.shape[1], plan, y=y, dead_zone=dead_zone)
     return base, levels, world
 
 
@@ -134,13 +144,14 @@ def decode_uvd(cards: Cards, strand_card: np.ndarray, base: np.ndarray, levels: 
 
 
 def _in_chunks(cards: Cards, strand_card: np.ndarray, scale: np.ndarray, n: int, plan: Prediction,
-               y: np.ndarray | None = None, residuals=None):
+               y: np.ndarray | None = None, residuals=None, dead_zone: tuple[np.ndarray, float] | None = None):
     """:func:`_run` over blocks of strands, which are independent of each other, in parallel."""
     cmap = CardMap(cards)
 
     def one(b: slice):
         part = None if residuals is None else (residuals[0][b], [r[b] for r in residuals[1]])
-        return _run(cmap, strand_card[b], scale[b], n, plan, y=None if y is None else y[b], residuals=part)
+        return _run(cmap, strand_card[b], scale[b], n, plan, y=None if y is None else y[b], residuals=part,
+                    dead_zone=None if dead_zone is None else (dead_zone[0][b], dead_zone[1]))
 
     parts = map_blocks(one, len(strand_card))
     rec = np.concatenate([p[0] for p in parts])

@@ -1,5 +1,5 @@
-"""Neighbour prediction across the strands of a card (spec 4.3): an exact integer transform that the
-writer applies per residual array and channel where it codes smaller."""
+"""Strand-point coding (spec 4.3): neighbour prediction across the strands of a card (an exact integer
+transform the writer applies where it codes smaller), the base predictor choice and the dead zone."""
 
 import json
 
@@ -102,3 +102,32 @@ def test_parallel_strands_choose_the_previous_sample_as_base_predictor():
     assert codec._choose_base_order(np.zeros(200, np.int64), y, 16) == 1
     smooth = np.linspace(0, 1, 64)[None, :, None] ** 2 * rng.normal(0, 5000, (200, 1, 3))  # bends differ
     assert codec._choose_base_order(np.zeros(200, np.int64), smooth, 16) == 2
+
+
+def test_the_dead_zone_leaves_more_zero_residuals_and_keeps_the_bound(monkeypatch):
+    """A refinement residual stays zero where the prediction alone is within 0.97 tol of the input."""
+    from cghair_format import strand_coder
+    from cghair_format.cards import build_cards
+
+    asset = build_cards(load_hair("Ratboy_mohawk.tfx"), n_cards=60, n_groups=4, points=32, seed=0,
+                        progress=False).asset
+    calls = []
+    real = strand_coder.encode_uvd
+
+    def spy(*args, **kw):
+        out = real(*args, **kw)
+        if kw.get("dead_zone") is not None:
+            calls.append((args, kw, out))
+        return out
+
+    monkeypatch.setattr(codec, "encode_uvd", spy)
+    data, report = cgh.encode(asset, "compact")
+    args, kw, (base, levels, world) = calls[-1]
+    points, distance = kw["dead_zone"]
+    assert distance == pytest.approx(0.97 * 2e-4 * report.bbox_diagonal)
+    _, plain_levels, _ = real(*args)  # the same step without the dead zone
+    zeros = sum(int((r == 0).sum()) for r in levels)
+    plain_zeros = sum(int((r == 0).sum()) for r in plain_levels)
+    assert zeros > plain_zeros
+    decoded = cgh.decode_points(cgh.decode(data))
+    assert np.linalg.norm(decoded - cgh.decode_points(asset), axis=-1).max() <= 2e-4 * report.bbox_diagonal
