@@ -2,7 +2,9 @@
 
 Every byte of a .cgh is covered: the header and chunk table by the header checksum, each chunk's
 stored bytes by its own checksum, alignment padding by the must-be-zero rule, and the file length by
-the header. So no single flipped byte can go unnoticed, and this sweep asserts exactly that.
+the header. So no single flipped byte can go unnoticed, and this sweep asserts exactly that. Files
+re-sealed after their payloads were changed get past the checksums; the decoders must refuse those
+(or decode them to a valid asset) on their own.
 """
 
 import time
@@ -81,3 +83,31 @@ def test_mutated_files_never_return_an_asset_with_bad_values(small_file):
         except cgh.CghFormatError:
             continue
         asset.validate()  # a flip that still decodes must give a consistent asset
+
+
+@pytest.mark.filterwarnings("error")
+@pytest.mark.parametrize("chunk", ["META", "CARD", "STRD", "OPAC", "LOGT", "CBKS", "MLPW"])
+def test_resealed_garbage_is_refused_or_decodes(small_file, chunk):
+    """Checksums catch accidents; a file re-sealed after a chunk's payload was changed (valid CRCs)
+    reaches the decoders themselves (the rANS coder for STRD), which must answer with CghFormatError
+    or a valid asset, fast, without a warning."""
+    from cghair_format import codec, container
+
+    _, infos = container.read_table(small_file)
+    payloads = container.unpack(small_file, set(codec.REQUIRED_CHUNKS))[2]
+    rng = np.random.default_rng(7)
+    refused = 0
+    for _ in range(150):
+        body = bytearray(payloads[chunk])
+        for _ in range(int(rng.integers(1, 4))):
+            body[int(rng.integers(0, len(body)))] = int(rng.integers(0, 256))
+        data = container.pack([container.Chunk(i.type, bytes(body) if i.type == chunk else payloads[i.type],
+                                               i.required) for i in infos], level=1)
+        start = time.perf_counter()
+        try:
+            cgh.decode(data).validate()
+        except cgh.CghFormatError:
+            refused += 1
+        assert time.perf_counter() - start < MAX_SECONDS
+    if chunk in ("STRD", "META"):
+        assert refused > 100  # most garbage there is caught by the decoder's own checks
