@@ -11,7 +11,7 @@ import os
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import BinaryIO
+from typing import BinaryIO, NamedTuple
 
 import numpy as np
 
@@ -117,7 +117,8 @@ def encode(asset: HairAsset, profile: str | Profile = "compact") -> tuple[bytes,
     passed = None  # (step, error, quantized geometry) of the largest step that met the bound so far
     for attempt in range(MAX_TIGHTENINGS):
         geometry = _quantize_geometry(asset, prof, step, diag, card_fraction, points)
-        err = 0.0 if geometry[3] is None else float(np.linalg.norm(geometry[3] - points, axis=-1).max())
+        decoded = geometry.decoded_points
+        err = 0.0 if decoded is None else float(np.linalg.norm(decoded - points, axis=-1).max())
         if step is None:
             passed = (step, err, geometry)
             break
@@ -130,8 +131,8 @@ def encode(asset: HairAsset, profile: str | Profile = "compact") -> tuple[bytes,
         step *= TIGHTEN_TARGET * tol / err if err > 0 else 1 / GROW_BELOW
     if passed is None:
         raise AssetError(f"could not meet the position tolerance {tol:g} (error {err:g})")
-    step, err, (meta, cards_w, residuals, _) = passed
-    chunks = _geometry_chunks(asset, meta, cards_w, residuals)
+    step, err, geometry = passed
+    chunks = _geometry_chunks(asset, geometry)
     data = container.pack(chunks + appearance_chunks, level=prof.zstd_level)
     _, infos = container.read_table(data)
     return data, EncodeReport(prof.name, step, err, diag, {i.type: i.stored for i in infos})
@@ -257,8 +258,18 @@ def _card_step_fraction(asset: HairAsset, prof: Profile, step: float | None, dia
     return fraction
 
 
+class _Geometry(NamedTuple):
+    """What depends on the point step: META, the CARD streams, and (quantized profiles) the STRD
+    residual arrays and the world points a decoder will get."""
+
+    meta: dict
+    cards: StreamWriter
+    residuals: list[np.ndarray] | None
+    decoded_points: np.ndarray | None
+
+
 def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag: float, card_fraction: float,
-                       points: np.ndarray) -> tuple[dict, StreamWriter, list[np.ndarray] | None, np.ndarray | None]:
+                       points: np.ndarray) -> _Geometry:
     """What depends on the step: META, the CARD streams, and (quantized profiles) the STRD residual
     arrays and the world points a decoder will get (``points``: the input's)."""
     meta = _meta(asset, prof, step, diag, card_fraction)
@@ -267,7 +278,7 @@ def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag
     if q["lossless"]:
         for a in (asset.cards.spine, asset.cards.normal, asset.cards.half_width):
             cards_w.array(a.astype(np.float32), shuffle=True)
-        return meta, cards_w, None, None
+        return _Geometry(meta, cards_w, None, None)
     cards = _encode_cards(asset.cards, q, cards_w)
     su, sv = _card_scales(cards, q["step"])
     scale = _uvd_scale(su, sv, asset.strand_card, q["step"])
@@ -277,13 +288,13 @@ def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag
                                              Prediction(q["base_stride"], q["base_order"], NEWTON_STEPS))
     base, levels, decoded_points = encode_uvd(cards, asset.strand_card, y, scale, _prediction(q),
                                               dead_zone=(points, DEAD_ZONE * prof.position_tolerance * diag))
-    return meta, cards_w, [base] + levels, decoded_points
+    return _Geometry(meta, cards_w, [base] + levels, decoded_points)
 
 
-def _geometry_chunks(asset: HairAsset, meta: dict, cards_w: StreamWriter, residuals: list[np.ndarray] | None
-                     ) -> list[container.Chunk]:
+def _geometry_chunks(asset: HairAsset, geometry: _Geometry) -> list[container.Chunk]:
     """META, CARD and STRD once the step is settled: the residuals go through neighbour prediction
     and the entropy coder (lossless: the card coordinates as float32)."""
+    meta, cards_w, residuals = geometry.meta, geometry.cards, geometry.residuals
     strd_w = StreamWriter()
     strd_w.ints(np.diff(asset.strand_card.astype(np.int64), prepend=0))
     if residuals is None:

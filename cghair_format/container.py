@@ -6,10 +6,8 @@ every size against the file length before allocating and every checksum before d
 
 from __future__ import annotations
 
-import os
 import struct
 import zlib
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import zstandard
@@ -23,6 +21,7 @@ from .errors import (
     UnknownRequiredChunkError,
     UnsupportedVersionError,
 )
+from .parallel import map_threads
 
 MAGIC = b"\x89CGH\r\n\x1a\n"
 VERSION_MAJOR = 1
@@ -65,8 +64,7 @@ def pack(chunks: list[Chunk], level: int = 19) -> bytes:
         z = zstandard.ZstdCompressor(level=level, write_content_size=True).compress(c.payload)
         return (c, CODEC_ZSTD, z) if len(z) < len(c.payload) else (c, CODEC_RAW, c.payload)
 
-    with ThreadPoolExecutor(max_workers=os.cpu_count() or 1) as pool:  # zstd releases the GIL
-        bodies = list(pool.map(body, chunks))
+    bodies = map_threads(body, chunks)
     offset = _align(HEADER_SIZE + ENTRY_SIZE * len(chunks))
     table, layout = b"", []
     for c, codec, stored in bodies:

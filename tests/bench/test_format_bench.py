@@ -13,6 +13,7 @@ import pytest
 
 import cghair_format as cgh
 from cghair_format.exchange import write_3dgs_ply
+from cghair_format.gaussians import strand_weights
 
 from .paper_scale import paper_scale_asset
 
@@ -45,9 +46,10 @@ def test_format_table(model, request, tmp_path, benchmark):
         _, t_gauss = _timed(lambda a=decoded: cgh.decode_gaussians(a))
         err = float(np.linalg.norm(cgh.decode_points(decoded) - points, axis=-1).max()) / diag
         op_err = float(np.abs(decoded.opacity - asset.opacity).max())
+        w_err = float(np.abs(strand_weights(decoded.appearance) - strand_weights(asset.appearance)).max())
         chunks = {k: v for k, v in report.chunk_sizes.items()}
         rows.append((profile, len(data), 8 * len(data) / asset.n_gaussians, t_enc, t_dec, t_gauss, err, op_err,
-                     ply_bytes / len(data), chunks))
+                     ply_bytes / len(data), chunks, w_err))
     compact = cgh.encode(asset, "compact")[0]
     benchmark.pedantic(lambda: cgh.decode_gaussians(cgh.decode(compact)), rounds=2, iterations=1)
     lines = [f"\n.cgh at the paper's scale from {model}: {asset.n_strands:,} strands x {asset.points_per_strand} "
@@ -56,10 +58,10 @@ def test_format_table(model, request, tmp_path, benchmark):
              f"{asset.appearance.sh_degree} (stand-in appearance: see tests/bench/paper_scale.py)",
              f"3DGS PLY of the same Gaussians (SH 3, INRIA layout): {ply_bytes:,} bytes",
              "profile   bytes        bits/G  encode s  decode s  +Gaussians s  max pt err/diag  max opac err"
-             "  PLY ratio"]
+             "  max weight err  PLY ratio"]
     for r in rows:
         lines.append(f"{r[0]:<9} {r[1]:>11,}  {r[2]:6.2f}  {r[3]:8.2f}  {r[4]:8.2f}  {r[5]:12.2f}  {r[6]:15.2e}  "
-                     f"{r[7]:12.5f}  {r[8]:9.0f}x")
+                     f"{r[7]:12.5f}  {r[10]:14.5f}  {r[8]:9.0f}x")
     for r in rows:
         lines.append(f"  {r[0]} chunks: " + ", ".join(f"{k} {v:,}" for k, v in r[9].items()))
     if build_timings:

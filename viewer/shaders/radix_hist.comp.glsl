@@ -2,8 +2,6 @@
 // Radix sort, pass step 1: per block of 4096 keys, how many have each 4-bit digit.
 // block_hist is digit-major: block_hist[digit * n_blocks + block].
 layout(local_size_x = 256) in;
-const uint ITEMS = 16u;
-const uint BLOCK = 256u * ITEMS;
 
 layout(std430, binding = 0) readonly buffer Keys { uint keys[]; };
 layout(std430, binding = 1) writeonly buffer BlockHist { uint block_hist[]; };
@@ -12,6 +10,8 @@ uniform uint u_count;
 uniform uint u_shift;
 uniform uint u_blocks;
 
+#include "radix_common.glsl"
+
 shared uint hist[16];
 
 void main() {
@@ -19,13 +19,8 @@ void main() {
     uint block = gl_WorkGroupID.x;
     if (t < 16u) hist[t] = 0u;
     barrier();
-    uint start = block * BLOCK + t * ITEMS;
     uint c[16];
-    for (uint d = 0u; d < 16u; ++d) c[d] = 0u;
-    for (uint i = 0u; i < ITEMS; ++i) {
-        uint idx = start + i;
-        if (idx < u_count) c[(keys[idx] >> u_shift) & 15u] += 1u;
-    }
+    count_digits(block * BLOCK + t * ITEMS, c);
     for (uint d = 0u; d < 16u; ++d) if (c[d] != 0u) atomicAdd(hist[d], c[d]);
     barrier();
     if (t < 16u) block_hist[t * u_blocks + block] = hist[t];

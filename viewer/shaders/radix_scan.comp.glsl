@@ -8,7 +8,9 @@ layout(std430, binding = 0) buffer BlockHist { uint block_hist[]; };
 
 uniform uint u_count;  // 16 * n_blocks
 
-shared uint sums[1024];
+const uint SCAN_THREADS = 1024u;
+shared uint sums[SCAN_THREADS];
+#include "workgroup_scan.glsl"
 
 void main() {
     uint t = gl_LocalInvocationID.x;
@@ -16,15 +18,7 @@ void main() {
     uint lo = min(t * per, u_count), hi = min(lo + per, u_count);
     uint s = 0u;
     for (uint i = lo; i < hi; ++i) s += block_hist[i];
-    sums[t] = s;
-    barrier();
-    for (uint off = 1u; off < 1024u; off <<= 1) {
-        uint v = t >= off ? sums[t - off] : 0u;
-        barrier();
-        sums[t] += v;
-        barrier();
-    }
-    uint run = sums[t] - s;  // exclusive
+    uint run = exclusive_prefix(t, s);
     for (uint i = lo; i < hi; ++i) {
         uint v = block_hist[i];
         block_hist[i] = run;
