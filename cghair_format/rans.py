@@ -38,19 +38,18 @@ def bit_length(u: np.ndarray) -> np.ndarray:
 TOKEN_BITS = np.r_[bit_length(np.arange(DIRECT)), np.arange(5, 65)].astype(np.int64)
 
 
-def tokens(u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Tokens, extra-bit widths and extra values of unsigned integers ``u`` (uint64)."""
+def tokens(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Tokens and extra values of unsigned integers ``u`` (uint64); :func:`token_widths` gives each
+    token's number of extra bits."""
     u = np.asarray(u, np.uint64)
     sym = np.where(u < DIRECT, u, 0).astype(np.uint8)
-    width = np.zeros(u.shape, np.int64)
     extra = np.zeros(u.shape, np.uint64)
     big = np.flatnonzero(u.ravel() >= DIRECT)  # few: the work below is on them alone
     ub = u.ravel()[big]
     nb = bit_length(ub)
     sym.ravel()[big] = DIRECT + nb - 5
-    width.ravel()[big] = nb - 1
     extra.ravel()[big] = ub - (np.uint64(1) << (nb - 1).astype(np.uint64))
-    return sym, width, extra
+    return sym, extra
 
 
 def untokens(sym: np.ndarray, extra: np.ndarray) -> np.ndarray:
@@ -127,10 +126,10 @@ def normalize(counts: np.ndarray) -> np.ndarray:
 
 def estimate_bytes(u: np.ndarray) -> float:
     """Order-0 size estimate of unsigned integers under this coder: token entropy plus extra bits."""
-    sym, width, _ = tokens(u)
+    sym, _ = tokens(u)
     counts = np.bincount(sym.ravel(), minlength=ALPHABET)
     p = counts[counts > 0] / sym.size
-    return float(-(counts[counts > 0] * np.log2(p)).sum() + width.sum()) / 8
+    return float(-(counts[counts > 0] * np.log2(p)).sum() + token_widths(sym).sum()) / 8
 
 
 class Tables:

@@ -50,7 +50,7 @@ def write_residuals(w: StreamWriter, arrays: list[np.ndarray]) -> None:
     s = arrays[0].shape[0]
     widths = [a.shape[1] for a in arrays]
     column_array, first, lanes, active = _plan(widths, s)
-    sym, width, extra = rans.tokens(zigzag(np.concatenate(arrays, axis=1)))
+    sym, extra = rans.tokens(zigzag(np.concatenate(arrays, axis=1)))
     bits = rans.TOKEN_BITS[sym]
     prev = np.zeros_like(bits)
     prev[:, 1:] = bits[:, :-1]
@@ -71,7 +71,7 @@ def write_residuals(w: StreamWriter, arrays: list[np.ndarray]) -> None:
     w.array(states)
     w.array(words)
     # in step order; the padding lanes of the last block have width 0 and add no bits
-    w.array(rans.pack_bits(_to_steps(width, lanes, blocks), _to_steps(extra, lanes, blocks)))
+    w.array(rans.pack_bits(rans.token_widths(step_sym), _to_steps(extra, lanes, blocks)))
 
 
 def read_residuals(r: StreamReader, strands: int, widths: list[int]) -> list[np.ndarray]:

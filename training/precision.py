@@ -15,23 +15,20 @@ import copy
 import sys
 
 import numpy as np
+import torch
 
 from cghair_format import decode, decode_gaussians, encode, read
 from cghair_format.asset import HairAsset
 from cghair_format.quantize import rows_int8_decode, rows_int8_encode
 
 from .dataset import View, read_dataset
+from .losses import psnr
 from .splatter import render_gaussians
 
 
-def render_views(asset: HairAsset, views: list[View]) -> np.ndarray:
+def render_views(asset: HairAsset, views: list[View]) -> torch.Tensor:
     g = decode_gaussians(asset)
-    return np.stack([render_gaussians(g, v.camera)["rgb"] for v in views])
-
-
-def psnr(a: np.ndarray, b: np.ndarray) -> float:
-    mse = float(np.mean((a.astype(np.float64) - b) ** 2))
-    return float("inf") if mse == 0 else 10 * np.log10(1 / mse)
+    return torch.as_tensor(np.stack([render_gaussians(g, v.camera)["rgb"] for v in views]), dtype=torch.float64)
 
 
 def with_weight_bits(asset: HairAsset, bits: int) -> HairAsset:
