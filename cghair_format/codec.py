@@ -37,6 +37,7 @@ from .strand_coder import (
     code_base,
     decode_uvd,
     encode_uvd,
+    level_widths,
     neighbour_decode,
     neighbour_encode,
     neighbour_order,
@@ -361,14 +362,13 @@ def _with_neighbour_prediction(strand_card: np.ndarray, residuals: list[np.ndarr
     return stored, masks
 
 
-def _undo_neighbour_prediction(strand_card: np.ndarray, stored: list[np.ndarray], masks: list[int]) -> None:
-    """Inverse of :func:`_with_neighbour_prediction`, in place."""
-    order, starts = neighbour_order(strand_card, stored[0][:, 0])
-    for j, (r, mask) in enumerate(zip(stored, masks, strict=True)):
-        part = r[:, 1:] if j == 0 else r
-        for ch in range(3):
-            if mask >> ch & 1:
-                part[..., ch] = neighbour_decode(part[..., ch], order, starts)
+def _undo_neighbour_prediction(strand_card: np.ndarray, values: np.ndarray, widths: list[int],
+                               masks: list[int]) -> None:
+    """Inverse of :func:`_with_neighbour_prediction`, in place, on the arrays side by side ``[S, N, 3]``."""
+    order, starts = neighbour_order(strand_card, values[:, 0])
+    column_mask = np.repeat([[mask >> ch & 1 for ch in range(3)] for mask in masks], widths, axis=0)
+    column_mask[0] = 0  # the roots stay plain
+    neighbour_decode(values, order, starts, column_mask)
 
 
 def _estimate(residuals: np.ndarray) -> float:
@@ -503,11 +503,11 @@ def _decode_chunks(meta: dict, payloads: dict[str, bytes]) -> HairAsset:
         stride, step = q["base_stride"], q["step"]
         cards = _decode_cards(rd["CARD"], c, m + 1, q)
         su, sv = _card_scales(cards, step)
-        base_idx, plan = level_plan(p, stride)
-        residuals = read_residuals(rd["STRD"], s, [len(base_idx)] + [len(lv[0]) for lv in plan])
-        _undo_neighbour_prediction(strand_card, residuals, q["neighbour"])
+        columns = level_widths(p, stride)
+        residuals = read_residuals(rd["STRD"], s, columns)
+        _undo_neighbour_prediction(strand_card, residuals, columns, q["neighbour"])
         scale = _uvd_scale(su, sv, strand_card, step)
-        uvd = decode_uvd(cards, strand_card, residuals[0], residuals[1:], p, scale, _prediction(q))
+        uvd = decode_uvd(cards, strand_card, residuals, p, scale, _prediction(q))
         opacity = np.clip(_get_hier(rd["OPAC"], s, p - 1, stride, "opacity") / q["opacity_scale"], 0, 1)
         if meta["weight_mode"] == "hard":
             idx = rd["LOGT"].ints((s,), "assignment")

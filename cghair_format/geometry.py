@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import _native
 from .asset import Cards
 from .parallel import map_blocks
 
@@ -89,11 +90,12 @@ def triangle_and_barycentrics(uv: np.ndarray, segments: int) -> tuple[np.ndarray
 
 
 class CardMap:
-    """The card-to-world mapping of section "Strand points", with its Jacobian, for many points.
+    """The card-to-world mapping of section "Strand points", for many points.
 
     Each triangle is kept as an affine frame: ``x = A + f * Ef + (v - upper) * Ev`` and likewise for
     the normal, where ``f`` is the fraction of the way along the quad and ``upper`` is 1 on a quad's
     upper triangle. This equals the barycentric form of the spec; one gather per point fetches it.
+    The mapping itself, and its Jacobian, are compiled (:mod:`._native`).
     """
 
     def __init__(self, cards: Cards) -> None:
@@ -107,33 +109,14 @@ class CardMap:
             return [c[:, 0], np.where(upper, c[:, 1], c[:, 2]) - c[:, 0],
                     np.where(upper, c[:, 1] - c[:, 2], c[:, 1] - c[:, 0])]
 
-        self.frames = np.concatenate(frame(v) + frame(n), axis=1)  # [T, 18]: A, Ef, Ev, NA, NEf, NEv
+        self.frames = np.ascontiguousarray(np.concatenate(frame(v) + frame(n), axis=1))  # [T, 18]
 
-    def __call__(self, card: np.ndarray, uvd: np.ndarray, jacobian: bool = False):
-        """World points ``[N, 3]`` of card coordinates ``uvd [N, 3]`` on cards ``card [N]``; with
-        ``jacobian``, also ``d point / d (u, v, delta)`` as three ``[N, 3]`` columns (u, v, delta)."""
-        m = self.segments
-        uvd = np.asarray(uvd, np.float64)
-        s = uvd[:, 0] * m
-        k = np.clip(np.floor(s), 0, m - 1)
-        f = (s - k)[:, None]
-        upper = f[:, 0] + uvd[:, 1] > 1
-        g = (uvd[:, 1] - upper)[:, None]
-        fr = self.frames[card.astype(np.int64) * 2 * m + 2 * k.astype(np.int64) + upper]
-        ef, ev, nf, nv = fr[:, 3:6], fr[:, 6:9], fr[:, 12:15], fr[:, 15:18]
-        n = fr[:, 9:12] + f * nf + g * nv
-        length = np.sqrt(np.einsum("ij,ij->i", n, n))[:, None]
-        np.maximum(length, 1e-30, out=length)
-        nh = n / length
-        delta = uvd[:, 2:3]
-        x = fr[:, 0:3] + f * ef + g * ev + delta * nh
-        if not jacobian:
-            return x
-
-        def d_normal(dn):
-            return (dn - nh * np.einsum("ij,ij->i", nh, dn)[:, None]) / length
-
-        return x, (m * (ef + delta * d_normal(nf)), ev + delta * d_normal(nv), nh)
+    def __call__(self, card: np.ndarray, uvd: np.ndarray) -> np.ndarray:
+        """World points ``[N, 3]`` (float64) of card coordinates ``uvd [N, 3]`` on cards ``card [N]``."""
+        out = np.empty((len(card), 3))
+        _native.map_points(self.frames, self.segments, np.ascontiguousarray(card, np.int64),
+                           np.ascontiguousarray(uvd, np.float64), out)
+        return out
 
 
 def strand_points(cards: Cards, strand_card: np.ndarray, uvd: np.ndarray) -> np.ndarray:

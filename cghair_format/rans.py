@@ -1,4 +1,5 @@
-"""A multi-lane rANS entropy coder with static context tables, in vectorized numpy (spec 4.3.2).
+"""A multi-lane rANS entropy coder with static context tables (spec 4.3.2): the writer, in vectorized
+numpy; the reader is compiled (:func:`._native.decode_residuals`).
 
 Unsigned integers are split into a token (coded with rANS under a frequency table that the caller
 picks per symbol: its context) and raw extra bits. ``L`` lanes each hold a rANS state and code their
@@ -13,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import InvalidContentError, TruncatedError
+from .errors import InvalidContentError
 
 DIRECT = 16
 ALPHABET = DIRECT + 60  # bit lengths 5 .. 64
@@ -52,15 +53,6 @@ def tokens(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return sym, extra
 
 
-def untokens(sym: np.ndarray, extra: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`tokens`: the unsigned integers (uint64)."""
-    u = sym.astype(np.uint64)
-    big = np.flatnonzero(sym.ravel() >= DIRECT)
-    lead = np.uint64(1) << (u.ravel()[big] - np.uint64(DIRECT - 4))
-    u.ravel()[big] = lead + extra.ravel()[big]
-    return u
-
-
 def token_widths(sym: np.ndarray) -> np.ndarray:
     sym = sym.astype(np.int64)
     return np.where(sym >= DIRECT, sym - DIRECT + 4, 0)
@@ -78,24 +70,6 @@ def pack_bits(width: np.ndarray, value: np.ndarray) -> np.ndarray:
     pos = np.arange(total) - np.repeat(np.cumsum(width) - width, width)
     bits = (value[owner] >> (width[owner] - 1 - pos).astype(np.uint64)) & np.uint64(1)
     return np.packbits(bits.astype(np.uint8))
-
-
-def unpack_bits(data: np.ndarray, width: np.ndarray, where: str) -> np.ndarray:
-    """Inverse of :func:`pack_bits`: one uint64 per width (0 where the width is 0)."""
-    out = np.zeros(width.size, np.uint64)
-    has = np.flatnonzero(width.ravel())
-    width = width.ravel()[has].astype(np.int64)
-    total = int(width.sum())
-    if (total + 7) // 8 != len(data):
-        raise InvalidContentError(f"{where}: {len(data)} bytes of extra bits, the tokens need {(total + 7) // 8}")
-    if total == 0:
-        return out
-    bits = np.unpackbits(data)[:total].astype(np.uint64)
-    owner = np.repeat(np.arange(len(width)), width)
-    starts = np.cumsum(width) - width
-    shifted = bits << (width[owner] - 1 - (np.arange(total) - starts[owner])).astype(np.uint64)
-    out[has] = np.add.reduceat(shifted, starts)
-    return out
 
 
 def normalize(counts: np.ndarray) -> np.ndarray:
@@ -117,7 +91,7 @@ def normalize(counts: np.ndarray) -> np.ndarray:
             row[j] -= take
             diff += take
         top = order[0]
-        if row[top] > MAX_FREQ:  # no symbol may be (nearly) free: see Decoder.check_budget
+        if row[top] > MAX_FREQ:  # no symbol may be (nearly) free: see check_budget
             other = order[1] if row[order[1]] > 0 else (top + 1) % ALPHABET
             row[other] += row[top] - MAX_FREQ
             row[top] = MAX_FREQ
@@ -173,44 +147,9 @@ def encode(sym: np.ndarray, table: np.ndarray, active: np.ndarray, tables: Table
     return x.astype(np.uint32), words.astype(np.uint16)
 
 
-class Decoder:
-    """Step-by-step decoding of what :func:`encode` wrote; the caller supplies each step's tables.
-    States stay below 2^32 and every product below it, so the arithmetic is uint32."""
-
-    def __init__(self, states: np.ndarray, words: np.ndarray, tables: Tables, where: str) -> None:
-        self.x = states.astype(np.uint32)
-        if (self.x < LOW).any():
-            raise InvalidContentError(f"{where}: a lane's initial rANS state is below {LOW}")
-        self.words = words.astype(np.uint32)
-        self.pos = 0
-        self.tables = tables
-        self.where = where
-
-    def check_budget(self, symbols: int) -> None:
-        """Refuse, before decoding, more symbols than the lane states and words can hold: each costs
-        at least ``tables.min_bits``. A crafted stream can thus not make the decoder loop for long."""
-        held = 16 * len(self.words) + 32 * len(self.x)
-        if symbols * self.tables.min_bits > held + 64:
-            raise InvalidContentError(f"{self.where}: {symbols} symbols cannot fit in {held} bits of rANS stream")
-
-    def step(self, table: np.ndarray, active: int) -> np.ndarray:
-        x = self.x[:active]
-        slot = x & np.uint32(TOTAL - 1)
-        sym = self.tables.flat_slot[table * TOTAL + slot]
-        if (sym == NO_SYMBOL).any():
-            raise InvalidContentError(f"{self.where}: a symbol is coded with an empty frequency table")
-        k = table * ALPHABET + sym
-        x = self.tables.flat_freq[k] * (x >> np.uint32(PROB_BITS)) + slot - self.tables.flat_start[k]
-        need = x < LOW
-        n = int(np.count_nonzero(need))
-        if n:
-            if self.pos + n > len(self.words):
-                raise TruncatedError(f"{self.where}: the rANS word stream ends early")
-            x[need] = (x[need] << np.uint32(16)) | self.words[self.pos:self.pos + n]
-            self.pos += n
-        self.x[:active] = x
-        return sym
-
-    def finish(self) -> None:
-        if self.pos != len(self.words) or (self.x != LOW).any():
-            raise InvalidContentError(f"{self.where}: the rANS stream does not end where its symbols do")
+def check_budget(symbols: int, words: int, lanes: int, tables: Tables, where: str) -> None:
+    """Refuse, before decoding, more symbols than ``lanes`` states and ``words`` 16-bit words can hold:
+    each costs at least ``tables.min_bits``. A crafted stream can thus not make a decoder loop for long."""
+    held = 16 * words + 32 * lanes
+    if symbols * tables.min_bits > held + 64:
+        raise InvalidContentError(f"{where}: {symbols} symbols cannot fit in {held} bits of rANS stream")

@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import rans
-from .errors import InvalidContentError
-from .quantize import unzigzag, zigzag
+from . import _native, rans
+from .errors import InvalidContentError, TruncatedError
+from .quantize import zigzag
 from .streams import StreamReader, StreamWriter
 
 LANES = 4096  # at most; each lane costs its 4-byte state ...
@@ -74,32 +74,25 @@ def write_residuals(w: StreamWriter, arrays: list[np.ndarray]) -> None:
     w.array(rans.pack_bits(rans.token_widths(step_sym), _to_steps(extra, lanes, blocks)))
 
 
-def read_residuals(r: StreamReader, strands: int, widths: list[int]) -> list[np.ndarray]:
-    """Inverse of :func:`write_residuals`: the residual arrays ``[S, n_a, 3]`` (int64)."""
-    column_array, first, lanes, active = _plan(widths, strands)
+def read_residuals(r: StreamReader, strands: int, widths: list[int]) -> np.ndarray:
+    """Inverse of :func:`write_residuals`: the residual arrays side by side, ``[S, sum(widths), 3]``
+    (int64), decoded by the
+    compiled :func:`._native.decode_residuals` (one strand per lane, as the spec's step order has it)."""
+    column_array, first, lanes, _ = _plan(widths, strands)
     n_tables = len(widths) * 3 * CONTEXTS
     tables = rans.Tables(r.array((n_tables, rans.ALPHABET), "token tables", ("<u2",)), "STRD token tables")
-    states = r.array((lanes,), "rANS states", ("<u4",))
-    words = r.array((None,), "rANS words", ("<u2",))
-    extra_bits = r.array((None,), "extra bits", ("|u1",))
-    dec = rans.Decoder(states, words, tables, "STRD")
+    states = r.array((lanes,), "rANS states", ("<u4",)).astype(np.uint32)
+    words = r.array((None,), "rANS words", ("<u2",)).astype(np.uint16)
+    extra_bits = r.array((None,), "extra bits", ("|u1",)).astype(np.uint8)
+    if (states < rans.LOW).any():
+        raise InvalidContentError(f"STRD: a lane's initial rANS state is below {rans.LOW}", chunk="STRD")
     n = len(column_array)
-    dec.check_budget(strands * n * 3)
-    sym = np.zeros((len(active), n, 3, lanes), np.uint8)
-    for b, act in enumerate(active):
-        prev = np.zeros((3, act), np.int64)
-        for col in range(n):
-            if first[col]:
-                prev[:] = 0
-            other = np.zeros(act, np.int64)
-            for ch in range(3):
-                got = dec.step(_table(int(column_array[col]), ch, prev[ch], other), act)
-                sym[b, col, ch, :act] = got
-                prev[ch] = rans.TOKEN_BITS[got]
-                other = np.maximum(other, prev[ch])
-    dec.finish()
-    if sym.size and int(sym.max()) >= rans.DIRECT + 53 - 4:  # z >= 2^53
-        raise InvalidContentError("STRD: a residual is too large to reconstruct exactly in float64", chunk="STRD")
-    u = rans.untokens(sym, rans.unpack_bits(extra_bits, rans.token_widths(sym), "STRD").reshape(sym.shape))
-    values = unzigzag(u.transpose(0, 3, 1, 2).reshape(-1, n, 3)[:strands])
-    return np.split(values, np.cumsum(widths)[:-1], axis=1)
+    rans.check_budget(strands * n * 3, len(words), lanes, tables, "STRD")
+    values = np.empty((strands, n, 3), np.int64)
+    fault = _native.decode_residuals(tables.flat_slot, tables.flat_freq, tables.flat_start, states, words,
+                                     extra_bits, column_array.astype(np.int64), first.astype(np.uint8), lanes,
+                                     np.empty((strands, n, 3), np.uint8), values)
+    if fault:
+        error = TruncatedError if fault == _native.TRUNCATED else InvalidContentError
+        raise error(f"STRD: {_native.FAULTS[fault]}", chunk="STRD")
+    return values

@@ -1,0 +1,412 @@
+# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
+"""Compiled kernels of the codec: the per-point recurrences that numpy can only run as long chains of
+whole-array temporaries. Each follows the spec's pseudocode one point at a time, releases the GIL,
+and is called on independent blocks of strands from several threads (:mod:`.parallel`).
+
+- :func:`map_points`: the card-to-world mapping (spec 6.1) of many points.
+- :func:`run_strands`: the world-guided predictive coding of strand points (spec 4.3), encoding
+  (residuals from scaled card coordinates) or decoding (scaled card coordinates from residuals).
+- :func:`undo_neighbour`: the neighbour prediction across the strands of a card (spec 4.3), undone.
+- :func:`decode_residuals`: the STRD token stream and extra bits (spec 4.3.2), decoded.
+"""
+
+from libc.math cimport fabs, floor, isfinite, rint, sqrt
+from libc.stdint cimport uint8_t, uint16_t, uint32_t, uint64_t
+from libc.stdlib cimport calloc, free
+
+ctypedef long long i64
+
+cdef struct Frame:  # a card triangle as an affine frame (geometry.CardMap): 18 doubles
+    double a[3]
+    double ef[3]
+    double ev[3]
+    double na[3]
+    double nef[3]
+    double nev[3]
+
+
+cdef inline double dot3(const double* a, const double* b) noexcept nogil:
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+cdef inline void cross3(const double* a, const double* b, double* out) noexcept nogil:
+    out[0] = a[1] * b[2] - a[2] * b[1]
+    out[1] = a[2] * b[0] - a[0] * b[2]
+    out[2] = a[0] * b[1] - a[1] * b[0]
+
+
+cdef inline void card_map(const double* frames, int m, i64 card, const double* uvd, double* x,
+                          double* ju, double* jv, double* jd) noexcept nogil:
+    """World point ``x`` of card coordinates ``uvd`` on ``card``; with ``ju`` not NULL also the
+    Jacobian columns d x / d(u, v, delta)."""
+    cdef double s = uvd[0] * m
+    cdef double k = floor(s)
+    if not (k >= 0):  # also NaN
+        k = 0
+    if k > m - 1:
+        k = m - 1
+    cdef double f = s - k
+    cdef int upper = f + uvd[1] > 1
+    cdef double g = uvd[1] - upper
+    cdef const Frame* fr = <const Frame*> (frames + 18 * (card * 2 * m + 2 * <i64> k + upper))
+    cdef double n[3]
+    cdef double nh[3]
+    cdef int i
+    for i in range(3):
+        n[i] = fr.na[i] + f * fr.nef[i] + g * fr.nev[i]
+    cdef double length = sqrt(dot3(n, n))
+    if length < 1e-30:
+        length = 1e-30
+    cdef double inv = 1.0 / length
+    for i in range(3):
+        nh[i] = n[i] * inv
+    cdef double delta = uvd[2]
+    for i in range(3):
+        x[i] = fr.a[i] + f * fr.ef[i] + g * fr.ev[i] + delta * nh[i]
+    if ju == NULL:
+        return
+    cdef double pf = dot3(nh, fr.nef)
+    cdef double pv = dot3(nh, fr.nev)
+    for i in range(3):
+        ju[i] = m * (fr.ef[i] + delta * ((fr.nef[i] - nh[i] * pf) * inv))
+        jv[i] = fr.ev[i] + delta * ((fr.nev[i] - nh[i] * pv) * inv)
+        jd[i] = nh[i]
+
+
+cdef inline void solve3(const double* a, const double* b, const double* c, const double* r,
+                        double* out) noexcept nogil:
+    """``[a b c] out = r`` by Cramer's rule; a singular system (|det| <= 1e-30) gives 0."""
+    cdef double bc[3]
+    cdef double ca[3]
+    cdef double ab[3]
+    cross3(b, c, bc)
+    cross3(c, a, ca)
+    cross3(a, b, ab)
+    cdef double det = dot3(a, bc)
+    cdef double inv = 1.0 / det if fabs(det) > 1e-30 else 0.0
+    out[0] = dot3(r, bc) * inv
+    out[1] = dot3(r, ca) * inv
+    out[2] = dot3(r, ab) * inv
+
+
+cdef inline void to_world(const double* frames, int m, i64 card, const double* scaled, const double* inv_sc,
+                          double* x) noexcept nogil:
+    cdef double uvd[3]
+    uvd[0] = scaled[0] * inv_sc[0]
+    uvd[1] = scaled[1] * inv_sc[1]
+    uvd[2] = scaled[2] * inv_sc[2]
+    card_map(frames, m, card, uvd, x, NULL, NULL, NULL)
+
+
+cdef inline void newton(const double* frames, int m, i64 card, const double* sc, const double* inv_sc,
+                        const double* goal, int steps, double max_step_ratio, double* p) noexcept nogil:
+    """``steps`` Newton steps on ``map(card, p / sc) = goal`` from ``p`` (scaled card coordinates);
+    a step is kept only where it is finite and at most ``max_step_ratio`` x the miss in steps + 1."""
+    cdef double c[3]
+    cdef double x[3]
+    cdef double ju[3]
+    cdef double jv[3]
+    cdef double jd[3]
+    cdef double miss[3]
+    cdef double sol[3]
+    cdef double bound, d
+    cdef int i, step, ok
+    for i in range(3):
+        c[i] = p[i] * inv_sc[i]
+    for step in range(steps):
+        card_map(frames, m, card, c, x, ju, jv, jd)
+        for i in range(3):
+            miss[i] = goal[i] - x[i]
+        solve3(ju, jv, jd, miss, sol)
+        bound = max_step_ratio * sqrt(dot3(miss, miss)) * sc[2] + 1.0
+        ok = 1
+        for i in range(3):
+            d = sol[i] * sc[i]
+            if not isfinite(d) or fabs(d) > bound:
+                ok = 0
+        if ok:
+            for i in range(3):
+                c[i] = c[i] + sol[i]
+    for i in range(3):
+        x[i] = c[i] * sc[i]
+    if isfinite(x[0]) and isfinite(x[1]) and isfinite(x[2]):
+        for i in range(3):
+            p[i] = x[i]
+
+
+cdef check_cards(const i64[::1] card, Py_ssize_t triangles, int segments):
+    """Every card index must have its triangles in ``frames``: the kernels read them unchecked."""
+    cdef Py_ssize_t i, cards = triangles // (2 * segments) if segments > 0 else 0
+    for i in range(card.shape[0]):
+        if card[i] < 0 or card[i] >= cards:
+            raise ValueError(f"card index {card[i]} outside [0, {cards})")
+
+
+def map_points(const double[:, ::1] frames, int segments, const i64[::1] card, const double[:, ::1] uvd,
+               double[:, ::1] out):
+    """``out[i]`` = the world point of card coordinates ``uvd[i]`` on ``card[i]``."""
+    cdef Py_ssize_t i, n = card.shape[0]
+    if frames.shape[1] != 18 or uvd.shape[0] != n or out.shape[0] != n or uvd.shape[1] != 3 or out.shape[1] != 3:
+        raise ValueError("map_points: mismatched shapes")
+    check_cards(card, frames.shape[0], segments)
+    with nogil:
+        for i in range(n):
+            card_map(&frames[0, 0], segments, card[i], &uvd[i, 0], &out[i, 0], NULL, NULL, NULL)
+
+
+def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int segments,
+                const i64[::1] strand_card, const double[:, ::1] scale,
+                const i64[::1] base, int base_order, const i64[::1] level_start, const i64[::1] idx,
+                const i64[:, ::1] nb, const double[:, ::1] wt, int newton_steps, double max_step_ratio,
+                double[:, :, ::1] rec, double[:, :, ::1] world, i64[:, :, ::1] res, const double[:, :, ::1] y=None, const double[:, :, ::1] dz_points=None, double dz_dist=-1.0):
+    """The recurrence of spec 4.3 for the strands ``strands_to_code`` (indices into ``[S]``; best
+    grouped by card, whose triangles then stay in cache) of ``n`` points, into ``rec`` (scaled card
+    coordinates ``[S, n, 3]``) and ``world`` (their world points).
+
+    Levels: ``level_start [L + 1]`` delimits rows of ``idx [R]`` (the new indices), ``nb [R, 4]`` and
+    ``wt [R, 4]`` (their interpolation neighbours and weights). Decoding (``y`` None) reads the
+    residuals ``res [S, len(base) + R, 3]`` (base samples, then the levels' rows); encoding writes them from ``y``
+    (``[S, n, 3]``), leaving a refinement residual at zero where the prediction alone maps within
+    ``dz_dist`` of ``dz_points`` (``dz_dist < 0``: no dead zone)."""
+    cdef Py_ssize_t t, s, j, li, row, kk, i, ch
+    cdef Py_ssize_t strands = strands_to_code.shape[0], nbase = base.shape[0], levels = level_start.shape[0] - 1
+    cdef int encode = y is not None, dead_zone = encode and dz_points is not None and dz_dist >= 0
+    cdef double pred[3]
+    cdef double goal[3]
+    cdef double xw[3]
+    cdef double inv_sc[3]
+    cdef double w, ratio, dist2 = dz_dist * dz_dist
+    cdef const double* fr
+    cdef const double* sc
+    cdef double* R
+    cdef double* W
+    cdef const double* Y = NULL
+    cdef const double* Z = NULL
+    cdef i64* BR
+    cdef i64* LR
+    cdef i64 card, a, b, c
+    if strands == 0:
+        return
+    check_cards(strand_card, frames.shape[0], segments)
+    shape = (strand_card.shape[0], rec.shape[1], 3)
+    if (frames.shape[1] != 18 or tuple(scale.shape)[:2] != shape[::2] or tuple(rec.shape)[:3] != shape
+            or tuple(world.shape)[:3] != shape or tuple(res.shape)[:3] != (shape[0], nbase + idx.shape[0], 3)
+            or (y is not None and tuple(y.shape)[:3] != shape)
+            or (dz_points is not None and tuple(dz_points.shape)[:3] != shape)
+            or nb.shape[0] != idx.shape[0] or wt.shape[0] != idx.shape[0] or nb.shape[1] != 4 or wt.shape[1] != 4
+            or level_start[levels] != idx.shape[0]):
+        raise ValueError("run_strands: mismatched shapes")
+    for t in range(strands):
+        if strands_to_code[t] < 0 or strands_to_code[t] >= shape[0]:
+            raise ValueError("run_strands: a strand index is out of range")
+    fr = &frames[0, 0]
+    with nogil:
+        for t in range(strands):
+            s = strands_to_code[t]
+            card = strand_card[s]
+            sc = &scale[s, 0]
+            for ch in range(3):
+                inv_sc[ch] = 1.0 / sc[ch]
+            R = &rec[s, 0, 0]
+            W = &world[s, 0, 0]
+            BR = &res[s, 0, 0]
+            LR = BR + 3 * nbase
+            if encode:
+                Y = &y[s, 0, 0]
+                if dead_zone:
+                    Z = &dz_points[s, 0, 0]
+            for j in range(nbase):
+                c = base[j]
+                for ch in range(3):
+                    if j == 0:
+                        pred[ch] = 0.0
+                    elif j == 1 or base_order == 1:
+                        pred[ch] = R[3 * base[j - 1] + ch]
+                    else:
+                        a = base[j - 2]
+                        b = base[j - 1]
+                        ratio = <double> (c - b) / <double> (b - a)
+                        pred[ch] = R[3 * b + ch] + (R[3 * b + ch] - R[3 * a + ch]) * ratio
+                    if encode:
+                        BR[3 * j + ch] = <i64> rint(Y[3 * c + ch] - pred[ch])
+                    R[3 * c + ch] = pred[ch] + BR[3 * j + ch]
+                to_world(fr, segments, card, R + 3 * c, inv_sc, W + 3 * c)
+            for li in range(levels):
+                for row in range(level_start[li], level_start[li + 1]):
+                    i = idx[row]
+                    for ch in range(3):
+                        pred[ch] = 0.0
+                        goal[ch] = 0.0
+                    for kk in range(4):
+                        w = wt[row, kk]
+                        j = 3 * nb[row, kk]
+                        for ch in range(3):
+                            pred[ch] = pred[ch] + R[j + ch] * w
+                            goal[ch] = goal[ch] + W[j + ch] * w
+                    if newton_steps:
+                        newton(fr, segments, card, sc, inv_sc, goal, newton_steps, max_step_ratio, pred)
+                    if encode:
+                        for ch in range(3):
+                            LR[3 * row + ch] = <i64> rint(Y[3 * i + ch] - pred[ch])
+                        if dead_zone:
+                            to_world(fr, segments, card, pred, inv_sc, xw)
+                            for ch in range(3):
+                                xw[ch] = xw[ch] - Z[3 * i + ch]
+                            if dot3(xw, xw) <= dist2:
+                                LR[3 * row] = 0
+                                LR[3 * row + 1] = 0
+                                LR[3 * row + 2] = 0
+                    for ch in range(3):
+                        R[3 * i + ch] = pred[ch] + LR[3 * row + ch]
+                    to_world(fr, segments, card, R + 3 * i, inv_sc, W + 3 * i)
+
+
+def undo_neighbour(i64[:, :, ::1] values, const i64[::1] order, const uint8_t[::1] starts,
+                   const uint8_t[:, ::1] mask):
+    """Neighbour prediction undone in place (spec 4.3): going through the strands in ``order``, each
+    value ``values[s, col, ch]`` with ``mask[col, ch]`` gets the previous strand's added, unless
+    ``starts`` marks ``s`` as the first strand of its card. Integers wrap as int64 (a corrupt file
+    gives wrong numbers, never a crash)."""
+    cdef Py_ssize_t t, s, p, col, ch, n = values.shape[1]
+    with nogil:
+        for t in range(1, order.shape[0]):
+            if starts[t]:
+                continue
+            s = order[t]
+            p = order[t - 1]
+            for col in range(n):
+                for ch in range(3):
+                    if mask[col, ch]:
+                        values[s, col, ch] = <i64> (<uint64_t> values[s, col, ch] + <uint64_t> values[p, col, ch])
+
+
+# --- STRD entropy decoding (spec 4.3.2) ------------------------------------------------------------
+
+
+cdef enum:  # rans.py, residual_coder.py
+    DIRECT = 16
+    ALPHABET = 76
+    PROB_BITS = 12
+    LOW = 65536
+    CONTEXTS = 32
+
+cdef enum:  # what decode_residuals returns: 0, or the first fault found
+    EMPTY_TABLE = 1
+    WORDS_END_EARLY = 2
+    STREAM_NOT_ENDED = 3
+    EXTRA_BITS_LENGTH = 4
+    TOO_LARGE = 5
+    NO_MEMORY = 6
+
+FAULTS = {EMPTY_TABLE: "a symbol is coded with an empty frequency table",
+          WORDS_END_EARLY: "the rANS word stream ends early",
+          STREAM_NOT_ENDED: "the rANS stream does not end where its symbols do",
+          EXTRA_BITS_LENGTH: "the extra bits do not have the length the tokens need",
+          TOO_LARGE: "a residual is too large to reconstruct exactly in float64",
+          NO_MEMORY: "out of memory"}
+TRUNCATED = WORDS_END_EARLY
+
+
+cdef inline int token_bits(int tok) noexcept nogil:
+    """The bit class of a token: bitlen of its smallest value."""
+    if tok >= DIRECT:
+        return tok - DIRECT + 5
+    cdef int n = 0
+    while tok:
+        n += 1
+        tok >>= 1
+    return n
+
+
+def decode_residuals(const uint8_t[::1] flat_slot, const uint32_t[::1] flat_freq, const uint32_t[::1] flat_start,
+                     const uint32_t[::1] states, const uint16_t[::1] words, const uint8_t[::1] extra,
+                     const i64[::1] column_array, const uint8_t[::1] first, int lanes, uint8_t[:, :, ::1] sym,
+                     i64[:, :, ::1] out):
+    """Decode the STRD token stream and extra bits into residuals ``out [S, N, 3]`` (``sym``: scratch
+    of the same shape). Returns 0, or the first fault found: a key of ``FAULTS``."""
+    cdef Py_ssize_t strands = out.shape[0], n = out.shape[1], nwords = words.shape[0]
+    cdef Py_ssize_t b, col, lane, s, act, pos = 0, blocks = (strands + lanes - 1) // lanes
+    cdef int ch, tok, p, o, nb, t
+    cdef uint32_t x, slot, f
+    cdef uint64_t z, total_bits = 0, bitpos = 0, i
+    cdef uint32_t* xs = <uint32_t*> calloc(lanes, sizeof(uint32_t))
+    cdef int* prev = <int*> calloc(3 * lanes, sizeof(int))
+    cdef int fault = 0
+    if xs == NULL or prev == NULL:
+        free(xs)
+        free(prev)
+        return NO_MEMORY
+    with nogil:
+        for lane in range(lanes):
+            xs[lane] = states[lane]
+        for b in range(blocks):
+            act = min(lanes, strands - b * lanes)
+            for col in range(n):
+                if first[col]:
+                    for lane in range(3 * lanes):
+                        prev[lane] = 0
+                for ch in range(3):
+                    for lane in range(act):
+                        s = b * lanes + lane
+                        p = prev[ch * lanes + lane]
+                        o = 0
+                        if ch >= 1:
+                            o = prev[lane]
+                        if ch == 2 and prev[lanes + lane] > o:
+                            o = prev[lanes + lane]
+                        t = ((column_array[col] * 3 + ch) * CONTEXTS + min(p, 7) * 4 + min(o, 3))
+                        x = xs[lane]
+                        slot = x & ((1 << PROB_BITS) - 1)
+                        tok = flat_slot[t * (1 << PROB_BITS) + slot]
+                        if tok >= ALPHABET:
+                            fault = EMPTY_TABLE
+                            break
+                        f = flat_freq[t * ALPHABET + tok]
+                        x = f * (x >> PROB_BITS) + slot - flat_start[t * ALPHABET + tok]
+                        if x < LOW:
+                            if pos >= nwords:
+                                fault = WORDS_END_EARLY
+                                break
+                            x = (x << 16) | words[pos]
+                            pos += 1
+                        xs[lane] = x
+                        sym[s, col, ch] = tok
+                        prev[ch * lanes + lane] = token_bits(tok)
+                        if tok >= DIRECT + 49:  # z >= 2^53: beyond what float64 holds exactly
+                            fault = TOO_LARGE
+                            break
+                        if tok >= DIRECT:
+                            total_bits += tok - DIRECT + 4
+                    if fault:
+                        break
+                if fault:
+                    break
+            if fault:
+                break
+        if not fault:
+            if pos != nwords:
+                fault = STREAM_NOT_ENDED
+            for lane in range(lanes):
+                if xs[lane] != LOW:
+                    fault = STREAM_NOT_ENDED
+        if not fault and (total_bits + 7) // 8 != <uint64_t> extra.shape[0]:
+            fault = EXTRA_BITS_LENGTH
+        if not fault:  # the extra bits, in the same step order
+            for b in range(blocks):
+                act = min(lanes, strands - b * lanes)
+                for col in range(n):
+                    for ch in range(3):
+                        for lane in range(act):
+                            s = b * lanes + lane
+                            tok = sym[s, col, ch]
+                            z = tok
+                            if tok >= DIRECT:
+                                nb = tok - DIRECT + 4
+                                z = 1
+                                for i in range(<uint64_t> nb):
+                                    z = (z << 1) | ((extra[bitpos >> 3] >> (7 - (bitpos & 7))) & 1)
+                                    bitpos += 1
+                            out[s, col, ch] = <i64> (z >> 1) ^ -<i64> (z & 1)
+    free(xs)
+    free(prev)
+    return fault
