@@ -28,6 +28,8 @@ from .quantize import (
     oct_encode,
     rows_int8_decode,
     rows_int8_encode,
+    softmax_levels_decode,
+    softmax_levels_encode,
     zigzag,
 )
 from .residual_coder import read_residuals, write_residuals
@@ -51,7 +53,7 @@ LIMITS = {"strands": 1 << 24, "points": 4096, "cards": 1 << 20, "segments": 1024
 CARD_STEP_FRACTION = 1 / 8  # card geometry is quantized at least 8x finer than strand points ...
 CARD_ERROR_SHARE = 0.25  # ... and finer still until the cards alone move no point by more than this x tol
 MIN_CARD_STEP_FRACTION = 1 / 1024
-MIN_NORMAL_BITS, MAX_NORMAL_BITS = 16, 24
+MIN_NORMAL_BITS, MAX_NORMAL_BITS = 8, 24
 MAX_TIGHTENINGS = 8
 STEP_START = 0.93  # first step, as a fraction of the position tolerance
 TIGHTEN_TARGET = 0.97  # a retry aims the measured error at this fraction of the tolerance ...
@@ -114,10 +116,10 @@ def encode(asset: HairAsset, profile: str | Profile = "compact") -> tuple[bytes,
     # the cards' own error): start where it usually meets the bound at once, then tighten or grow
     step = None if prof.lossless else STEP_START * tol
     appearance_chunks = _appearance_chunks(asset, prof)
-    card_fraction = _card_step_fraction(asset, prof, step, diag, points, tol)
+    card_fraction, normal_bits = _card_quantization(asset, prof, step, diag, points, tol)
     passed = None  # (step, error, quantized geometry) of the largest step that met the bound so far
     for attempt in range(MAX_TIGHTENINGS):
-        geometry = _quantize_geometry(asset, prof, step, diag, card_fraction, points)
+        geometry = _quantize_geometry(asset, prof, step, diag, card_fraction, normal_bits, points)
         decoded = geometry.decoded_points
         err = 0.0 if decoded is None else float(np.linalg.norm(decoded - points, axis=-1).max())
         if step is None:
@@ -155,7 +157,8 @@ def decode(data: bytes) -> HairAsset:
 
 # --- META ----------------------------------------------------------------------------------------
 
-def _meta(asset: HairAsset, prof: Profile, step: float | None, diag: float, card_fraction: float) -> dict:
+def _meta(asset: HairAsset, prof: Profile, step: float | None, diag: float, card_fraction: float,
+          normal_bits: int) -> dict:
     app = asset.appearance
     return {
         "strands": asset.n_strands, "points": asset.points_per_strand, "cards": asset.cards.count,
@@ -167,7 +170,7 @@ def _meta(asset: HairAsset, prof: Profile, step: float | None, diag: float, card
         "bbox_diagonal": diag, "profile": prof.name,
         "quant": {"lossless": True} if step is None else {
             "lossless": False, "step": step, "card_step": step * card_fraction,
-            "normal_bits": _normal_bits(asset.uvd, step), "base_stride": prof.base_stride, "base_order": 2,
+            "normal_bits": normal_bits, "base_stride": prof.base_stride, "base_order": 2,
             "newton_steps": NEWTON_STEPS, "opacity_scale": prof.opacity_scale,
             "logit_levels": prof.logit_levels, "logit_floor": prof.logit_floor, "half_bias": prof.half_bias},
     }
@@ -244,19 +247,30 @@ def _parse_meta(raw: bytes) -> dict:
 
 # --- chunks ---------------------------------------------------------------------------------------
 
-def _card_step_fraction(asset: HairAsset, prof: Profile, step: float | None, diag: float, points: np.ndarray,
-                        tol: float) -> float:
-    """The card step as a fraction of the point step: CARD_STEP_FRACTION, halved while the quantized
-    cards alone (exact card coordinates) move some point by more than CARD_ERROR_SHARE of the
-    tolerance. Short card segments and wide cards magnify spine errors through the strip's bitangent."""
-    fraction = CARD_STEP_FRACTION
-    while step is not None and fraction > MIN_CARD_STEP_FRACTION:
-        cards = _encode_cards(asset.cards, _meta(asset, prof, step, diag, fraction)["quant"], StreamWriter())
-        moved = strand_points(cards, asset.strand_card, asset.uvd).astype(np.float64) - points
-        if np.sqrt(np.max(np.sum(moved * moved, axis=-1))) <= CARD_ERROR_SHARE * tol:
-            break
+def _card_quantization(asset: HairAsset, prof: Profile, step: float | None, diag: float, points: np.ndarray,
+                       tol: float) -> tuple[float, int]:
+    """The card step as a fraction of the point step, and the normals' octahedral bits.
+
+    The fraction starts at CARD_STEP_FRACTION and is halved while the quantized cards alone (exact card
+    coordinates) move some point by more than CARD_ERROR_SHARE of the tolerance: short card segments
+    and wide cards magnify spine errors through the strip's bitangent. The bits start from
+    :func:`_normal_bits`, a bound for the point farthest from its card, and drop while the cards still
+    move no point by more than that share: most points lie far closer to their card."""
+    if step is None:
+        return CARD_STEP_FRACTION, MAX_NORMAL_BITS
+
+    def moved(fraction: float, bits: int) -> float:
+        quant = _meta(asset, prof, step, diag, fraction, bits)["quant"]
+        cards = _encode_cards(asset.cards, quant, StreamWriter())
+        d = strand_points(cards, asset.strand_card, asset.uvd).astype(np.float64) - points
+        return float(np.sqrt(np.max(np.sum(d * d, axis=-1))))
+
+    fraction, bits = CARD_STEP_FRACTION, _normal_bits(asset.uvd, step)
+    while fraction > MIN_CARD_STEP_FRACTION and moved(fraction, bits) > CARD_ERROR_SHARE * tol:
         fraction /= 2
-    return fraction
+    while bits > MIN_NORMAL_BITS and moved(fraction, bits - 1) <= CARD_ERROR_SHARE * tol:
+        bits -= 1
+    return fraction, bits
 
 
 class _Geometry(NamedTuple):
@@ -270,10 +284,10 @@ class _Geometry(NamedTuple):
 
 
 def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag: float, card_fraction: float,
-                       points: np.ndarray) -> _Geometry:
+                       normal_bits: int, points: np.ndarray) -> _Geometry:
     """What depends on the step: META, the CARD streams, and (quantized profiles) the STRD residual
     arrays and the world points a decoder will get (``points``: the input's)."""
-    meta = _meta(asset, prof, step, diag, card_fraction)
+    meta = _meta(asset, prof, step, diag, card_fraction, normal_bits)
     q = meta["quant"]
     cards_w = StreamWriter()
     if q["lossless"]:
@@ -325,8 +339,11 @@ def _appearance_chunks(asset: HairAsset, prof: Profile) -> list[container.Chunk]
         if app.weight_mode == "hard":
             logt_w.ints(np.argmax(app.logits, axis=1))
         else:
-            z = (app.logits.astype(np.float64) - app.logits.max(axis=1, keepdims=True)) / app.temperature
-            logt_w.ints(np.rint(prof.logit_levels * np.exp(z)))  # the strand's largest logit -> levels
+            levels = softmax_levels_encode(app.logits, app.temperature, prof.logit_levels)
+            top = np.argmax(levels, axis=1)  # its level is always logit_levels: store where, not what
+            others = levels[np.arange(app.k)[None, :] != top[:, None]].reshape(len(levels), app.k - 1)
+            logt_w.array(top.astype(_narrowest(app.k - 1)))
+            logt_w.array(others.astype(_narrowest(prof.logit_levels)))
         qc, sc = rows_int8_encode(app.codebooks.reshape(-1, app.latent_dim), prof.weight_bits)
         cbks_w.array(qc)
         cbks_w.array(sc)
@@ -369,6 +386,11 @@ def _undo_neighbour_prediction(strand_card: np.ndarray, values: np.ndarray, widt
     column_mask = np.repeat([[mask >> ch & 1 for ch in range(3)] for mask in masks], widths, axis=0)
     column_mask[0] = 0  # the roots stay plain
     neighbour_decode(values, order, starts, column_mask)
+
+
+def _narrowest(top: int) -> type:
+    """The narrowest unsigned integer type that holds ``0 .. top``."""
+    return next(t for t in (np.uint8, np.uint16, np.uint32) if top <= np.iinfo(t).max)
 
 
 def _estimate(residuals: np.ndarray) -> float:
@@ -516,17 +538,21 @@ def _decode_chunks(meta: dict, payloads: dict[str, bytes]) -> HairAsset:
             logits = np.full((s, k), q["logit_floor"], np.float32)
             logits[np.arange(s), idx] = 0.0
         else:
-            levels = rd["LOGT"].ints((s, k), "logits")
-            if levels.min() < 0 or levels.max() > q["logit_levels"]:
+            top = rd["LOGT"].array((s,), "largest logit", ("|u1", "<u2")).astype(np.int64)
+            others = rd["LOGT"].array((s, k - 1), "other logits", ("|u1", "<u2", "<u4")).astype(np.int64)
+            if top.size and (top.min() < 0 or top.max() >= k):
+                raise InvalidContentError(f"largest logit's index outside [0, {k})", chunk="LOGT")
+            if others.size and (others.min() < 0 or others.max() > q["logit_levels"]):
                 raise InvalidContentError(f"soft logits outside [0, {q['logit_levels']}]", chunk="LOGT")
-            with np.errstate(divide="ignore"):  # a stored 0 is the floor
-                logits = np.maximum(meta["temperature"] * np.log(levels / q["logit_levels"]), q["logit_floor"])
+            levels = np.full((s, k), q["logit_levels"], np.int64)
+            levels[np.arange(k)[None, :] != top[:, None]] = others.ravel()
+            logits = softmax_levels_decode(levels, meta["temperature"], q["logit_levels"], q["logit_floor"])
         cq = rd["CBKS"].array((nt * k, d), "codebooks", ("|i1",))
-        codebooks = rows_int8_decode(cq, rd["CBKS"].array((nt * k,), "codebook scales", ("<f4",))).reshape(nt, k, d)
+        codebooks = rows_int8_decode(cq, rd["CBKS"].array((nt * k,), "codebook scales", ("<u2",))).reshape(nt, k, d)
         mlp = []
         for j, (i, o, layer) in enumerate(zip(widths[:-1], widths[1:], meta["mlp"], strict=True)):
             qw = rd["MLPW"].array((o, i), f"mlp[{j}].weight", ("|i1",))
-            sw = rd["MLPW"].array((o,), f"mlp[{j}].scale", ("<f4",))
+            sw = rd["MLPW"].array((o,), f"mlp[{j}].scale", ("<u2",))
             bias = rd["MLPW"].array((o,), f"mlp[{j}].bias", ("<f2", "<f4"))
             mlp.append(MlpLayer(rows_int8_decode(qw, sw), bias.astype(np.float32), layer["activation"]))
     cards.group = rd["CARD"].array((c,), "group", ("<u2", "<u4")).astype(np.int32)

@@ -15,9 +15,9 @@ class Profile:
     lossless: bool = False
     position_tolerance: float = 2e-4  # max point error / bounding-box diagonal
     opacity_scale: float = 127.5  # opacity = round(o * scale) / scale: max error 0.5 / scale
-    logit_levels: int = 1023  # soft logits stored as round(levels * exp((logit - max) / temperature)) ...
+    logit_levels: int = 255  # soft logits stored as round(levels * exp((logit - max) / temperature)) ...
     logit_floor: float = -16.0  # ... and a stored 0 decodes to this logit
-    weight_bits: int = 6  # codebook and MLP weights: this many bits of symmetric levels per row (in int8)
+    weight_bits: int = 5  # codebook and MLP weights: this many bits of symmetric levels per row (in int8)
     half_bias: bool = True  # MLP biases as float16 (else float32)
     base_stride: int = 16  # hierarchical predictor: coarse samples every this many points
     zstd_level: int = 19
@@ -35,7 +35,7 @@ PROFILES: dict[str, Profile] = {
                     logit_floor=-24.0, weight_bits=8, half_bias=False,
                     description="points within 2e-5 of the bbox diagonal, opacity within 1/2047"),
     "compact": Profile("compact", description="the default: points within 2e-4 of the bbox diagonal, "
-                                              "opacity within 1/255, 6-bit weights"),
+                                              "opacity within 1/255, 5-bit weights"),
 }
 DEFAULT_PROFILE = "compact"
 

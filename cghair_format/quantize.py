@@ -142,19 +142,45 @@ def oct_decode(q: np.ndarray, bits: int = 16) -> np.ndarray:
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
+# --- soft logits -------------------------------------------------------------------------------
+
+def softmax_levels_encode(logits: np.ndarray, temperature: float, levels: int) -> np.ndarray:
+    """Soft logits ``[S, K]`` as what softmax makes of them: ``round(levels * exp((l - max) / tau))``,
+    each strand's largest logit at ``levels`` (spec 4.4)."""
+    z = (np.asarray(logits, np.float64) - np.max(logits, axis=1, keepdims=True)) / temperature
+    return np.rint(levels * np.exp(z)).astype(np.int64)
+
+
+def softmax_levels_decode(q: np.ndarray, temperature: float, levels: int, floor: float) -> np.ndarray:
+    """Inverse of :func:`softmax_levels_encode` up to softmax: ``max(tau * log(q / levels), floor)``;
+    every softmax weight is then within ``K / (2 * levels)`` of the original's."""
+    with np.errstate(divide="ignore"):  # a stored 0 is the floor
+        return np.maximum(temperature * np.log(np.asarray(q) / levels), floor)
+
+
 # --- weights -----------------------------------------------------------------------------------
 
 def rows_int8_encode(w: np.ndarray, bits: int = 8) -> tuple[np.ndarray, np.ndarray]:
-    """Symmetric ``bits``-bit levels (2..8) per row of ``[R, C]`` in int8: ``w ~ q * scale[row]``,
-    ``scale = absmax / (2^(bits-1) - 1)``."""
+    """Symmetric ``bits``-bit levels (2..8) per row of ``[R, C]`` in int8: ``w ~ q * scale[row]``.
+
+    ``scale`` is ``absmax / (2^(bits-1) - 1)`` rounded up to a bfloat16 (the top 16 bits of a
+    float32, returned as uint16): rounding up keeps every value within the levels, and the scale's
+    own precision (2^-8) is far finer than the levels'."""
     w = np.asarray(w, np.float64)
     top = (1 << (bits - 1)) - 1
-    scale = np.abs(w).max(axis=1) / top
-    scale = np.where(scale > 0, scale, 1.0).astype(np.float32)
-    q = np.clip(np.rint(w / scale[:, None].astype(np.float64)), -top, top).astype(np.int8)
-    return q, scale
+    scale = (np.abs(w).max(axis=1) / top).astype(np.float32)
+    scale = np.where(scale > 0, scale, np.float32(1.0)).astype(np.float32)
+    scale_bits = ((scale.view(np.uint32).astype(np.uint64) + 0xFFFF) >> 16).astype(np.uint16)
+    q = np.clip(np.rint(w / bfloat16_decode(scale_bits)[:, None]), -top, top).astype(np.int8)
+    return q, scale_bits
 
 
-def rows_int8_decode(q: np.ndarray, scale: np.ndarray) -> np.ndarray:
+def bfloat16_decode(b: np.ndarray) -> np.ndarray:
+    """float32 values of bfloat16 bit patterns (uint16)."""
+    return (np.asarray(b, np.uint32) << 16).view(np.float32)
+
+
+def rows_int8_decode(q: np.ndarray, scale_bits: np.ndarray) -> np.ndarray:
+    """``q * scale[row]`` (float32) with the bfloat16 row scales of :func:`rows_int8_encode`."""
     with np.errstate(over="ignore", invalid="ignore"):  # a corrupt scale gives inf, which validate() refuses
-        return (q.astype(np.float32) * scale[:, None]).astype(np.float32)
+        return (q.astype(np.float32) * bfloat16_decode(scale_bits)[:, None]).astype(np.float32)

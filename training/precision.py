@@ -1,11 +1,13 @@
 """How much each quantization costs in the picture: render PSNR against the unquantized asset.
 
     python -m training.precision MODEL.cgh DATASET_DIR [--split test] [--bits 8,7,6,5,4]
+                                 [--logit-levels 1023,255]
 
 ``MODEL.cgh`` is the reference (write it with ``--profile lossless`` to measure every profile);
 the cameras come from the dataset's split. For each profile the file is encoded, decoded and
 rendered; for each bit depth only the codebook and MLP weights are quantized (per row, as the
-writer does), which isolates their share of the error.
+writer does), and for each logit level count only the soft logits (as the writer stores them),
+which isolates each one's share of the error.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import torch
 
 from cghair_format import decode, decode_gaussians, encode, read
 from cghair_format.asset import HairAsset
-from cghair_format.quantize import rows_int8_decode, rows_int8_encode
+from cghair_format.quantize import rows_int8_decode, rows_int8_encode, softmax_levels_decode, softmax_levels_encode
 
 from .dataset import View, read_dataset
 from .losses import psnr
@@ -42,7 +44,18 @@ def with_weight_bits(asset: HairAsset, bits: int) -> HairAsset:
     return out
 
 
-def measure(asset: HairAsset, views: list[View], profiles=("high", "compact"), bits=(8, 7, 6, 5, 4)) -> list[dict]:
+def with_logit_levels(asset: HairAsset, levels: int, floor: float = -16.0) -> HairAsset:
+    """A copy with soft logits stored on ``levels`` softmax levels, everything else exact."""
+    out = copy.deepcopy(asset)
+    app = out.appearance
+    if app.weight_mode == "soft":
+        q = softmax_levels_encode(app.logits, app.temperature, levels)
+        app.logits = softmax_levels_decode(q, app.temperature, levels, floor).astype(np.float32)
+    return out
+
+
+def measure(asset: HairAsset, views: list[View], profiles=("high", "compact"), bits=(8, 7, 6, 5, 4),
+            logit_levels=(1023, 255)) -> list[dict]:
     reference = render_views(asset, views)
     rows = []
     for profile in profiles:
@@ -52,6 +65,9 @@ def measure(asset: HairAsset, views: list[View], profiles=("high", "compact"), b
     for b in bits:
         rows.append({"what": f"{b}-bit weights only", "bytes": None,
                      "psnr": psnr(render_views(with_weight_bits(asset, b), views), reference)})
+    for n in logit_levels if asset.appearance.weight_mode == "soft" else ():
+        rows.append({"what": f"{n} logit levels only", "bytes": None,
+                     "psnr": psnr(render_views(with_logit_levels(asset, n), views), reference)})
     return rows
 
 
@@ -61,13 +77,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("dataset", help="a NeRF-synthetic dataset folder, for its cameras")
     p.add_argument("--split", default="test", choices=("train", "test"))
     p.add_argument("--bits", default="8,7,6,5,4", help="weight bit depths to try (2..8)")
+    p.add_argument("--logit-levels", default="1023,255", help="soft-logit level counts to try (1..65535)")
     args = p.parse_args(argv)
     try:
         bits = tuple(int(b) for b in args.bits.split(","))
+        levels = tuple(int(n) for n in args.logit_levels.split(","))
     except ValueError:
-        p.error(f"--bits takes comma-separated integers, got {args.bits!r}")
+        p.error(f"--bits and --logit-levels take comma-separated integers, got {args.bits!r}, {args.logit_levels!r}")
     if not all(2 <= b <= 8 for b in bits):
         p.error("--bits must lie in 2..8")
+    if not all(1 <= n <= 65535 for n in levels):
+        p.error("--logit-levels must lie in 1..65535")
     from cghair_format.errors import CghError
 
     try:
@@ -76,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"python -m training.precision: error: {exc}", file=sys.stderr)
         return 1
     print(f"render PSNR against {args.cgh} on {len(views)} {args.split} views")
-    for row in measure(asset, views, bits=bits):
+    for row in measure(asset, views, bits=bits, logit_levels=levels):
         size = f"{row['bytes']:>10,} B" if row["bytes"] is not None else " " * 12
         print(f"{row['what']:<22} {size}  {row['psnr']:7.2f} dB")
     return 0
