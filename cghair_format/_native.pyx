@@ -410,3 +410,61 @@ def decode_residuals(const uint8_t[::1] flat_slot, const uint32_t[::1] flat_freq
     free(xs)
     free(prev)
     return fault
+
+
+# --- the writer's strand order (spec 4.3, informative) ---------------------------------------------
+
+def chain_order(const double[:, ::1] features, const i64[::1] by_card, const i64[::1] group_start, int window,
+                i64[::1] out):
+    """Within each group of ``by_card`` (strands sorted by card, then root v; group ``g`` is
+    ``by_card[group_start[g]:group_start[g + 1]]``), a greedy chain: from the group's first strand,
+    each next one is the most alike (L1 distance between ``features`` rows) among the first
+    ``window`` strands not yet taken, in the group's order. Writes the chained strands to ``out``."""
+    cdef Py_ssize_t g, a, n, k, i, j, best, prev, cur, pos = 0, f = features.shape[1], seen
+    cdef double d, best_d
+    cdef i64* nxt
+    if by_card.shape[0] != out.shape[0] or group_start[group_start.shape[0] - 1] != by_card.shape[0]:
+        raise ValueError("chain_order: mismatched shapes")
+    for k in range(by_card.shape[0]):
+        if by_card[k] < 0 or by_card[k] >= features.shape[0]:
+            raise ValueError("chain_order: a strand index is out of range")
+    nxt = <i64*> calloc(by_card.shape[0] + 1, sizeof(i64))
+    if nxt == NULL:
+        raise MemoryError()
+    with nogil:
+        for g in range(group_start.shape[0] - 1):
+            a = group_start[g]
+            n = group_start[g + 1] - a
+            if n <= 0:
+                continue
+            # a linked list of the group's strands not yet taken, in order; slot n is its head
+            for k in range(n):
+                nxt[k] = k + 1 if k + 1 < n else -1
+            cur = 0
+            nxt[n] = nxt[0]  # the first strand is taken
+            out[pos] = by_card[a]
+            pos += 1
+            for k in range(1, n):
+                best = -1
+                best_d = 0.0
+                prev = n
+                i = nxt[n]
+                seen = 0
+                while i >= 0 and seen < window:
+                    d = 0.0
+                    for j in range(f):
+                        d = d + fabs(features[by_card[a + i], j] - features[by_card[a + cur], j])
+                    if best < 0 or d < best_d:
+                        best = i
+                        best_d = d
+                    i = nxt[i]
+                    seen += 1
+                # unlink best
+                prev = n
+                while nxt[prev] != best:
+                    prev = nxt[prev]
+                nxt[prev] = nxt[best]
+                cur = best
+                out[pos] = by_card[a + cur]
+                pos += 1
+    free(nxt)

@@ -16,7 +16,7 @@ A :class:`HairAsset` holds what the paper stores, as plain numpy arrays:
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -157,6 +157,19 @@ class HairAsset:
     @property
     def n_gaussians(self) -> int:
         return self.n_strands * (self.points_per_strand - 1)
+
+    def take_strands(self, order: np.ndarray) -> HairAsset:
+        """The same asset with its strands in ``order`` (indices into the strands): every per-strand
+        array follows; cards, codebooks and MLP are shared."""
+        order = np.asarray(order, np.int64)
+
+        def pick(a: np.ndarray | None) -> np.ndarray | None:
+            return None if a is None else a[order]
+
+        app = self.appearance
+        return replace(self, strand_card=self.strand_card[order], uvd=self.uvd[order], opacity=self.opacity[order],
+                       appearance=replace(app, logits=app.logits[order]), strand_ids=pick(self.strand_ids),
+                       root_uv=pick(self.root_uv), source_color=pick(self.source_color))
 
     def validate(self) -> HairAsset:
         """Check shapes, dtypes, ranges and cross-references; raise :class:`AssetError` if wrong."""

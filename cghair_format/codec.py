@@ -18,7 +18,7 @@ import numpy as np
 from . import container, rans
 from .asset import ACTIVATIONS, UP_AXES, WEIGHT_MODES, Appearance, Cards, HairAsset, MlpLayer
 from .errors import AssetError, InvalidContentError, LimitError
-from .geometry import card_mesh, strand_points
+from .geometry import card_scales, strand_points
 from .profiles import Profile, get_profile
 from .quantize import (
     hier_decode,
@@ -36,6 +36,7 @@ from .residual_coder import read_residuals, write_residuals
 from .strand_coder import (
     NEWTON_STEPS,
     Prediction,
+    canonical_order,
     code_base,
     decode_uvd,
     encode_uvd,
@@ -68,13 +69,20 @@ class EncodeReport:
     max_point_error: float  # largest Euclidean distance to the input point, measured, scene units
     bbox_diagonal: float
     chunk_sizes: dict[str, int] = field(default_factory=dict)  # stored bytes per chunk
+    # the file's strand i is the input's strand_order[i] (None: the input's order, kept)
+    strand_order: np.ndarray | None = None
+
+    def in_file_order(self, asset: HairAsset) -> HairAsset:
+        """The encoded ``asset`` with its strands in the order the file stores them."""
+        return asset if self.strand_order is None else asset.take_strands(self.strand_order)
 
 
 # --- public API ----------------------------------------------------------------------------------
 
-def write(asset: HairAsset, path: str | os.PathLike, profile: str | Profile = "compact") -> EncodeReport:
-    """Write ``asset`` to ``path`` atomically (temporary file, then rename)."""
-    data, report = encode(asset, profile)
+def write(asset: HairAsset, path: str | os.PathLike, profile: str | Profile = "compact",
+          keep_order: bool = False) -> EncodeReport:
+    """Write ``asset`` to ``path`` atomically (temporary file, then rename); see :func:`encode`."""
+    data, report = encode(asset, profile, keep_order)
     path = Path(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
     try:
@@ -105,10 +113,20 @@ def _read_bytes(source) -> bytes:
     return Path(source).read_bytes()
 
 
-def encode(asset: HairAsset, profile: str | Profile = "compact") -> tuple[bytes, EncodeReport]:
-    """Serialise a validated asset; returns the bytes and what the quantization measured."""
+def encode(asset: HairAsset, profile: str | Profile = "compact", keep_order: bool = False
+           ) -> tuple[bytes, EncodeReport]:
+    """Serialise a validated asset; returns the bytes and what the quantization measured.
+
+    The quantized profiles store the strands in canonical order (by card, then root position: spec
+    4.3), which codes smaller: ``report.strand_order`` maps them back to the input's (the asset's
+    optional ``strand_ids`` travel with their strands). ``keep_order`` keeps the input's order instead,
+    at a cost (4-5 % at the paper's scale); the lossless profile always keeps it."""
     prof = get_profile(profile)
     asset.validate()
+    order = None
+    if not prof.lossless and not keep_order:
+        order = canonical_order(asset.cards, asset.strand_card, asset.uvd)
+        asset = asset.take_strands(order)
     points = strand_points(asset.cards, asset.strand_card, asset.uvd).astype(np.float64)
     diag = float(np.linalg.norm(points.reshape(-1, 3).max(0) - points.reshape(-1, 3).min(0)))
     tol = prof.position_tolerance * max(diag, 1e-12)
@@ -138,7 +156,7 @@ def encode(asset: HairAsset, profile: str | Profile = "compact") -> tuple[bytes,
     chunks = _geometry_chunks(asset, geometry)
     data = container.pack(chunks + appearance_chunks, level=prof.zstd_level)
     _, infos = container.read_table(data)
-    return data, EncodeReport(prof.name, step, err, diag, {i.type: i.stored for i in infos})
+    return data, EncodeReport(prof.name, step, err, diag, {i.type: i.stored for i in infos}, order)
 
 
 def decode(data: bytes) -> HairAsset:
@@ -295,7 +313,7 @@ def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag
             cards_w.array(a.astype(np.float32), shuffle=True)
         return _Geometry(meta, cards_w, None, None)
     cards = _encode_cards(asset.cards, q, cards_w)
-    su, sv = _card_scales(cards, q["step"])
+    su, sv = card_scales(cards, q["step"])
     scale = _uvd_scale(su, sv, asset.strand_card, q["step"])
     y = asset.uvd * scale[:, None, :]
     q["base_order"] = _choose_base_order(asset.strand_card, y, q["base_stride"])
@@ -362,17 +380,16 @@ def _with_neighbour_prediction(strand_card: np.ndarray, residuals: list[np.ndarr
     """Per residual array and channel, the plain residuals or their differences from the card
     neighbour's (spec 4.3), whichever the entropy coder's estimate finds smaller. Returns the arrays
     to store and, per array, the mask of channels stored as differences (bit 0 u, bit 1 v, bit 2
-    delta). The roots (column 0 of the base array) stay plain: they define the neighbour order."""
-    order, starts = neighbour_order(strand_card, residuals[0][:, 0])
+    delta)."""
+    order, starts = neighbour_order(strand_card)
     stored, masks = [], []
-    for j, r in enumerate(residuals):
+    for r in residuals:
         r = r.copy()
-        part = r[:, 1:] if j == 0 else r
         mask = 0
         for ch in range(3):
-            diff = neighbour_encode(part[..., ch], order, starts)
-            if _estimate(diff) < _estimate(part[..., ch]):
-                part[..., ch] = diff
+            diff = neighbour_encode(r[..., ch], order, starts)
+            if _estimate(diff) < _estimate(r[..., ch]):
+                r[..., ch] = diff
                 mask |= 1 << ch
         stored.append(r)
         masks.append(mask)
@@ -382,9 +399,8 @@ def _with_neighbour_prediction(strand_card: np.ndarray, residuals: list[np.ndarr
 def _undo_neighbour_prediction(strand_card: np.ndarray, values: np.ndarray, widths: list[int],
                                masks: list[int]) -> None:
     """Inverse of :func:`_with_neighbour_prediction`, in place, on the arrays side by side ``[S, N, 3]``."""
-    order, starts = neighbour_order(strand_card, values[:, 0])
+    order, starts = neighbour_order(strand_card)
     column_mask = np.repeat([[mask >> ch & 1 for ch in range(3)] for mask in masks], widths, axis=0)
-    column_mask[0] = 0  # the roots stay plain
     neighbour_decode(values, order, starts, column_mask)
 
 
@@ -407,7 +423,7 @@ def _choose_base_order(strand_card: np.ndarray, y: np.ndarray, base_stride: int)
     coder's estimate finds smaller once neighbour prediction has had its say: strands of a card that
     run parallel share their steps more than their bends, which favours 1."""
     base, _ = level_plan(y.shape[1], base_stride)
-    order, starts = neighbour_order(strand_card, np.rint(y[:, 0]).astype(np.int64))
+    order, starts = neighbour_order(strand_card)
     sizes = {}
     for k in (2, 1):
         r = code_base(np.zeros(y.shape), base, k, y)[:, 1:]
@@ -490,17 +506,6 @@ def _uvd_scale(su: np.ndarray, sv: np.ndarray, strand_card: np.ndarray, step: fl
     return np.stack([su[strand_card], sv[strand_card], np.ones(len(strand_card))], axis=-1) / step
 
 
-def _card_scales(cards: Cards, step: float) -> tuple[np.ndarray, np.ndarray]:
-    """Per card, the world length of one unit of u and of v (upper bounds), at least ``step``."""
-    mesh = card_mesh(cards)
-    m1 = cards.spine.shape[1]
-    rails = mesh.vertices.astype(np.float64).reshape(cards.count, m1, 2, 3)
-    seg = np.linalg.norm(np.diff(rails, axis=1), axis=-1).max(axis=(1, 2))
-    su = np.maximum((m1 - 1) * seg, step)
-    sv = np.maximum(2 * cards.half_width.astype(np.float64).max(axis=1), step)
-    return su, sv
-
-
 def _decode_chunks(meta: dict, payloads: dict[str, bytes]) -> HairAsset:
     s, p, c, m, nt, k, d = (meta[key] for key in ("strands", "points", "cards", "segments", "groups", "k",
                                                     "latent_dim"))
@@ -524,7 +529,7 @@ def _decode_chunks(meta: dict, payloads: dict[str, bytes]) -> HairAsset:
     else:
         stride, step = q["base_stride"], q["step"]
         cards = _decode_cards(rd["CARD"], c, m + 1, q)
-        su, sv = _card_scales(cards, step)
+        su, sv = card_scales(cards, step)
         columns = level_widths(p, stride)
         residuals = read_residuals(rd["STRD"], s, columns)
         _undo_neighbour_prediction(strand_card, residuals, columns, q["neighbour"])

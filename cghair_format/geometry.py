@@ -89,6 +89,17 @@ def triangle_and_barycentrics(uv: np.ndarray, segments: int) -> tuple[np.ndarray
     return (2 * k + upper).astype(np.int64), bary
 
 
+def card_scales(cards: Cards, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per card, the world length of one unit of u and of v (upper bounds), at least ``step``."""
+    mesh = card_mesh(cards)
+    m1 = cards.spine.shape[1]
+    rails = mesh.vertices.astype(np.float64).reshape(cards.count, m1, 2, 3)
+    seg = np.linalg.norm(np.diff(rails, axis=1), axis=-1).max(axis=(1, 2))
+    su = np.maximum((m1 - 1) * seg, step)
+    sv = np.maximum(2 * cards.half_width.astype(np.float64).max(axis=1), step)
+    return su, sv
+
+
 class CardMap:
     """The card-to-world mapping of section "Strand points", for many points.
 

@@ -7,8 +7,9 @@ world positions), carried back to card coordinates by Newton steps on the card m
 the card-space interpolation, and only the residual in card coordinates is stored.
 
 Strands of one card run side by side, so their residuals are alike too: with neighbour prediction
-(spec 4.3) a strand's residuals are stored as differences from those of the strand next to it on
-the card (ordered by root position), level by level and channel by channel where that is smaller.
+(spec 4.3) a strand's residuals are stored as differences from those of the strand before it on
+the card (the writer stores strands by card and root position), array by array and channel by
+channel where that is smaller.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import numpy as np
 
 from . import _native
 from .asset import Cards
-from .geometry import CardMap
+from .geometry import CardMap, card_scales
 from .parallel import map_blocks
 from .quantize import base_prediction, level_plan
 
@@ -119,10 +120,31 @@ def decode_uvd(cards: Cards, strand_card: np.ndarray, residuals: np.ndarray, n: 
 
 # --- neighbour prediction across the strands of a card (spec 4.3) ----------------------------------
 
-def neighbour_order(strand_card: np.ndarray, roots: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Strands ordered by card, then root ``v``, then root ``u``, then index (``roots``: the base
-    residuals of sample 0, ``[S, 3]`` integers), and for each position whether it starts its card."""
-    order = np.lexsort((roots[:, 0], roots[:, 1], strand_card))
+CHAIN_SAMPLES = 8  # the strand features the writer's order compares: every this many points ...
+CHAIN_WINDOW = 256  # ... among this many candidates at most
+
+
+def canonical_order(cards: Cards, strand_card: np.ndarray, uvd: np.ndarray) -> np.ndarray:
+    """The order the writer stores strands in (spec 4.3): card by card; on each card a greedy chain
+    that starts at the strand with the smallest root ``v`` and goes on to the most alike strand not yet
+    taken (its points' card coordinates, in world units, every CHAIN_SAMPLES points). Each strand's
+    neighbour, the one before it, is then as alike as the writer could make it, and ``strand_card``
+    runs in blocks."""
+    su, sv = card_scales(cards, 0.0)
+    card = strand_card.astype(np.int64)
+    world = np.stack([su, sv, np.ones_like(su)], axis=-1)[card][:, None, :]
+    features = np.ascontiguousarray((uvd[:, ::CHAIN_SAMPLES].astype(np.float64) * world).reshape(len(card), -1))
+    by_card = np.lexsort((np.arange(len(card)), uvd[:, 0, 1], card))
+    group_start = np.searchsorted(card[by_card], np.arange(cards.count + 1)).astype(np.int64)
+    out = np.empty(len(card), np.int64)
+    _native.chain_order(features, by_card.astype(np.int64), group_start, CHAIN_WINDOW, out)
+    return out
+
+
+def neighbour_order(strand_card: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Strands ordered by card, then by index (a stable sort), and for each position whether it starts
+    its card: a strand's neighbour is the one before it in this order, on the same card."""
+    order = np.argsort(strand_card, kind="stable")
     cards = strand_card[order]
     starts = np.r_[True, cards[1:] != cards[:-1]]
     return order, starts

@@ -80,8 +80,9 @@ class CardBuild:
         """Error after encoding with ``profile`` and decoding, and the encoded size in bytes."""
         from ..codec import decode, encode
 
-        data, _ = encode(self.asset, profile)
-        return ReconstructionError.measure(self.points, decode_points(decode(data))), len(data)
+        data, report = encode(self.asset, profile)
+        points = self.points if report.strand_order is None else self.points[report.strand_order]
+        return ReconstructionError.measure(points, decode_points(decode(data))), len(data)
 
     def timing_table(self) -> str:
         out = io.StringIO()

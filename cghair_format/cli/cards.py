@@ -28,6 +28,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0, help="random seed of the k-means stages (default: 0)")
     p.add_argument("--profile", choices=PROFILE_NAMES, default="compact",
                    help="precision profile of the written file (default: compact)")
+    p.add_argument("--keep-order", action="store_true",
+                   help="keep the input's strand order in the file (default: the writer's order, which codes smaller)")
     p.add_argument("--units", type=positive_float, default=None,
                    help="metres per input unit (overrides what the file says)")
     p.add_argument("--up", choices=("Y", "Z"), default=None, help="up axis of the input (overrides the file)")
@@ -61,8 +63,9 @@ def run(args: argparse.Namespace) -> int:
                         sh_degree=args.sh_degree)
     if args.attribution is not None:
         build.asset.attribution = args.attribution
-    write(build.asset, out, profile=args.profile)
-    after = ReconstructionError.measure(build.points, decode_points(read(out)))
+    report = write(build.asset, out, profile=args.profile, keep_order=args.keep_order)
+    points = build.points if report.strand_order is None else build.points[report.strand_order]
+    after = ReconstructionError.measure(points, decode_points(read(out)))
     info = build.info
     print(f"{out}: {info['strands']:,} strands x {info['points']} points on {info['cards']:,} cards of "
           f"{args.segments} segments, {info['groups']} groups; {out.stat().st_size:,} bytes ({args.profile})")

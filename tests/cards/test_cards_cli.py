@@ -27,6 +27,9 @@ def test_build_write_and_report(strand_file, tmp_path, capsys):
     assert code == 0
     assert "12 cards of 8 segments, 3 groups" in text
     assert "point error before quantization" in text and "point error after quantization (compact)" in text
+    # the file stores strands card by card; the error is measured against each strand's own input
+    after = [ln for ln in text.splitlines() if "after quantization" in ln][0]
+    assert float(after.split("(")[-1].rstrip(")")) <= 2e-4 + 1e-6  # max error / bbox diagonal
     for stage in ("cluster", "guide", "normals", "uv", "textures"):
         assert stage in text
     asset = read(out)

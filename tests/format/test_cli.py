@@ -4,6 +4,7 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 import cghair_format as cgh
@@ -42,6 +43,17 @@ def test_encode_changes_profile(asset_file, tmp_path, capsys):
     out = tmp_path / "l.cgh"
     assert main(["encode", str(asset_file), "-o", str(out), "--profile", "lossless"]) == 0
     assert cgh.read_info(out)["profile"] == "lossless"
+
+
+def test_encode_keeps_the_strand_order_when_asked(tmp_path, capsys):
+    source = tmp_path / "src.cgh"
+    cgh.write(example_asset(4, strands=30, cards=4), source, "lossless")
+    assert main(["encode", str(source), "-o", str(tmp_path / "kept.cgh"), "--keep-order"]) == 0
+    assert "card by card" not in capsys.readouterr().out
+    assert np.array_equal(cgh.read(tmp_path / "kept.cgh").strand_card, cgh.read(source).strand_card)
+    assert main(["encode", str(source), "-o", str(tmp_path / "sorted.cgh")]) == 0
+    assert "strands stored card by card" in capsys.readouterr().out
+    assert np.all(np.diff(cgh.read(tmp_path / "sorted.cgh").strand_card) >= 0)
 
 
 def test_missing_file_and_not_a_cgh(tmp_path, capsys):

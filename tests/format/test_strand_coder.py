@@ -12,7 +12,8 @@ from hypothesis import strategies as st
 import cghair_format as cgh
 from cghair_format import codec, container
 from cghair_format.errors import InvalidContentError
-from cghair_format.strand_coder import neighbour_decode, neighbour_encode, neighbour_order
+from cghair_format.geometry import card_scales
+from cghair_format.strand_coder import canonical_order, neighbour_decode, neighbour_encode, neighbour_order
 
 
 @settings(max_examples=60, deadline=None)
@@ -20,24 +21,64 @@ from cghair_format.strand_coder import neighbour_decode, neighbour_encode, neigh
 def test_neighbour_transform_is_an_exact_inverse(strands, cards, seed):
     rng = np.random.default_rng(seed)
     strand_card = rng.integers(0, cards, strands)
-    roots = rng.integers(-3, 4, (strands, 3))  # ties on purpose: the strand index breaks them
     r = rng.integers(-2**40, 2**40, (strands, 7, 3))
     mask = rng.random((7, 3)) < 0.5
-    order, starts = neighbour_order(strand_card, roots)
+    order, starts = neighbour_order(strand_card)
     stored = np.where(mask, neighbour_encode(r, order, starts), r)
     neighbour_decode(stored, order, starts, mask)
     assert np.array_equal(stored, r)
 
 
-def test_neighbour_order_is_card_then_root_v_then_root_u_then_index():
+def test_a_strands_neighbour_is_the_one_before_it_on_its_card():
     strand_card = np.array([1, 0, 1, 0, 1, 1])
-    roots = np.array([[5, 2, 0], [0, 9, 0], [1, 2, 0], [0, 1, 0], [1, 2, 0], [0, 0, 0]])
-    order, starts = neighbour_order(strand_card, roots)
-    expected = sorted(range(6), key=lambda s: (strand_card[s], roots[s, 1], roots[s, 0], s))
-    assert order.tolist() == expected == [3, 1, 5, 2, 4, 0]
+    order, starts = neighbour_order(strand_card)
+    assert order.tolist() == [1, 3, 0, 2, 4, 5]
     assert starts.tolist() == [True, False, True, False, False, False]
     d = neighbour_encode(np.arange(6) * 10, order, starts)
-    assert d.tolist() == [-40, -20, -30, 30, 20, 50]  # the firsts of each card (3 and 5) stay plain
+    assert d.tolist() == [0, 10, 20, 20, 20, 10]  # the firsts of each card (1 and 0) stay plain
+
+
+def test_the_writers_order_chains_alike_strands_card_by_card():
+    """Card by card, from the smallest root v, each next strand is the most alike one left."""
+    from cghair_format.examples import example_asset
+
+    asset = example_asset(3, strands=40, points=17, cards=3)
+    order = canonical_order(asset.cards, asset.strand_card, asset.uvd)
+    assert sorted(order.tolist()) == list(range(40))
+    cards = asset.strand_card[order]
+    assert np.all(np.diff(cards) >= 0)
+    su, sv = card_scales(asset.cards, 0.0)
+    world = asset.uvd[:, ::8].astype(np.float64) * np.stack([su, sv, np.ones_like(su)], -1)[asset.strand_card][:, None]
+    for c in np.unique(cards):
+        chain = order[cards == c]
+        assert asset.uvd[chain[0], 0, 1] == asset.uvd[asset.strand_card == c, 0, 1].min()
+        for k in range(1, len(chain)):
+            left = chain[k:]
+            dist = np.abs(world[left] - world[chain[k - 1]]).sum(axis=(1, 2))
+            assert dist[0] == dist.min()
+
+
+def test_the_writer_stores_strands_in_canonical_order_unless_asked_to_keep_it():
+    from cghair_format.cards import build_cards
+
+    asset = build_cards(load_hair("Ratboy_mohawk.tfx"), n_cards=60, n_groups=4, points=32, seed=0,
+                        progress=False).asset
+    asset.strand_ids = np.arange(asset.n_strands, dtype=np.uint32) + 1000
+    data, report = cgh.encode(asset, "compact")
+    assert np.array_equal(report.strand_order, canonical_order(asset.cards, asset.strand_card, asset.uvd))
+    decoded = cgh.decode(data)
+    assert np.all(np.diff(decoded.strand_card) >= 0)  # grouped by card
+    assert np.array_equal(decoded.strand_ids, 1000 + report.strand_order)  # ids travel with their strands
+    in_order = report.in_file_order(asset)
+    assert np.linalg.norm(cgh.decode_points(decoded) - cgh.decode_points(in_order), axis=-1).max() \
+        <= 2e-4 * report.bbox_diagonal
+
+    kept, kept_report = cgh.encode(asset, "compact", keep_order=True)
+    assert kept_report.strand_order is None
+    assert np.array_equal(cgh.decode(kept).strand_card, asset.strand_card)
+    assert np.linalg.norm(cgh.decode_points(cgh.decode(kept)) - cgh.decode_points(asset), axis=-1).max() \
+        <= 2e-4 * kept_report.bbox_diagonal
+    assert report.chunk_sizes["STRD"] < kept_report.chunk_sizes["STRD"]  # the ids' own chunk aside
 
 
 def test_real_hair_stores_neighbour_differences_and_decodes_the_same_points(monkeypatch):
@@ -49,7 +90,8 @@ def test_real_hair_stores_neighbour_differences_and_decodes_the_same_points(monk
     masks = json.loads(container.unpack(data, set(codec.REQUIRED_CHUNKS))[2]["META"])["quant"]["neighbour"]
     assert any(masks), masks
     decoded = cgh.decode_points(cgh.decode(data))
-    assert np.linalg.norm(decoded - cgh.decode_points(asset), axis=-1).max() <= 2e-4 * report.bbox_diagonal
+    expected = cgh.decode_points(report.in_file_order(asset))
+    assert np.linalg.norm(decoded - expected, axis=-1).max() <= 2e-4 * report.bbox_diagonal
 
     # the same file without the transform reconstructs the same points and is larger
     monkeypatch.setattr(codec, "_with_neighbour_prediction", lambda _, res: (res, [0] * len(res)))
@@ -94,7 +136,8 @@ def test_both_base_predictors_decode_within_the_bound(order, monkeypatch):
     data, report = cgh.encode(asset, "compact")
     assert json.loads(container.unpack(data, set(codec.REQUIRED_CHUNKS))[2]["META"])["quant"]["base_order"] == order
     decoded = cgh.decode_points(cgh.decode(data))
-    assert np.linalg.norm(decoded - cgh.decode_points(asset), axis=-1).max() <= 2e-4 * report.bbox_diagonal
+    expected = cgh.decode_points(report.in_file_order(asset))
+    assert np.linalg.norm(decoded - expected, axis=-1).max() <= 2e-4 * report.bbox_diagonal
 
 
 def test_parallel_strands_choose_the_previous_sample_as_base_predictor():
@@ -133,4 +176,5 @@ def test_the_dead_zone_leaves_more_zero_residuals_and_keeps_the_bound(monkeypatc
     plain_zeros = sum(int((r == 0).sum()) for r in plain_levels)
     assert zeros > plain_zeros
     decoded = cgh.decode_points(cgh.decode(data))
-    assert np.linalg.norm(decoded - cgh.decode_points(asset), axis=-1).max() <= 2e-4 * report.bbox_diagonal
+    expected = cgh.decode_points(report.in_file_order(asset))
+    assert np.linalg.norm(decoded - expected, axis=-1).max() <= 2e-4 * report.bbox_diagonal
