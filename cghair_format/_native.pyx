@@ -161,7 +161,8 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                 double[:, :, ::1] rec, double[:, :, ::1] world, i64[:, :, ::1] res, const double[:, :, ::1] y=None, const double[:, :, ::1] dz_points=None, double dz_dist=-1.0):
     """The recurrence of spec 4.3 for the strands ``strands_to_code`` (indices into ``[S]``; best
     grouped by card, whose triangles then stay in cache) of ``n`` points, into ``rec`` (scaled card
-    coordinates ``[S, n, 3]``) and ``world`` (their world points).
+    coordinates ``[S, n, 3]``) and ``world`` (their world points; when decoding, all but the last
+    level's, which nothing is predicted from).
 
     Levels: ``level_start [L + 1]`` delimits rows of ``idx [R]`` (the new indices), ``nb [R, 4]`` and
     ``wt [R, 4]`` (their interpolation neighbours and weights). Decoding (``y`` None) reads the
@@ -258,7 +259,8 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                                 LR[3 * row + 2] = 0
                     for ch in range(3):
                         R[3 * i + ch] = pred[ch] + LR[3 * row + ch]
-                    to_world(fr, segments, card, R + 3 * i, inv_sc, W + 3 * i)
+                    if encode or li + 1 < levels:  # a decoder predicts nothing from the last level
+                        to_world(fr, segments, card, R + 3 * i, inv_sc, W + 3 * i)
 
 
 def undo_neighbour(i64[:, :, ::1] values, const i64[::1] order, const uint8_t[::1] starts,
@@ -468,3 +470,48 @@ def chain_order(const double[:, ::1] features, const i64[::1] by_card, const i64
                 out[pos] = by_card[a + cur]
                 pos += 1
     free(nxt)
+
+
+# --- Gaussians of strand segments (spec 6.2) -------------------------------------------------------
+
+def segment_frames(const float[:, :, ::1] points, double thickness, float[:, :, ::1] means,
+                   float[:, :, ::1] rotations, float[:, :, ::1] scales):
+    """Per segment ``p_i -> p_i+1`` of strands ``points [S, P, 3]``: the mean (midpoint), the rotation
+    (w, x, y, z) taking +z to the segment direction by the shortest arc (a zero-length segment: the
+    identity; a segment along -z: a half turn about x) and the scales ``(d, d, length / 2)``."""
+    cdef Py_ssize_t s, i, c, n = points.shape[0], p = points.shape[1]
+    cdef double d[3]
+    cdef double q[4]
+    cdef double length, norm
+    if (means.shape[0] != n or rotations.shape[0] != n or scales.shape[0] != n or p < 1
+            or means.shape[1] != p - 1 or rotations.shape[1] != p - 1 or scales.shape[1] != p - 1
+            or points.shape[2] != 3 or means.shape[2] != 3 or rotations.shape[2] != 4 or scales.shape[2] != 3):
+        raise ValueError("segment_frames: mismatched shapes")
+    with nogil:
+        for s in range(n):
+            for i in range(p - 1):
+                for c in range(3):
+                    d[c] = <double> points[s, i + 1, c] - <double> points[s, i, c]
+                    means[s, i, c] = <float> ((<double> points[s, i + 1, c] + <double> points[s, i, c]) / 2)
+                length = sqrt(dot3(d, d))
+                if length > 0:
+                    for c in range(3):
+                        d[c] = d[c] / (length if length > 1e-30 else 1e-30)
+                else:
+                    d[0] = 0.0
+                    d[1] = 0.0
+                    d[2] = 1.0
+                q[0] = 1.0 + d[2]
+                q[1] = -d[1]
+                q[2] = d[0]
+                q[3] = 0.0
+                if q[0] < 1e-12:
+                    q[0] = 0.0
+                    q[1] = 1.0
+                    q[2] = 0.0
+                norm = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+                for c in range(4):
+                    rotations[s, i, c] = <float> (q[c] / norm)
+                scales[s, i, 0] = <float> thickness
+                scales[s, i, 1] = <float> thickness
+                scales[s, i, 2] = <float> (length / 2)

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import _native
 from .asset import Appearance, HairAsset
 from .geometry import strand_points
 from .parallel import map_blocks
@@ -46,26 +47,16 @@ def segment_frames(points: np.ndarray, thickness: float) -> tuple[np.ndarray, np
     """Means, rotations (w, x, y, z) and scales of the segment Gaussians of strands ``[S, P, 3]``.
 
     The rotation is the shortest arc taking +z to the segment direction; a zero-length segment
-    gets the identity, a segment along -z a half turn about x.
+    gets the identity, a segment along -z a half turn about x (compiled: :func:`._native.segment_frames`).
     """
     s, p = points.shape[:2]
+    points = np.ascontiguousarray(points, np.float32)
     means = np.empty((s, p - 1, 3), np.float32)
     rotations = np.empty((s, p - 1, 4), np.float32)
     scales = np.empty((s, p - 1, 3), np.float32)
 
     def block(b: slice) -> None:
-        pts = points[b].astype(np.float64)
-        seg = pts[:, 1:] - pts[:, :-1]
-        length = np.sqrt(np.sum(seg * seg, axis=-1))
-        d = seg / np.maximum(length, 1e-30)[..., None]
-        d[length <= 0] = (0.0, 0.0, 1.0)
-        w = 1.0 + d[..., 2]
-        q = np.stack([w, -d[..., 1], d[..., 0], np.zeros_like(w)], axis=-1)
-        q[w < 1e-12] = (0.0, 1.0, 0.0, 0.0)
-        rotations[b] = q / np.sqrt(np.sum(q * q, axis=-1, keepdims=True))
-        means[b] = (pts[:, 1:] + pts[:, :-1]) / 2
-        scales[b, :, :2] = thickness
-        scales[b, :, 2] = length / 2
+        _native.segment_frames(points[b], float(thickness), means[b], rotations[b], scales[b])
 
     map_blocks(block, s)
     return means.reshape(-1, 3), rotations.reshape(-1, 4), scales.reshape(-1, 3)

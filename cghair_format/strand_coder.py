@@ -62,8 +62,9 @@ def _code_strands(cards: Cards, strand_card: np.ndarray, scale: np.ndarray, n: i
     the input point: the error stays bounded, zeros cost the least, and as the decoder predicts
     from what it reconstructs, later samples simply see that reconstruction.
 
-    Returns the reconstruction ``[S, n, 3]`` (scaled units), its world points ``[S, n, 3]`` and the
-    residuals ``[S, N, 3]``: the base samples' columns, then each level's."""
+    Returns the reconstruction ``[S, n, 3]`` (scaled units), its world points ``[S, n, 3]`` (when
+    decoding, all but the last level's) and the residuals ``[S, N, 3]``: the base samples' columns,
+    then each level's."""
     base, levels = level_plan(n, plan.base_stride)
     s = len(strand_card)
     level_start = np.cumsum([0] + [len(idx) for idx, _, _ in levels], dtype=np.int64)
