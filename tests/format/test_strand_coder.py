@@ -178,3 +178,33 @@ def test_the_dead_zone_leaves_more_zero_residuals_and_keeps_the_bound(monkeypatc
     decoded = cgh.decode_points(cgh.decode(data))
     expected = cgh.decode_points(report.in_file_order(asset))
     assert np.linalg.norm(decoded - expected, axis=-1).max() <= 2e-4 * report.bbox_diagonal
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_the_writers_base_estimate_codes_what_the_compiled_coder_stores(order):
+    """The writer picks the base predictor from numpy's code_base; the compiled recurrence must store
+    exactly those base residuals (spec 4.3), or the choice would be made on other numbers."""
+    from cghair_format.examples import example_asset
+    from cghair_format.quantize import level_plan
+    from cghair_format.strand_coder import Prediction, code_base, encode_uvd
+
+    asset = example_asset(2, strands=30, points=40, cards=3)
+    scale = np.abs(np.random.default_rng(0).normal(100, 10, (30, 3)))
+    y = asset.uvd.astype(np.float64) * scale[:, None, :]
+    base_idx, _ = level_plan(40, 16)
+    base, _, _ = encode_uvd(asset.cards, asset.strand_card, y, scale, Prediction(16, order, 2))
+    assert np.array_equal(base, code_base(np.zeros(y.shape), base_idx, order, y))
+
+
+def test_the_compiled_kernels_refuse_card_indices_they_would_read_outside():
+    from cghair_format import _native
+    from cghair_format.examples import example_asset
+    from cghair_format.geometry import CardMap
+
+    asset = example_asset(2, strands=5, points=6, cards=2)
+    cmap = CardMap(asset.cards)
+    with pytest.raises(ValueError, match="card index 2 outside"):
+        cmap(np.array([2]), np.zeros((1, 3)))
+    with pytest.raises(ValueError, match="mismatched"):
+        _native.map_points(cmap.frames, asset.cards.segments, np.zeros(2, np.int64), np.zeros((1, 3)),
+                           np.zeros((2, 3)))
