@@ -142,6 +142,20 @@ cdef check_cards(const i64[::1] card, Py_ssize_t triangles, int segments):
             raise ValueError(f"card index {card[i]} outside [0, {cards})")
 
 
+cdef inline bint fits(const double* frames, int m, i64 card, const double* pred, const i64* r,
+                      const double* inv_sc, const double* target, double dist2) noexcept nogil:
+    """Whether ``pred + r`` (scaled card coordinates) maps within ``sqrt(dist2)`` of ``target``."""
+    cdef double p[3]
+    cdef double x[3]
+    cdef int ch
+    for ch in range(3):
+        p[ch] = pred[ch] + r[ch]
+    to_world(frames, m, card, p, inv_sc, x)
+    for ch in range(3):
+        x[ch] = x[ch] - target[ch]
+    return dot3(x, x) <= dist2
+
+
 def map_points(const double[:, ::1] frames, int segments, const i64[::1] card, const double[:, ::1] uvd,
                double[:, ::1] out):
     """``out[i]`` = the world point of card coordinates ``uvd[i]`` on ``card[i]``."""
@@ -158,7 +172,8 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                 const i64[::1] strand_card, const double[:, ::1] scale,
                 const i64[::1] base, int base_order, const i64[::1] level_start, const i64[::1] idx,
                 const i64[:, ::1] nb, const double[:, ::1] wt, int newton_steps, double max_step_ratio,
-                double[:, :, ::1] rec, double[:, :, ::1] world, i64[:, :, ::1] res, const double[:, :, ::1] y=None, const double[:, :, ::1] dz_points=None, double dz_dist=-1.0):
+                double[:, :, ::1] rec, double[:, :, ::1] world, i64[:, :, ::1] res, const double[:, :, ::1] y=None, const double[:, :, ::1] dz_points=None, double dz_dist=-1.0,
+                bint neighbour_zone=False):
     """The recurrence of spec 4.3 for the strands ``strands_to_code`` (indices into ``[S]``; best
     grouped by card, whose triangles then stay in cache) of ``n`` points, into ``rec`` (scaled card
     coordinates ``[S, n, 3]``) and ``world`` (their world points; when decoding, all but the last
@@ -168,13 +183,14 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
     ``wt [R, 4]`` (their interpolation neighbours and weights). Decoding (``y`` None) reads the
     residuals ``res [S, len(base) + R, 3]`` (base samples, then the levels' rows); encoding writes them from ``y``
     (``[S, n, 3]``), leaving a refinement residual at zero where the prediction alone maps within
-    ``dz_dist`` of ``dz_points`` (``dz_dist < 0``: no dead zone)."""
+    ``dz_dist`` of ``dz_points`` (``dz_dist < 0``: no dead zone). With ``neighbour_zone`` a sample
+    first takes the residual of its card neighbour (the strand coded before it, same card: its
+    stored difference is then zero) where that too maps within ``dz_dist``."""
     cdef Py_ssize_t t, s, j, li, row, kk, i, ch
     cdef Py_ssize_t strands = strands_to_code.shape[0], nbase = base.shape[0], levels = level_start.shape[0] - 1
     cdef int encode = y is not None, dead_zone = encode and dz_points is not None and dz_dist >= 0
     cdef double pred[3]
     cdef double goal[3]
-    cdef double xw[3]
     cdef double inv_sc[3]
     cdef double w, ratio, dist2 = dz_dist * dz_dist
     cdef const double* fr
@@ -185,7 +201,12 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
     cdef const double* Z = NULL
     cdef i64* BR
     cdef i64* LR
+    cdef i64* NB = NULL
+    cdef i64 zero[3]
     cdef i64 card, a, b, c
+    zero[0] = 0
+    zero[1] = 0
+    zero[2] = 0
     if strands == 0:
         return
     check_cards(strand_card, frames.shape[0], segments)
@@ -212,10 +233,13 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
             W = &world[s, 0, 0]
             BR = &res[s, 0, 0]
             LR = BR + 3 * nbase
+            NB = NULL  # encoding: the residuals of this strand's neighbour (spec 4.3), when coded already
             if encode:
                 Y = &y[s, 0, 0]
                 if dead_zone:
                     Z = &dz_points[s, 0, 0]
+                    if neighbour_zone and t > 0 and strand_card[strands_to_code[t - 1]] == card:
+                        NB = &res[strands_to_code[t - 1], 0, 0]
             for j in range(nbase):
                 c = base[j]
                 for ch in range(3):
@@ -230,6 +254,10 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                         pred[ch] = R[3 * b + ch] + (R[3 * b + ch] - R[3 * a + ch]) * ratio
                     if encode:
                         BR[3 * j + ch] = <i64> rint(Y[3 * c + ch] - pred[ch])
+                if NB != NULL and fits(fr, segments, card, pred, NB + 3 * j, inv_sc, Z + 3 * c, dist2):
+                    for ch in range(3):  # the neighbour's residual will do: its difference is zero
+                        BR[3 * j + ch] = NB[3 * j + ch]
+                for ch in range(3):
                     R[3 * c + ch] = pred[ch] + BR[3 * j + ch]
                 to_world(fr, segments, card, R + 3 * c, inv_sc, W + 3 * c)
             for li in range(levels):
@@ -249,14 +277,14 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                     if encode:
                         for ch in range(3):
                             LR[3 * row + ch] = <i64> rint(Y[3 * i + ch] - pred[ch])
-                        if dead_zone:
-                            to_world(fr, segments, card, pred, inv_sc, xw)
-                            for ch in range(3):
-                                xw[ch] = xw[ch] - Z[3 * i + ch]
-                            if dot3(xw, xw) <= dist2:
-                                LR[3 * row] = 0
-                                LR[3 * row + 1] = 0
-                                LR[3 * row + 2] = 0
+                        if NB != NULL and fits(fr, segments, card, pred, NB + 3 * (nbase + row), inv_sc,
+                                               Z + 3 * i, dist2):
+                            for ch in range(3):  # the neighbour's residual will do: its difference is zero
+                                LR[3 * row + ch] = NB[3 * (nbase + row) + ch]
+                        elif dead_zone and fits(fr, segments, card, pred, zero, inv_sc, Z + 3 * i, dist2):
+                            LR[3 * row] = 0
+                            LR[3 * row + 1] = 0
+                            LR[3 * row + 2] = 0
                     for ch in range(3):
                         R[3 * i + ch] = pred[ch] + LR[3 * row + ch]
                     if encode or li + 1 < levels:  # a decoder predicts nothing from the last level

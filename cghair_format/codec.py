@@ -35,6 +35,7 @@ from .quantize import (
 from .residual_coder import read_residuals, write_residuals
 from .strand_coder import (
     NEWTON_STEPS,
+    DeadZone,
     Prediction,
     canonical_order,
     code_base,
@@ -319,8 +320,9 @@ def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag
     q["base_order"] = _choose_base_order(asset.strand_card, y, q["base_stride"])
     q["newton_steps"] = _choose_newton_steps(cards, asset.strand_card, y, scale,
                                              Prediction(q["base_stride"], q["base_order"], NEWTON_STEPS))
-    base, levels, decoded_points = encode_uvd(cards, asset.strand_card, y, scale, _prediction(q),
-                                              dead_zone=(points, DEAD_ZONE * prof.position_tolerance * diag))
+    zone = DeadZone(points, DEAD_ZONE * prof.position_tolerance * diag)
+    zone = zone._replace(neighbour=_choose_neighbour_zone(cards, asset.strand_card, y, scale, _prediction(q), zone))
+    base, levels, decoded_points = encode_uvd(cards, asset.strand_card, y, scale, _prediction(q), dead_zone=zone)
     return _Geometry(meta, cards_w, [base] + levels, decoded_points)
 
 
@@ -443,6 +445,24 @@ def _choose_newton_steps(cards: Cards, strand_card: np.ndarray, y: np.ndarray, s
         trial = Prediction(plan.base_stride, plan.base_order, steps)
         base, levels, _ = encode_uvd(cards, strand_card[pick], y[pick], scale[pick], trial)
         sizes[steps] = sum(_estimate(r) for r in [base] + levels)
+    return min(sizes, key=sizes.get)
+
+
+def _choose_neighbour_zone(cards: Cards, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray,
+                           plan: Prediction, zone: DeadZone, sample_cards: int = 64) -> bool:
+    """Whether the dead zone first tries the card neighbour's residual: whichever codes the strands of
+    an evenly spaced sample of cards smaller. It pays where a card's strands are much alike (strands
+    densified from fewer, 10-18 % off STRD at the paper's scale) and costs a little where they are
+    not (the Ratboy model: 1.5 %)."""
+    ids = np.unique(strand_card)
+    picked = ids[np.linspace(0, len(ids) - 1, min(sample_cards, len(ids))).astype(np.int64)]
+    pick = np.flatnonzero(np.isin(strand_card, picked))
+    sizes = {}
+    for neighbour in (True, False):
+        trial = zone._replace(points=zone.points[pick], neighbour=neighbour)
+        base, levels, _ = encode_uvd(cards, strand_card[pick], y[pick], scale[pick], plan, dead_zone=trial)
+        stored, _ = _with_neighbour_prediction(strand_card[pick], [base] + levels)
+        sizes[neighbour] = sum(_estimate(r) for r in stored)
     return min(sizes, key=sizes.get)
 
 

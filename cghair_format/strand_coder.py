@@ -15,6 +15,7 @@ channel where that is smaller.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -26,6 +27,17 @@ from .quantize import base_prediction, level_plan
 
 NEWTON_STEPS = 2
 MAX_STEP_RATIO = 64.0
+
+
+class DeadZone(NamedTuple):
+    """Encoding only (spec 4.3, a writer's MAY): a sample takes a cheaper residual where its
+    reconstruction still lies within ``distance`` of the input point (``points [S, n, 3]``, world):
+    zero for a refinement sample, and with ``neighbour`` first the residual of its card neighbour
+    (the strand coded before it on its card), whose stored difference is then zero."""
+
+    points: np.ndarray
+    distance: float
+    neighbour: bool = False
 
 
 @dataclass(frozen=True)
@@ -53,14 +65,13 @@ def code_base(rec: np.ndarray, base: np.ndarray, order: int, y: np.ndarray | Non
 
 def _code_strands(cards: Cards, strand_card: np.ndarray, scale: np.ndarray, n: int, plan: Prediction,
                   y: np.ndarray | None = None, residuals: np.ndarray | None = None,
-                  dead_zone: tuple[np.ndarray, float] | None = None):
+                  dead_zone: DeadZone | None = None):
     """Encode (``y`` given, scaled card coordinates ``[S, n, 3]``) or decode (``residuals`` given) with
     the compiled recurrence :func:`._native.run_strands`, over blocks of strands in parallel.
 
-    ``dead_zone`` (encoding): the input's world points ``[S, n, 3]`` and a distance. A refinement
-    sample's residual is left at zero wherever its prediction alone lies within that distance of
-    the input point: the error stays bounded, zeros cost the least, and as the decoder predicts
-    from what it reconstructs, later samples simply see that reconstruction.
+    ``dead_zone`` (encoding): see :class:`DeadZone`. The error stays bounded, the residuals it picks
+    cost the least, and as the decoder predicts from what it reconstructs, later samples simply see
+    that reconstruction.
 
     Returns the reconstruction ``[S, n, 3]`` (scaled units), its world points ``[S, n, 3]`` (when
     decoding, all but the last level's) and the residuals ``[S, N, 3]``: the base samples' columns,
@@ -81,25 +92,25 @@ def _code_strands(cards: Cards, strand_card: np.ndarray, scale: np.ndarray, n: i
     card = np.ascontiguousarray(strand_card, np.int64)
     scale = np.ascontiguousarray(scale, np.float64)
     y = None if y is None else np.ascontiguousarray(y, np.float64)
-    near = None if dead_zone is None else np.ascontiguousarray(dead_zone[0], np.float64)
+    near = None if dead_zone is None else np.ascontiguousarray(dead_zone.points, np.float64)
 
     by_card = np.argsort(card, kind="stable")  # a card's triangles stay in cache while its strands are coded
 
     def block(b: slice) -> None:
         _native.run_strands(by_card[b], frames, segments, card, scale, base.astype(np.int64), plan.base_order,
                             level_start, idx, nb, wt, plan.newton_steps, MAX_STEP_RATIO, rec, world, residuals,
-                            y=y, dz_points=near, dz_dist=-1.0 if dead_zone is None else float(dead_zone[1]))
+                            y=y, dz_points=near, dz_dist=-1.0 if dead_zone is None else float(dead_zone.distance),
+                            neighbour_zone=dead_zone is not None and dead_zone.neighbour)
 
     map_blocks(block, s)
     return rec, world, residuals
 
 
 def encode_uvd(cards: Cards, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray, plan: Prediction,
-               dead_zone: tuple[np.ndarray, float] | None = None):
+               dead_zone: DeadZone | None = None):
     """Residuals (base, levels) of scaled card coordinates ``y [S, P, 3]`` (``uvd * scale``), and the
     world points ``[S, P, 3]`` the decoder will reconstruct. Every reconstructed value is within 0.5
-    of ``y``, except refinement samples where ``dead_zone`` (see :func:`_code_strands`) lets a zero
-    residual stand."""
+    of ``y``, except samples where ``dead_zone`` (:class:`DeadZone`) lets a cheaper residual stand."""
     _, world, residuals = _code_strands(cards, strand_card, scale, y.shape[1], plan, y=y, dead_zone=dead_zone)
     base, *levels = np.split(residuals, np.cumsum(level_widths(y.shape[1], plan.base_stride))[:-1], axis=1)
     return base, levels, world

@@ -2,6 +2,7 @@
 transform the writer applies where it codes smaller), the base predictor choice and the dead zone."""
 
 import json
+import unittest.mock
 
 import numpy as np
 import pytest
@@ -150,8 +151,11 @@ def test_parallel_strands_choose_the_previous_sample_as_base_predictor():
     assert codec._choose_base_order(np.zeros(200, np.int64), smooth, 16) == 2
 
 
-def test_the_dead_zone_leaves_more_zero_residuals_and_keeps_the_bound(monkeypatch):
-    """A refinement residual stays zero where the prediction alone is within 0.97 tol of the input."""
+@pytest.mark.parametrize("neighbour", [True, False])
+def test_the_dead_zone_stores_more_zeros_and_keeps_the_bound(neighbour, monkeypatch):
+    """Where a cheaper residual still lands within 0.97 tol of the input, the writer takes it: the card
+    neighbour's, whose stored difference is zero (when the writer chose to), else zero for a
+    refinement sample (spec 4.3)."""
     from cghair_format import strand_coder
     from cghair_format.cards import build_cards
 
@@ -167,17 +171,49 @@ def test_the_dead_zone_leaves_more_zero_residuals_and_keeps_the_bound(monkeypatc
         return out
 
     monkeypatch.setattr(codec, "encode_uvd", spy)
+    monkeypatch.setattr(codec, "_choose_neighbour_zone", lambda *_: neighbour)
     data, report = cgh.encode(asset, "compact")
     args, kw, (base, levels, world) = calls[-1]
-    points, distance = kw["dead_zone"]
+    assert kw["dead_zone"].neighbour == neighbour
+    points, distance = kw["dead_zone"].points, kw["dead_zone"].distance
     assert distance == pytest.approx(0.97 * 2e-4 * report.bbox_diagonal)
-    _, plain_levels, _ = real(*args)  # the same step without the dead zone
-    zeros = sum(int((r == 0).sum()) for r in levels)
-    plain_zeros = sum(int((r == 0).sum()) for r in plain_levels)
-    assert zeros > plain_zeros
+    plain_base, plain_levels, _ = real(*args)  # the same step without the dead zone
+    strand_card = args[1]
+    stored, _ = codec._with_neighbour_prediction(strand_card, [base] + levels)
+    plain_stored, _ = codec._with_neighbour_prediction(strand_card, [plain_base] + plain_levels)
+    zeros = sum(int((r == 0).sum()) for r in stored)
+    assert zeros > 1.1 * sum(int((r == 0).sum()) for r in plain_stored)
+    # base samples get no plain zero, only the neighbour's residual: there the zeros are its doing
+    assert ((stored[0] == 0).sum() > (plain_stored[0] == 0).sum()) == neighbour
+    assert np.linalg.norm(world - points, axis=-1).max() <= 2e-4 * report.bbox_diagonal
     decoded = cgh.decode_points(cgh.decode(data))
     expected = cgh.decode_points(report.in_file_order(asset))
     assert np.linalg.norm(decoded - expected, axis=-1).max() <= 2e-4 * report.bbox_diagonal
+
+
+def test_the_writer_tries_the_neighbours_residual_where_a_cards_strands_are_alike():
+    """Densified strands (each between two real ones) are much alike: the neighbour's residual pays.
+    Ratboy's own strands are not alike enough, and the writer keeps the plain dead zone."""
+    from cghair_format.cards import build_cards
+    from cghair_format.strands import densify
+
+    calls = []
+    real = codec._choose_neighbour_zone
+
+    def spy(*args, **kw):
+        calls.append(real(*args, **kw))
+        return calls[-1]
+
+    with unittest.mock.patch.object(codec, "_choose_neighbour_zone", spy):
+        strands = load_hair("Ratboy_mohawk.tfx")
+        plain = build_cards(strands, n_cards=60, n_groups=4, points=32, seed=0, progress=False).asset
+        cgh.encode(plain, "compact")
+        plain_calls, calls[:] = list(calls), []
+        dense = build_cards(densify(strands, 4 * strands.count, seed=0), n_cards=60, n_groups=4, points=32,
+                            seed=0, progress=False).asset
+        cgh.encode(dense, "compact")
+    assert plain_calls and not any(plain_calls)  # once per step the writer tries
+    assert calls and all(calls)
 
 
 @pytest.mark.parametrize("order", [1, 2])
