@@ -103,7 +103,8 @@ def estimate_bytes(u: np.ndarray) -> float:
     sym, _ = tokens(u)
     counts = np.bincount(sym.ravel(), minlength=ALPHABET)
     p = counts[counts > 0] / sym.size
-    return float(-(counts[counts > 0] * np.log2(p)).sum() + token_widths(sym).sum()) / 8
+    extra_bits = int(counts @ token_widths(np.arange(ALPHABET)))
+    return float(-(counts[counts > 0] * np.log2(p)).sum() + extra_bits) / 8
 
 
 class Tables:
