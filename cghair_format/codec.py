@@ -118,10 +118,11 @@ def encode(asset: HairAsset, profile: str | Profile = "compact", keep_order: boo
            ) -> tuple[bytes, EncodeReport]:
     """Serialise a validated asset; returns the bytes and what the quantization measured.
 
-    The quantized profiles store the strands in canonical order (by card, then root position: spec
-    4.3), which codes smaller: ``report.strand_order`` maps them back to the input's (the asset's
-    optional ``strand_ids`` travel with their strands). ``keep_order`` keeps the input's order instead,
-    at a cost (4-5 % at the paper's scale); the lossless profile always keeps it."""
+    The quantized profiles store the strands card by card, alike strands one after another (spec 4.3),
+    which codes smaller: ``report.strand_order`` maps them back to the input's (the asset's optional
+    per-strand data travel with their strands). ``keep_order`` keeps the input's order instead, at a
+    cost (the paper-scale straight.hair benchmark file grows by 24 %); the lossless profile always
+    keeps it."""
     prof = get_profile(profile)
     asset.validate()
     order = None
@@ -137,8 +138,10 @@ def encode(asset: HairAsset, profile: str | Profile = "compact", keep_order: boo
     appearance_chunks = _appearance_chunks(asset, prof)
     card_fraction, normal_bits = _card_quantization(asset, prof, step, diag, points, tol)
     passed = None  # (step, error, quantized geometry) of the largest step that met the bound so far
+    choices = None
     for attempt in range(MAX_TIGHTENINGS):
-        geometry = _quantize_geometry(asset, prof, step, diag, card_fraction, normal_bits, points)
+        geometry = _quantize_geometry(asset, prof, step, diag, card_fraction, normal_bits, points, choices)
+        choices = geometry.choices
         decoded = geometry.decoded_points
         err = 0.0 if decoded is None else float(np.linalg.norm(decoded - points, axis=-1).max())
         if step is None:
@@ -292,38 +295,53 @@ def _card_quantization(asset: HairAsset, prof: Profile, step: float | None, diag
     return fraction, bits
 
 
+class _Choices(NamedTuple):
+    """The writer's per-file choices for the strand points, made on the first step it tries and kept
+    for the others (they hardly depend on the step)."""
+
+    base_order: int
+    newton_steps: int
+    neighbour_zone: bool
+
+
 class _Geometry(NamedTuple):
     """What depends on the point step: META, the CARD streams, and (quantized profiles) the STRD
-    residual arrays and the world points a decoder will get."""
+    residual arrays, the world points a decoder will get and the choices made."""
 
     meta: dict
     cards: StreamWriter
     residuals: list[np.ndarray] | None
     decoded_points: np.ndarray | None
+    choices: _Choices | None
 
 
 def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag: float, card_fraction: float,
-                       normal_bits: int, points: np.ndarray) -> _Geometry:
+                       normal_bits: int, points: np.ndarray, choices: _Choices | None = None) -> _Geometry:
     """What depends on the step: META, the CARD streams, and (quantized profiles) the STRD residual
-    arrays and the world points a decoder will get (``points``: the input's)."""
+    arrays and the world points a decoder will get (``points``: the input's), with ``choices`` (None:
+    made here)."""
     meta = _meta(asset, prof, step, diag, card_fraction, normal_bits)
     q = meta["quant"]
     cards_w = StreamWriter()
     if q["lossless"]:
         for a in (asset.cards.spine, asset.cards.normal, asset.cards.half_width):
             cards_w.array(a.astype(np.float32), shuffle=True)
-        return _Geometry(meta, cards_w, None, None)
+        return _Geometry(meta, cards_w, None, None, None)
     cards = _encode_cards(asset.cards, q, cards_w)
     su, sv = card_scales(cards, q["step"])
     scale = _uvd_scale(su, sv, asset.strand_card, q["step"])
     y = asset.uvd * scale[:, None, :]
-    q["base_order"] = _choose_base_order(asset.strand_card, y, q["base_stride"])
-    q["newton_steps"] = _choose_newton_steps(cards, asset.strand_card, y, scale,
-                                             Prediction(q["base_stride"], q["base_order"], NEWTON_STEPS))
     zone = DeadZone(points, DEAD_ZONE * prof.position_tolerance * diag)
-    zone = zone._replace(neighbour=_choose_neighbour_zone(cards, asset.strand_card, y, scale, _prediction(q), zone))
-    base, levels, decoded_points = encode_uvd(cards, asset.strand_card, y, scale, _prediction(q), dead_zone=zone)
-    return _Geometry(meta, cards_w, [base] + levels, decoded_points)
+    if choices is None:
+        base_order = _choose_base_order(asset.strand_card, y, q["base_stride"])
+        newton_steps = _choose_newton_steps(cards, asset.strand_card, y, scale,
+                                            Prediction(q["base_stride"], base_order, NEWTON_STEPS))
+        choices = _Choices(base_order, newton_steps, _choose_neighbour_zone(
+            cards, asset.strand_card, y, scale, Prediction(q["base_stride"], base_order, newton_steps), zone))
+    q["base_order"], q["newton_steps"] = choices.base_order, choices.newton_steps
+    base, levels, decoded_points = encode_uvd(cards, asset.strand_card, y, scale, _prediction(q),
+                                              dead_zone=zone._replace(neighbour=choices.neighbour_zone))
+    return _Geometry(meta, cards_w, [base] + levels, decoded_points, choices)
 
 
 def _geometry_chunks(asset: HairAsset, geometry: _Geometry) -> list[container.Chunk]:

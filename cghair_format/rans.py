@@ -36,7 +36,9 @@ def bit_length(u: np.ndarray) -> np.ndarray:
 
 
 # bit length of the smallest value of each token: what contexts are built from
-TOKEN_BITS = np.r_[bit_length(np.arange(DIRECT)), np.arange(5, 65)].astype(np.int64)
+TOKEN_BITS = np.r_[bit_length(np.arange(DIRECT)), np.arange(5, 65)].astype(np.uint8)
+# the extra bits each token carries
+TOKEN_WIDTHS = np.r_[np.zeros(DIRECT), np.arange(4, 64)].astype(np.uint8)
 
 
 def tokens(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -54,8 +56,7 @@ def tokens(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def token_widths(sym: np.ndarray) -> np.ndarray:
-    sym = sym.astype(np.int64)
-    return np.where(sym >= DIRECT, sym - DIRECT + 4, 0)
+    return TOKEN_WIDTHS[sym]
 
 
 def pack_bits(width: np.ndarray, value: np.ndarray) -> np.ndarray:
@@ -103,7 +104,7 @@ def estimate_bytes(u: np.ndarray) -> float:
     sym, _ = tokens(u)
     counts = np.bincount(sym.ravel(), minlength=ALPHABET)
     p = counts[counts > 0] / sym.size
-    extra_bits = int(counts @ token_widths(np.arange(ALPHABET)))
+    extra_bits = int(counts @ TOKEN_WIDTHS.astype(np.int64))
     return float(-(counts[counts > 0] * np.log2(p)).sum() + extra_bits) / 8
 
 

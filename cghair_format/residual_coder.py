@@ -58,9 +58,10 @@ def write_residuals(w: StreamWriter, arrays: list[np.ndarray]) -> None:
     other = np.zeros_like(bits)
     other[..., 1] = bits[..., 0]
     other[..., 2] = np.maximum(bits[..., 0], bits[..., 1])
-    table = _table(column_array[None, :, None], np.arange(3)[None, None, :], prev, other)
+    table = _table(column_array[None, :, None].astype(np.int32), np.arange(3, dtype=np.int32)[None, None, :],
+                   prev, other)
     n_tables = len(widths) * 3 * CONTEXTS
-    counts = np.bincount((table * rans.ALPHABET + sym).ravel(), minlength=n_tables * rans.ALPHABET)
+    counts = np.bincount((table * rans.ALPHABET + sym).ravel(), minlength=n_tables * rans.ALPHABET)  # int32
     tables = rans.Tables(rans.normalize(counts.reshape(n_tables, rans.ALPHABET)), "STRD")
     blocks = len(active)
     step_sym = _to_steps(sym, lanes, blocks).reshape(-1, lanes)
