@@ -24,6 +24,7 @@ from .errors import AssetError
 
 UP_AXES = ("Y", "Z")
 ACTIVATIONS = ("relu", "none")
+MAX_MLP_VALUE = 1e30  # float32 reaches 3.4e38; a trained MLP stays many orders of magnitude below
 WEIGHT_MODES = ("soft", "hard")
 
 
@@ -125,6 +126,14 @@ class Appearance:
         want = n_segments * self.sh_coeffs * 3
         _check(width == want, f"the MLP outputs {width} values; {n_segments} Gaussians x "
                f"{self.sh_coeffs} SH coefficients x 3 channels need {want}")
+        # a latent is a convex mix of codebook rows, and relu (or none) never grows a value: bound each
+        # layer's outputs, so that decoding to Gaussians in float32 cannot overflow
+        bound = float(np.abs(self.codebooks).max())
+        for i, layer in enumerate(self.mlp):
+            bound = (float(np.abs(layer.weight.astype(np.float64)).sum(axis=1).max()) * bound
+                     + float(np.abs(layer.bias.astype(np.float64)).max()))
+            _check(bound <= MAX_MLP_VALUE, f"mlp[{i}] could output values up to {bound:.3g}, beyond float32's "
+                   f"safe range ({MAX_MLP_VALUE:g}): its weights or biases are far outside any trained model's")
 
 
 @dataclass

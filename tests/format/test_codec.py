@@ -171,3 +171,19 @@ def test_cards_that_magnify_their_own_error_get_a_finer_card_step():
     decoded = cgh.decode_points(cgh.decode(data))
     a = report.in_file_order(a)
     assert np.linalg.norm(decoded - cgh.decode_points(a), axis=-1).max() <= 2e-4 * report.bbox_diagonal
+
+
+def test_an_mlp_that_could_overflow_float32_is_refused():
+    """Finite but enormous weights (a crafted file) would overflow when decoding to Gaussians; the
+    asset's own bound on the MLP's outputs refuses them first, with a message that says why."""
+    a = example_asset(5)
+    a.appearance.mlp[-1].weight[0, 0] = 1e36
+    with pytest.raises(AssetError, match="safe range"):
+        a.validate()
+    a.appearance.mlp[-1].weight[0, 0] = 1e3  # large, yet nowhere near float32's limit
+    a.validate()
+    data = cgh.encode(a, "lossless")[0]
+    big = cgh.decode(data)
+    big.appearance.mlp[-1].weight[:] = 1e36
+    with pytest.raises(AssetError, match="safe range"):
+        cgh.encode(big, "lossless")
