@@ -172,7 +172,8 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                 const i64[::1] strand_card, const double[:, ::1] scale,
                 const i64[::1] base, int base_order, const i64[::1] level_start, const i64[::1] idx,
                 const i64[:, ::1] nb, const double[:, ::1] wt, int newton_steps, double max_step_ratio,
-                double[:, :, ::1] rec, double[:, :, ::1] world, i64[:, :, ::1] res, const double[:, :, ::1] y=None, const double[:, :, ::1] dz_points=None, double dz_dist=-1.0,
+                double[:, :, ::1] rec, double[:, :, ::1] world, i64[:, :, ::1] res,
+                const double[:, :, ::1] y=None, const double[:, :, ::1] dz_points=None, double dz_dist=-1.0,
                 bint neighbour_zone=False):
     """The recurrence of spec 4.3 for the strands ``strands_to_code`` (indices into ``[S]``; best
     grouped by card, whose triangles then stay in cache) of ``n`` points, into ``rec`` (scaled card
@@ -181,11 +182,12 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
 
     Levels: ``level_start [L + 1]`` delimits rows of ``idx [R]`` (the new indices), ``nb [R, 4]`` and
     ``wt [R, 4]`` (their interpolation neighbours and weights). Decoding (``y`` None) reads the
-    residuals ``res [S, len(base) + R, 3]`` (base samples, then the levels' rows); encoding writes them from ``y``
-    (``[S, n, 3]``), leaving a refinement residual at zero where the prediction alone maps within
+    residuals ``res [S, len(base) + R, 3]`` (base samples, then the levels' rows); encoding writes
+    them from ``y`` (``[S, n, 3]``), leaving a refinement residual at zero where the prediction alone maps within
     ``dz_dist`` of ``dz_points`` (``dz_dist < 0``: no dead zone). With ``neighbour_zone`` a sample
     first takes the residual of its card neighbour (the strand coded before it, same card: its
-    stored difference is then zero) where that too maps within ``dz_dist``."""
+    stored difference is then zero) where that too maps within ``dz_dist``: ``strands_to_code`` must
+    then list a card's strands in file order, each after its neighbour."""
     cdef Py_ssize_t t, s, j, li, row, kk, i, ch
     cdef Py_ssize_t strands = strands_to_code.shape[0], nbase = base.shape[0], levels = level_start.shape[0] - 1
     cdef int encode = y is not None, dead_zone = encode and dz_points is not None and dz_dist >= 0

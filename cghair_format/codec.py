@@ -18,7 +18,7 @@ import numpy as np
 from . import container, rans
 from .asset import ACTIVATIONS, UP_AXES, WEIGHT_MODES, Appearance, Cards, HairAsset, MlpLayer
 from .errors import AssetError, InvalidContentError, LimitError
-from .geometry import card_scales, strand_points
+from .geometry import CardMap, card_scales, strand_points
 from .profiles import Profile, get_profile
 from .quantize import (
     hier_decode,
@@ -37,8 +37,8 @@ from .strand_coder import (
     NEWTON_STEPS,
     DeadZone,
     Prediction,
+    base_residuals,
     canonical_order,
-    code_base,
     decode_uvd,
     encode_uvd,
     level_widths,
@@ -332,14 +332,15 @@ def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag
     scale = _uvd_scale(su, sv, asset.strand_card, q["step"])
     y = asset.uvd * scale[:, None, :]
     zone = DeadZone(points, DEAD_ZONE * prof.position_tolerance * diag)
+    cmap = CardMap(cards)
     if choices is None:
         base_order = _choose_base_order(asset.strand_card, y, q["base_stride"])
-        newton_steps = _choose_newton_steps(cards, asset.strand_card, y, scale,
+        newton_steps = _choose_newton_steps(cmap, asset.strand_card, y, scale,
                                             Prediction(q["base_stride"], base_order, NEWTON_STEPS))
         choices = _Choices(base_order, newton_steps, _choose_neighbour_zone(
-            cards, asset.strand_card, y, scale, Prediction(q["base_stride"], base_order, newton_steps), zone))
+            cmap, asset.strand_card, y, scale, Prediction(q["base_stride"], base_order, newton_steps), zone))
     q["base_order"], q["newton_steps"] = choices.base_order, choices.newton_steps
-    base, levels, decoded_points = encode_uvd(cards, asset.strand_card, y, scale, _prediction(q),
+    base, levels, decoded_points = encode_uvd(cmap, asset.strand_card, y, scale, _prediction(q),
                                               dead_zone=zone._replace(neighbour=choices.neighbour_zone))
     return _Geometry(meta, cards_w, [base] + levels, decoded_points, choices)
 
@@ -446,13 +447,13 @@ def _choose_base_order(strand_card: np.ndarray, y: np.ndarray, base_stride: int)
     order, starts = neighbour_order(strand_card)
     sizes = {}
     for k in (2, 1):
-        r = code_base(np.zeros(y.shape), base, k, y)[:, 1:]
+        r = base_residuals(y, base, k)[:, 1:]
         sizes[k] = sum(min(_estimate(r[..., ch]), _estimate(neighbour_encode(r[..., ch], order, starts)))
                        for ch in range(3))
     return min(sizes, key=sizes.get)
 
 
-def _choose_newton_steps(cards: Cards, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray,
+def _choose_newton_steps(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray,
                          plan: Prediction, sample: int = 512) -> int:
     """World-guided prediction (``plan.newton_steps``) or plain card-space prediction (0), whichever
     codes an evenly spaced sample of strands smaller. Strands smooth in the world (real hair) favour
@@ -461,12 +462,12 @@ def _choose_newton_steps(cards: Cards, strand_card: np.ndarray, y: np.ndarray, s
     sizes = {}
     for steps in (plan.newton_steps, 0):
         trial = Prediction(plan.base_stride, plan.base_order, steps)
-        base, levels, _ = encode_uvd(cards, strand_card[pick], y[pick], scale[pick], trial)
+        base, levels, _ = encode_uvd(cmap, strand_card[pick], y[pick], scale[pick], trial)
         sizes[steps] = sum(_estimate(r) for r in [base] + levels)
     return min(sizes, key=sizes.get)
 
 
-def _choose_neighbour_zone(cards: Cards, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray,
+def _choose_neighbour_zone(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray,
                            plan: Prediction, zone: DeadZone, sample_cards: int = 64) -> bool:
     """Whether the dead zone first tries the card neighbour's residual: whichever codes the strands of
     an evenly spaced sample of cards smaller. It pays where a card's strands are much alike (strands
@@ -478,7 +479,7 @@ def _choose_neighbour_zone(cards: Cards, strand_card: np.ndarray, y: np.ndarray,
     sizes = {}
     for neighbour in (True, False):
         trial = zone._replace(points=zone.points[pick], neighbour=neighbour)
-        base, levels, _ = encode_uvd(cards, strand_card[pick], y[pick], scale[pick], plan, dead_zone=trial)
+        base, levels, _ = encode_uvd(cmap, strand_card[pick], y[pick], scale[pick], plan, dead_zone=trial)
         stored, _ = _with_neighbour_prediction(strand_card[pick], [base] + levels)
         sizes[neighbour] = sum(_estimate(r) for r in stored)
     return min(sizes, key=sizes.get)
@@ -572,7 +573,7 @@ def _decode_chunks(meta: dict, payloads: dict[str, bytes]) -> HairAsset:
         residuals = read_residuals(rd["STRD"], s, columns)
         _undo_neighbour_prediction(strand_card, residuals, columns, q["neighbour"])
         scale = _uvd_scale(su, sv, strand_card, step)
-        uvd = decode_uvd(cards, strand_card, residuals, p, scale, _prediction(q))
+        uvd = decode_uvd(CardMap(cards), strand_card, residuals, p, scale, _prediction(q))
         opacity = np.clip(_get_hier(rd["OPAC"], s, p - 1, stride, "opacity") / q["opacity_scale"], 0, 1)
         if meta["weight_mode"] == "hard":
             idx = rd["LOGT"].ints((s,), "assignment")

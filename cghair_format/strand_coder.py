@@ -50,20 +50,19 @@ class Prediction:
     newton_steps: int
 
 
-def code_base(rec: np.ndarray, base: np.ndarray, order: int, y: np.ndarray | None = None,
-              residuals: np.ndarray | None = None) -> np.ndarray:
-    """Fill the base samples of ``rec [S, n, 3]``, encoding ``y`` or decoding ``residuals [S, nb, 3]``;
-    returns the residuals."""
-    out = np.zeros((len(rec), len(base), 3), np.int64) if residuals is None else residuals
+def base_residuals(y: np.ndarray, base: np.ndarray, order: int) -> np.ndarray:
+    """The residuals ``[S, nb, 3]`` of the base samples of ``y [S, n, 3]`` alone (no dead zone): what
+    the compiled recurrence stores for them, in numpy, for the writer's choice of ``order``."""
+    rec = np.zeros(y.shape)
+    out = np.zeros((len(y), len(base), 3), np.int64)
     for j, i in enumerate(base):
         pred = base_prediction(rec, base, j, order)
-        if residuals is None:
-            out[:, j] = np.rint(y[:, i] - pred)
+        out[:, j] = np.rint(y[:, i] - pred)
         rec[:, i] = pred + out[:, j]
     return out
 
 
-def _code_strands(cards: Cards, strand_card: np.ndarray, scale: np.ndarray, n: int, plan: Prediction,
+def _code_strands(cmap: CardMap, strand_card: np.ndarray, scale: np.ndarray, n: int, plan: Prediction,
                   y: np.ndarray | None = None, residuals: np.ndarray | None = None,
                   dead_zone: DeadZone | None = None):
     """Encode (``y`` given, scaled card coordinates ``[S, n, 3]``) or decode (``residuals`` given) with
@@ -88,16 +87,18 @@ def _code_strands(cards: Cards, strand_card: np.ndarray, scale: np.ndarray, n: i
         residuals = np.empty((s, len(base) + len(idx), 3), np.int64)
     else:
         residuals = np.ascontiguousarray(residuals, np.int64)
-    frames, segments = CardMap(cards).frames, cards.segments
     card = np.ascontiguousarray(strand_card, np.int64)
     scale = np.ascontiguousarray(scale, np.float64)
     y = None if y is None else np.ascontiguousarray(y, np.float64)
     near = None if dead_zone is None else np.ascontiguousarray(dead_zone.points, np.float64)
 
-    by_card = np.argsort(card, kind="stable")  # a card's triangles stay in cache while its strands are coded
+    # card by card, each strand after its neighbour (which the dead zone may copy); a card's triangles
+    # stay in cache while its strands are coded
+    by_card, _ = neighbour_order(card)
+    base = base.astype(np.int64)
 
     def block(b: slice) -> None:
-        _native.run_strands(by_card[b], frames, segments, card, scale, base.astype(np.int64), plan.base_order,
+        _native.run_strands(by_card[b], cmap.frames, cmap.segments, card, scale, base, plan.base_order,
                             level_start, idx, nb, wt, plan.newton_steps, MAX_STEP_RATIO, rec, world, residuals,
                             y=y, dz_points=near, dz_dist=-1.0 if dead_zone is None else float(dead_zone.distance),
                             neighbour_zone=dead_zone is not None and dead_zone.neighbour)
@@ -106,12 +107,13 @@ def _code_strands(cards: Cards, strand_card: np.ndarray, scale: np.ndarray, n: i
     return rec, world, residuals
 
 
-def encode_uvd(cards: Cards, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray, plan: Prediction,
+def encode_uvd(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray, plan: Prediction,
                dead_zone: DeadZone | None = None):
-    """Residuals (base, levels) of scaled card coordinates ``y [S, P, 3]`` (``uvd * scale``), and the
+    """Residuals (base, levels) of scaled card coordinates ``y [S, P, 3]`` (``uvd * scale``) on the cards
+    of ``cmap``, and the
     world points ``[S, P, 3]`` the decoder will reconstruct. Every reconstructed value is within 0.5
     of ``y``, except samples where ``dead_zone`` (:class:`DeadZone`) lets a cheaper residual stand."""
-    _, world, residuals = _code_strands(cards, strand_card, scale, y.shape[1], plan, y=y, dead_zone=dead_zone)
+    _, world, residuals = _code_strands(cmap, strand_card, scale, y.shape[1], plan, y=y, dead_zone=dead_zone)
     base, *levels = np.split(residuals, np.cumsum(level_widths(y.shape[1], plan.base_stride))[:-1], axis=1)
     return base, levels, world
 
@@ -122,11 +124,11 @@ def level_widths(n: int, base_stride: int) -> list[int]:
     return [len(base)] + [len(idx) for idx, _, _ in levels]
 
 
-def decode_uvd(cards: Cards, strand_card: np.ndarray, residuals: np.ndarray, n: int, scale: np.ndarray,
+def decode_uvd(cmap: CardMap, strand_card: np.ndarray, residuals: np.ndarray, n: int, scale: np.ndarray,
                plan: Prediction) -> np.ndarray:
     """Card coordinates ``[S, n, 3]`` (float64) from the residuals of :func:`encode_uvd`, side by side in
     one array ``[S, N, 3]`` (base samples, then each level)."""
-    rec, _, _ = _code_strands(cards, strand_card, scale, n, plan, residuals=residuals)
+    rec, _, _ = _code_strands(cmap, strand_card, scale, n, plan, residuals=residuals)
     return rec / scale[:, None, :]
 
 

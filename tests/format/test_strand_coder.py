@@ -218,18 +218,19 @@ def test_the_writer_tries_the_neighbours_residual_where_a_cards_strands_are_alik
 
 @pytest.mark.parametrize("order", [1, 2])
 def test_the_writers_base_estimate_codes_what_the_compiled_coder_stores(order):
-    """The writer picks the base predictor from numpy's code_base; the compiled recurrence must store
+    """The writer picks the base predictor from numpy's base_residuals; the compiled recurrence must store
     exactly those base residuals (spec 4.3), or the choice would be made on other numbers."""
     from cghair_format.examples import example_asset
+    from cghair_format.geometry import CardMap
     from cghair_format.quantize import level_plan
-    from cghair_format.strand_coder import Prediction, code_base, encode_uvd
+    from cghair_format.strand_coder import Prediction, base_residuals, encode_uvd
 
     asset = example_asset(2, strands=30, points=40, cards=3)
     scale = np.abs(np.random.default_rng(0).normal(100, 10, (30, 3)))
     y = asset.uvd.astype(np.float64) * scale[:, None, :]
     base_idx, _ = level_plan(40, 16)
-    base, _, _ = encode_uvd(asset.cards, asset.strand_card, y, scale, Prediction(16, order, 2))
-    assert np.array_equal(base, code_base(np.zeros(y.shape), base_idx, order, y))
+    base, _, _ = encode_uvd(CardMap(asset.cards), asset.strand_card, y, scale, Prediction(16, order, 2))
+    assert np.array_equal(base, base_residuals(y, base_idx, order))
 
 
 def test_the_compiled_kernels_refuse_card_indices_they_would_read_outside():
