@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _native
+from . import _native, memory
 from .asset import Appearance, HairAsset
 from .geometry import strand_points
 from .parallel import map_blocks
@@ -88,10 +88,11 @@ def strand_latents(appearance: Appearance, strand_group: np.ndarray) -> np.ndarr
 def run_mlp(appearance: Appearance, latents: np.ndarray) -> np.ndarray:
     """The global MLP applied to latents ``[S, D]``, in float32; ``[S, out]``. Each layer is one matrix
     product over all strands (BLAS runs it on every core; measured steadier than our threads calling
-    BLAS on blocks), then its bias and activation in place, by blocks of strands on every core."""
+    BLAS on blocks), then its bias and activation in place, by blocks of strands on every core. The
+    output of the paper-scale model's last layer is 475 MB: :func:`.memory.empty`."""
     h = latents.astype(np.float32)
     for layer in appearance.mlp:
-        h = h @ layer.weight.astype(np.float32).T
+        h = np.matmul(h, layer.weight.astype(np.float32).T, out=memory.empty((len(h), len(layer.weight)), np.float32))
         bias = layer.bias.astype(np.float32)
 
         def finish(b: slice, h=h, bias=bias, relu=layer.activation == "relu") -> None:

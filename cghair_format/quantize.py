@@ -71,22 +71,22 @@ def hier_encode(y: np.ndarray, base_stride: int) -> tuple[np.ndarray, list[np.nd
     Every reconstructed sample is within 0.5 of ``y``. Returns the base residuals ``[S, nb]`` and
     one residual array ``[S, L]`` per level, all int64.
     """
-    y = np.asarray(y, np.float64)
-    base, levels = level_plan(y.shape[1], base_stride)
-    rec = np.zeros_like(y)
-    base_res = np.zeros((y.shape[0], len(base)), np.int64)
+    yt = np.asarray(y, np.float64).T  # sample-major: each sample of every sequence is one contiguous row
+    base, levels = level_plan(yt.shape[0], base_stride)
+    rec = np.zeros(yt.shape)
+    base_res = np.zeros((len(base), yt.shape[1]), np.int64)
     for j, i in enumerate(base):
         pred = base_prediction(rec, base, j)
-        r = np.rint(y[:, i] - pred)
-        base_res[:, j] = r
-        rec[:, i] = pred + r
+        r = np.rint(yt[i] - pred)
+        base_res[j] = r
+        rec[i] = pred + r
     out = []
     for idx, nb, wt in levels:
         pred = _interp(rec, nb, wt)
-        r = np.rint(y[:, idx] - pred)
-        rec[:, idx] = pred + r
-        out.append(r.astype(np.int64))
-    return base_res, out
+        r = np.rint(yt[idx] - pred)
+        rec[idx] = pred + r
+        out.append(np.ascontiguousarray(r.T.astype(np.int64)))
+    return np.ascontiguousarray(base_res.T), out
 
 
 def hier_decode(base_res: np.ndarray, level_res: list[np.ndarray], n: int, base_stride: int) -> np.ndarray:
@@ -94,28 +94,30 @@ def hier_decode(base_res: np.ndarray, level_res: list[np.ndarray], n: int, base_
     base, levels = level_plan(n, base_stride)
     if len(levels) != len(level_res) or base_res.shape[1] != len(base):
         raise ValueError("residual streams do not match the level plan")
-    rec = np.zeros((base_res.shape[0], n), np.float64)
+    rec = np.zeros((n, base_res.shape[0]), np.float64)  # sample-major, as in hier_encode
     for j, i in enumerate(base):
-        rec[:, i] = base_prediction(rec, base, j) + base_res[:, j]
+        rec[i] = base_prediction(rec, base, j) + base_res[:, j]
     for (idx, nb, wt), r in zip(levels, level_res, strict=True):
-        rec[:, idx] = _interp(rec, nb, wt) + r
-    return rec
+        rec[idx] = _interp(rec, nb, wt) + r.T
+    return np.ascontiguousarray(rec.T)
 
 
 def base_prediction(rec: np.ndarray, base: np.ndarray, j: int, order: int = 2) -> np.ndarray | float:
-    """Prediction of base sample ``j``: 0 for the first, then the previous base sample (order 1) or
-    the linear extrapolation of the previous two (order 2, from the third on)."""
+    """Prediction of base sample ``j`` from the samples ``rec [n, ...]`` (sample-major) reconstructed so
+    far: 0 for the first, then the previous base sample (order 1) or the linear extrapolation of the
+    previous two (order 2, from the third on)."""
     if j == 0:
         return 0.0
     if j == 1 or order == 1:
-        return rec[:, base[j - 1]]
+        return rec[base[j - 1]]
     a, b, c = base[j - 2], base[j - 1], base[j]
-    return rec[:, b] + (rec[:, b] - rec[:, a]) * ((c - b) / (b - a))
+    return rec[b] + (rec[b] - rec[a]) * ((c - b) / (b - a))
 
 
 def _interp(rec: np.ndarray, nb: np.ndarray, wt: np.ndarray) -> np.ndarray:
-    return (rec[:, nb[:, 0]] * wt[:, 0] + rec[:, nb[:, 1]] * wt[:, 1]
-            + rec[:, nb[:, 2]] * wt[:, 2] + rec[:, nb[:, 3]] * wt[:, 3])
+    """Lagrange predictions ``[L, ...]`` of one level from the sample-major ``rec [n, ...]``."""
+    w = wt.reshape(wt.shape + (1,) * (rec.ndim - 1))
+    return rec[nb[:, 0]] * w[:, 0] + rec[nb[:, 1]] * w[:, 1] + rec[nb[:, 2]] * w[:, 2] + rec[nb[:, 3]] * w[:, 3]
 
 
 # --- unit vectors ------------------------------------------------------------------------------

@@ -53,12 +53,13 @@ class Prediction:
 def base_residuals(y: np.ndarray, base: np.ndarray, order: int) -> np.ndarray:
     """The residuals ``[S, nb, 3]`` of the base samples of ``y [S, n, 3]`` alone (no dead zone): what
     the compiled recurrence stores for them, in numpy, for the writer's choice of ``order``."""
-    rec = np.zeros(y.shape)
+    yt = y.transpose(1, 0, 2)  # sample-major, as base_prediction takes it
+    rec = np.zeros(yt.shape)
     out = np.zeros((len(y), len(base), 3), np.int64)
     for j, i in enumerate(base):
         pred = base_prediction(rec, base, j, order)
-        out[:, j] = np.rint(y[:, i] - pred)
-        rec[:, i] = pred + out[:, j]
+        out[:, j] = np.rint(yt[i] - pred)
+        rec[i] = pred + out[:, j]
     return out
 
 

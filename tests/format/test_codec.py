@@ -1,6 +1,7 @@
 """HairAsset <-> .cgh: round trips within each profile's bound, sources, atomic writes."""
 
 import io
+import mmap
 import os
 
 import numpy as np
@@ -9,9 +10,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import cghair_format as cgh
+from cghair_format import memory
 from cghair_format.errors import AssetError
 from cghair_format.examples import example_asset
-from cghair_format.gaussians import strand_weights
+from cghair_format.gaussians import run_mlp, strand_latents, strand_weights
 
 
 def _diag(points):
@@ -80,6 +82,18 @@ def test_gaussians_decode_shapes_and_values():
     zaxis = np.stack([2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)], -1)
     d = seg.reshape(-1, 3) / np.linalg.norm(seg.reshape(-1, 3), axis=1, keepdims=True)
     assert np.allclose(zaxis, d, atol=1e-5)
+
+
+def test_large_sh_outputs_live_in_their_own_mapping_and_match_numpy(monkeypatch):
+    a = example_asset(3, sh_degree=3)
+    app = a.appearance
+    latents = strand_latents(app, a.cards.group[a.strand_card])
+    small = run_mlp(app, latents)
+    monkeypatch.setattr(memory, "LARGE_BYTES", 1)  # every layer's output from memory.empty's mapping
+    mapped = run_mlp(app, latents)
+    assert isinstance(mapped.base.base, memoryview) and isinstance(mapped.base.base.obj, mmap.mmap)
+    assert mapped.flags.writeable and mapped.dtype == np.float32
+    assert np.array_equal(mapped, small)
 
 
 def test_sources_path_bytes_and_file_objects(tmp_path):
