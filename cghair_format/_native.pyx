@@ -156,6 +156,47 @@ cdef inline bint fits(const double* frames, int m, i64 card, const double* pred,
     return dot3(x, x) <= dist2
 
 
+cdef inline double miss2(const double* frames, int m, i64 card, const double* pred, const i64* r,
+                         const double* inv_sc, const double* target) noexcept nogil:
+    """The squared world distance from ``pred + r`` (scaled card coordinates) to ``target``."""
+    cdef double p[3]
+    cdef double x[3]
+    cdef int ch
+    for ch in range(3):
+        p[ch] = pred[ch] + r[ch]
+    to_world(frames, m, card, p, inv_sc, x)
+    for ch in range(3):
+        x[ch] = x[ch] - target[ch]
+    return dot3(x, x)
+
+
+cdef inline void nearest(const double* frames, int m, i64 card, const double* pred, const double* inv_sc,
+                         const double* point, double dist2, i64* r) noexcept nogil:
+    """Where the rounded residual ``r`` maps farther than ``sqrt(dist2)`` from ``point``: the one of
+    its 26 neighbours that maps nearest instead, if nearer (the writer's dead zone, spec 4.3)."""
+    cdef i64 c[3]
+    cdef i64 best[3]
+    cdef double d, best_d = miss2(frames, m, card, pred, r, inv_sc, point)
+    cdef int ch, du, dv, dd
+    if best_d <= dist2:
+        return
+    for ch in range(3):
+        best[ch] = r[ch]
+    for du in range(-1, 2):
+        for dv in range(-1, 2):
+            for dd in range(-1, 2):
+                c[0] = r[0] + du
+                c[1] = r[1] + dv
+                c[2] = r[2] + dd
+                d = miss2(frames, m, card, pred, c, inv_sc, point)
+                if d < best_d:
+                    best_d = d
+                    for ch in range(3):
+                        best[ch] = c[ch]
+    for ch in range(3):
+        r[ch] = best[ch]
+
+
 def map_points(const double[:, ::1] frames, int segments, const i64[::1] card, const double[:, ::1] uvd,
                double[:, ::1] out):
     """``out[i]`` = the world point of card coordinates ``uvd[i]`` on ``card[i]``."""
@@ -256,6 +297,8 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                         pred[ch] = R[3 * b + ch] + (R[3 * b + ch] - R[3 * a + ch]) * ratio
                     if encode:
                         BR[3 * j + ch] = <i64> rint(Y[3 * c + ch] - pred[ch])
+                if dead_zone:
+                    nearest(fr, segments, card, pred, inv_sc, Z + 3 * c, dist2, BR + 3 * j)
                 if NB != NULL and fits(fr, segments, card, pred, NB + 3 * j, inv_sc, Z + 3 * c, dist2):
                     for ch in range(3):  # the neighbour's residual will do: its difference is zero
                         BR[3 * j + ch] = NB[3 * j + ch]
@@ -279,6 +322,8 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                     if encode:
                         for ch in range(3):
                             LR[3 * row + ch] = <i64> rint(Y[3 * i + ch] - pred[ch])
+                        if dead_zone:
+                            nearest(fr, segments, card, pred, inv_sc, Z + 3 * i, dist2, LR + 3 * row)
                         if NB != NULL and fits(fr, segments, card, pred, NB + 3 * (nbase + row), inv_sc,
                                                Z + 3 * i, dist2):
                             for ch in range(3):  # the neighbour's residual will do: its difference is zero

@@ -142,13 +142,15 @@ CHAIN_WINDOW = 256  # ... among this many candidates at most
 def canonical_order(cards: Cards, strand_card: np.ndarray, uvd: np.ndarray) -> np.ndarray:
     """The order the writer stores strands in (spec 4.3): card by card; on each card a greedy chain
     that starts at the strand with the smallest root ``v`` and goes on to the most alike strand not yet
-    taken (its points' card coordinates, in world units, every CHAIN_SAMPLES points). Each strand's
-    neighbour, the one before it, is then as alike as the writer could make it, and ``strand_card``
-    runs in blocks."""
+    taken: its root and its steps between every CHAIN_SAMPLES-th point, in card coordinates times
+    world units. Each strand's neighbour, the one before it, is then as alike as the writer could make
+    it (in shape more than in place, as neighbour prediction wants), and ``strand_card`` runs in blocks."""
     su, sv = card_scales(cards, 0.0)
     card = strand_card.astype(np.int64)
     world = np.stack([su, sv, np.ones_like(su)], axis=-1)[card][:, None, :]
-    features = np.ascontiguousarray((uvd[:, ::CHAIN_SAMPLES].astype(np.float64) * world).reshape(len(card), -1))
+    samples = uvd[:, ::CHAIN_SAMPLES].astype(np.float64) * world
+    features = np.ascontiguousarray(np.concatenate([samples[:, :1], np.diff(samples, axis=1)], axis=1)
+                                    .reshape(len(card), -1))
     by_card = np.lexsort((np.arange(len(card)), uvd[:, 0, 1], card))
     group_start = np.searchsorted(card[by_card], np.arange(cards.count + 1)).astype(np.int64)
     out = np.empty(len(card), np.int64)

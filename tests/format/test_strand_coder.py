@@ -40,7 +40,8 @@ def test_a_strands_neighbour_is_the_one_before_it_on_its_card():
 
 
 def test_the_writers_order_chains_alike_strands_card_by_card():
-    """Card by card, from the smallest root v, each next strand is the most alike one left."""
+    """Card by card, from the smallest root v, each next strand is the most alike one left: root and
+    steps every 8th point."""
     from cghair_format.examples import example_asset
 
     asset = example_asset(3, strands=40, points=17, cards=3)
@@ -50,12 +51,13 @@ def test_the_writers_order_chains_alike_strands_card_by_card():
     assert np.all(np.diff(cards) >= 0)
     su, sv = card_scales(asset.cards, 0.0)
     world = asset.uvd[:, ::8].astype(np.float64) * np.stack([su, sv, np.ones_like(su)], -1)[asset.strand_card][:, None]
+    shape = np.concatenate([world[:, :1], np.diff(world, axis=1)], axis=1)  # the root, then the steps
     for c in np.unique(cards):
         chain = order[cards == c]
         assert asset.uvd[chain[0], 0, 1] == asset.uvd[asset.strand_card == c, 0, 1].min()
         for k in range(1, len(chain)):
             left = chain[k:]
-            dist = np.abs(world[left] - world[chain[k - 1]]).sum(axis=(1, 2))
+            dist = np.abs(shape[left] - shape[chain[k - 1]]).sum(axis=(1, 2))
             assert dist[0] == dist.min()
 
 
@@ -189,6 +191,35 @@ def test_the_dead_zone_stores_more_zeros_and_keeps_the_bound(neighbour, monkeypa
     decoded = cgh.decode_points(cgh.decode(data))
     expected = cgh.decode_points(report.in_file_order(asset))
     assert np.linalg.norm(decoded - expected, axis=-1).max() <= 2e-4 * report.bbox_diagonal
+
+
+def test_the_dead_zone_moves_a_sample_that_rounding_leaves_beyond_the_tolerance(monkeypatch):
+    """A step so coarse that rounding each channel leaves some points beyond the dead zone's distance:
+    the writer takes the nearest of the 26 neighbouring residuals there instead (spec 4.3)."""
+    from cghair_format import strand_coder
+    from cghair_format.cards import build_cards
+
+    asset = build_cards(load_hair("Ratboy_mohawk.tfx"), n_cards=60, n_groups=4, points=32, seed=0,
+                        progress=False).asset
+    calls = []
+    real = strand_coder.encode_uvd
+
+    def spy(*args, **kw):
+        calls.append((args, kw))
+        return real(*args, **kw)
+
+    monkeypatch.setattr(codec, "encode_uvd", spy)
+    monkeypatch.setattr(codec, "STEP_START", 1.4)  # x tol: the first step tried
+    cgh.encode(asset, "compact")
+    args, kw = next(c for c in calls if c[1].get("dead_zone") is not None)
+    zone = kw["dead_zone"]
+
+    def beyond(world):
+        return int((np.linalg.norm(world - zone.points, axis=-1) > zone.distance).sum())
+
+    plain = beyond(real(*args)[2])  # every channel rounded, no dead zone
+    assert plain > 100
+    assert beyond(real(*args, **kw)[2]) < plain / 10
 
 
 def test_the_writer_tries_the_neighbours_residual_where_a_cards_strands_are_alike():
