@@ -209,6 +209,51 @@ def map_points(const double[:, ::1] frames, int segments, const i64[::1] card, c
             card_map(&frames[0, 0], segments, card[i], &uvd[i, 0], &out[i, 0], NULL, NULL, NULL)
 
 
+def invert_points(const double[:, ::1] frames, int segments, const i64[::1] card, double[:, ::1] uvd,
+                  const double[:, ::1] goal, int steps):
+    """Card coordinates of world points, in place: from ``uvd[i]``, up to ``steps`` Newton steps on
+    ``map(card[i], uvd) = goal[i]``, each kept only where it brings the point nearer."""
+    cdef Py_ssize_t i, n = card.shape[0]
+    cdef int step, ch
+    cdef double c[3]
+    cdef double t[3]
+    cdef double x[3]
+    cdef double ju[3]
+    cdef double jv[3]
+    cdef double jd[3]
+    cdef double miss[3]
+    cdef double sol[3]
+    cdef double d2, d2t
+    if (frames.shape[1] != 18 or uvd.shape[0] != n or goal.shape[0] != n or uvd.shape[1] != 3
+            or goal.shape[1] != 3):
+        raise ValueError("invert_points: mismatched shapes")
+    check_cards(card, frames.shape[0], segments)
+    with nogil:
+        for i in range(n):
+            for ch in range(3):
+                c[ch] = uvd[i, ch]
+            card_map(&frames[0, 0], segments, card[i], c, x, ju, jv, jd)
+            for ch in range(3):
+                miss[ch] = goal[i, ch] - x[ch]
+            d2 = dot3(miss, miss)
+            for step in range(steps):
+                solve3(ju, jv, jd, miss, sol)
+                for ch in range(3):
+                    t[ch] = c[ch] + sol[ch]
+                card_map(&frames[0, 0], segments, card[i], t, x, ju, jv, jd)
+                for ch in range(3):
+                    x[ch] = goal[i, ch] - x[ch]
+                d2t = dot3(x, x)
+                if not d2t < d2:
+                    break
+                d2 = d2t
+                for ch in range(3):
+                    c[ch] = t[ch]
+                    miss[ch] = x[ch]
+            for ch in range(3):
+                uvd[i, ch] = c[ch]
+
+
 def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int segments,
                 const i64[::1] strand_card, const double[:, ::1] scale,
                 const i64[::1] base, int base_order, const i64[::1] level_start, const i64[::1] idx,

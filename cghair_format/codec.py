@@ -19,6 +19,7 @@ from . import container, rans
 from .asset import ACTIVATIONS, UP_AXES, WEIGHT_MODES, Appearance, Cards, HairAsset, MlpLayer
 from .errors import AssetError, InvalidContentError, LimitError
 from .geometry import CardMap, card_scales, strand_points
+from .parallel import map_blocks
 from .profiles import Profile, get_profile
 from .quantize import (
     hier_decode,
@@ -52,12 +53,12 @@ REQUIRED_CHUNKS = ("META", "CARD", "STRD", "OPAC", "LOGT", "CBKS", "MLPW")
 OPTIONAL_CHUNKS = ("SIDS", "ROOT", "SCOL", "XMET")
 LIMITS = {"strands": 1 << 24, "points": 4096, "cards": 1 << 20, "segments": 1024, "groups": 1 << 16,
           "k": 256, "latent_dim": 4096, "mlp_layers": 16, "mlp_width": 1 << 20, "meta_bytes": 1 << 20}
-CARD_STEP_FRACTION = 1 / 8  # card geometry is quantized at least 8x finer than strand points ...
-CARD_ERROR_SHARE = 0.25  # ... and finer still until the cards alone move no point by more than this x tol
-MIN_CARD_STEP_FRACTION = 1 / 1024
-MIN_NORMAL_BITS, MAX_NORMAL_BITS = 8, 24
+CARD_STEP_FRACTION = 4  # card geometry is quantized this much coarser than strand points (which are coded
+# on the quantized cards, so the cards' error does not reach them) ...
+CARD_MISS_SHARE = 0.25  # ... and finer (halved) while some point has no card coordinates within this x tol
+MIN_CARD_STEP_FRACTION = 1 / 1024  # on them (a coarse card can fold or lose its width)
 MAX_TIGHTENINGS = 8
-STEP_START = 0.93  # first step, as a fraction of the position tolerance
+STEP_START = 1.0  # first step, as a fraction of the position tolerance
 TIGHTEN_TARGET = 0.97  # a retry aims the measured error at this fraction of the tolerance ...
 GROW_BELOW = 0.9  # ... and a first step whose error is below this fraction is retried larger, once
 DEAD_ZONE = 0.97  # a refinement residual stays zero where the prediction is this close to the input (x tol)
@@ -132,15 +133,14 @@ def encode(asset: HairAsset, profile: str | Profile = "compact", keep_order: boo
     points = strand_points(asset.cards, asset.strand_card, asset.uvd).astype(np.float64)
     diag = float(np.linalg.norm(points.reshape(-1, 3).max(0) - points.reshape(-1, 3).min(0)))
     tol = prof.position_tolerance * max(diag, 1e-12)
-    # measured, the largest point error is 1.0-1.06 steps (half a step on each of u, v, delta, plus
-    # the cards' own error): start where it usually meets the bound at once, then tighten or grow
+    # measured, the largest point error is about 1.0 step (half a step on each of u, v, delta): start
+    # where it usually meets the bound at once, then tighten or grow
     step = None if prof.lossless else STEP_START * tol
     appearance_chunks = _appearance_chunks(asset, prof)
-    card_fraction, normal_bits = _card_quantization(asset, prof, step, diag, points, tol)
     passed = None  # (step, error, quantized geometry) of the largest step that met the bound so far
     choices = None
     for attempt in range(MAX_TIGHTENINGS):
-        geometry = _quantize_geometry(asset, prof, step, diag, card_fraction, normal_bits, points, choices)
+        geometry = _quantize_geometry(asset, prof, step, diag, points, tol, choices)
         choices = geometry.choices
         decoded = geometry.decoded_points
         err = 0.0 if decoded is None else float(np.linalg.norm(decoded - points, axis=-1).max())
@@ -179,8 +179,7 @@ def decode(data: bytes) -> HairAsset:
 
 # --- META ----------------------------------------------------------------------------------------
 
-def _meta(asset: HairAsset, prof: Profile, step: float | None, diag: float, card_fraction: float,
-          normal_bits: int) -> dict:
+def _meta(asset: HairAsset, prof: Profile, step: float | None, diag: float) -> dict:
     app = asset.appearance
     return {
         "strands": asset.n_strands, "points": asset.points_per_strand, "cards": asset.cards.count,
@@ -191,18 +190,23 @@ def _meta(asset: HairAsset, prof: Profile, step: float | None, diag: float, card
         "up_axis": asset.up_axis, "generator": asset.generator, "attribution": asset.attribution,
         "bbox_diagonal": diag, "profile": prof.name,
         "quant": {"lossless": True} if step is None else {
-            "lossless": False, "step": step, "card_step": step * card_fraction,
-            "normal_bits": normal_bits, "base_stride": prof.base_stride, "base_order": 2,
+            "lossless": False, "step": step, "card_step": step * CARD_STEP_FRACTION,
+            "normal_bits": _normal_bits(asset, prof), "base_stride": prof.base_stride, "base_order": 2,
             "newton_steps": NEWTON_STEPS, "opacity_scale": prof.opacity_scale,
             "logit_levels": prof.logit_levels, "logit_floor": prof.logit_floor, "half_bias": prof.half_bias},
     }
 
 
-def _normal_bits(uvd: np.ndarray, step: float) -> int:
-    """Octahedral bits that keep ``|delta| * normal error`` (error about 2 / 2^(bits-1)) below a
-    quarter step for the point farthest from its card."""
-    need = 8 * float(np.abs(uvd[..., 2]).max()) / step + 1
-    return int(np.clip(math.ceil(math.log2(need)) + 1, MIN_NORMAL_BITS, MAX_NORMAL_BITS))
+def _normal_bits(asset: HairAsset, prof: Profile) -> int:
+    """The profile's octahedral bits for the card normals, or more where points lie so far off their
+    card that the normals' error (about 2 / 2^(bits-1) rad, times the distance) would reach a quarter
+    of the shortest card segment: a step in ``u`` would then move such a point far more than the strip
+    does, and no step would meet the tolerance."""
+    seg = np.linalg.norm(np.diff(asset.cards.spine.astype(np.float64), axis=1), axis=-1).min(axis=1)
+    far = np.zeros(asset.cards.count)
+    np.maximum.at(far, asset.strand_card, np.abs(asset.uvd[..., 2]).max(axis=1))
+    need = float(np.max(8 * far / np.maximum(seg, 1e-30), initial=0.0))
+    return int(np.clip(math.ceil(math.log2(max(need, 1.0))) + 1, prof.normal_bits, 24))
 
 
 def _parse_meta(raw: bytes) -> dict:
@@ -269,32 +273,6 @@ def _parse_meta(raw: bytes) -> dict:
 
 # --- chunks ---------------------------------------------------------------------------------------
 
-def _card_quantization(asset: HairAsset, prof: Profile, step: float | None, diag: float, points: np.ndarray,
-                       tol: float) -> tuple[float, int]:
-    """The card step as a fraction of the point step, and the normals' octahedral bits.
-
-    The fraction starts at CARD_STEP_FRACTION and is halved while the quantized cards alone (exact card
-    coordinates) move some point by more than CARD_ERROR_SHARE of the tolerance: short card segments
-    and wide cards magnify spine errors through the strip's bitangent. The bits start from
-    :func:`_normal_bits`, a bound for the point farthest from its card, and drop while the cards still
-    move no point by more than that share: most points lie far closer to their card."""
-    if step is None:
-        return CARD_STEP_FRACTION, MAX_NORMAL_BITS
-
-    def moved(fraction: float, bits: int) -> float:
-        quant = _meta(asset, prof, step, diag, fraction, bits)["quant"]
-        cards = _encode_cards(asset.cards, quant, StreamWriter())
-        d = strand_points(cards, asset.strand_card, asset.uvd).astype(np.float64) - points
-        return float(np.sqrt(np.max(np.sum(d * d, axis=-1))))
-
-    fraction, bits = CARD_STEP_FRACTION, _normal_bits(asset.uvd, step)
-    while fraction > MIN_CARD_STEP_FRACTION and moved(fraction, bits) > CARD_ERROR_SHARE * tol:
-        fraction /= 2
-    while bits > MIN_NORMAL_BITS and moved(fraction, bits - 1) <= CARD_ERROR_SHARE * tol:
-        bits -= 1
-    return fraction, bits
-
-
 class _Choices(NamedTuple):
     """The writer's per-file choices for the strand points, made on the first step it tries and kept
     for the others (they hardly depend on the step)."""
@@ -315,24 +293,23 @@ class _Geometry(NamedTuple):
     choices: _Choices | None
 
 
-def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag: float, card_fraction: float,
-                       normal_bits: int, points: np.ndarray, choices: _Choices | None = None) -> _Geometry:
+def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag: float, points: np.ndarray,
+                       tol: float, choices: _Choices | None = None) -> _Geometry:
     """What depends on the step: META, the CARD streams, and (quantized profiles) the STRD residual
     arrays and the world points a decoder will get (``points``: the input's), with ``choices`` (None:
     made here)."""
-    meta = _meta(asset, prof, step, diag, card_fraction, normal_bits)
+    meta = _meta(asset, prof, step, diag)
     q = meta["quant"]
     cards_w = StreamWriter()
     if q["lossless"]:
         for a in (asset.cards.spine, asset.cards.normal, asset.cards.half_width):
             cards_w.array(a.astype(np.float32), shuffle=True)
         return _Geometry(meta, cards_w, None, None, None)
-    cards = _encode_cards(asset.cards, q, cards_w)
+    cards_w, cards, cmap, uvd = _quantized_cards(asset, q, points, tol)
     su, sv = card_scales(cards, q["step"])
     scale = _uvd_scale(su, sv, asset.strand_card, q["step"])
-    y = asset.uvd * scale[:, None, :]
+    y = uvd * scale[:, None, :]
     zone = DeadZone(points, DEAD_ZONE * prof.position_tolerance * diag)
-    cmap = CardMap(cards)
     if choices is None:
         base_order = _choose_base_order(asset.strand_card, y, q["base_stride"])
         newton_steps = _choose_newton_steps(cmap, asset.strand_card, y, scale,
@@ -343,6 +320,50 @@ def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag
     base, levels, decoded_points = encode_uvd(cmap, asset.strand_card, y, scale, _prediction(q),
                                               dead_zone=zone._replace(neighbour=choices.neighbour_zone))
     return _Geometry(meta, cards_w, [base] + levels, decoded_points, choices)
+
+
+def _quantized_cards(asset: HairAsset, q: dict, points: np.ndarray, tol: float
+                     ) -> tuple[StreamWriter, Cards, CardMap, np.ndarray]:
+    """The CARD streams at ``q["card_step"]`` (halved, down to MIN_CARD_STEP_FRACTION of the point
+    step, while some point is left more than CARD_MISS_SHARE x ``tol`` off), the cards a decoder will
+    get, their map, and the input ``points``' card coordinates ``[S, P, 3]`` on them."""
+    while True:
+        cards_w = StreamWriter()
+        cards = _encode_cards(asset.cards, q, cards_w)
+        cmap = CardMap(cards)
+        uvd, miss = _on_cards(cards, cmap, asset.strand_card, asset.uvd, points, 1e-3 * q["step"])
+        if miss <= CARD_MISS_SHARE * tol or q["card_step"] <= MIN_CARD_STEP_FRACTION * q["step"]:
+            return cards_w, cards, cmap, uvd
+        q["card_step"] /= 2
+
+
+def _on_cards(cards: Cards, cmap: CardMap, strand_card: np.ndarray, uvd: np.ndarray, points: np.ndarray,
+              atol: float) -> tuple[np.ndarray, float]:
+    """The card coordinates ``[S, P, 3]`` of the input ``points`` on the quantized ``cards`` (``cmap``
+    their map), from their coordinates ``uvd`` on the input's cards, and the largest distance left
+    between a point and its coordinates' image. The strand coder then codes the points themselves,
+    and the cards' own quantization error does not add to theirs. Newton steps (compiled) solve
+    nearly every point; the few they leave farther than ``atol`` off (off the strip, where the
+    mapping folds) are solved exactly (:func:`.cards.inverse.solve_uvd`) where that is nearer."""
+    from .cards.inverse import solve_uvd
+
+    s, p = uvd.shape[:2]
+    card = np.repeat(strand_card.astype(np.int64), p)
+    flat_uvd, flat_points = uvd.reshape(-1, 3), points.reshape(-1, 3)
+    out = np.empty((s * p, 3))
+
+    def block(b: slice) -> None:
+        out[b] = cmap.invert(card[b], flat_uvd[b], flat_points[b])
+
+    map_blocks(block, s * p, 1 << 16)
+    miss = np.linalg.norm(cmap(card, out) - flat_points, axis=-1)
+    off = np.flatnonzero(miss > atol)
+    if len(off):
+        exact, _ = solve_uvd(cards, flat_points[off], card[off], out[off, 0] * cards.segments)
+        nearer = np.linalg.norm(cmap(card[off], exact) - flat_points[off], axis=-1) < miss[off]
+        out[off[nearer]] = exact[nearer]
+        miss[off[nearer]] = np.linalg.norm(cmap(card[off[nearer]], exact[nearer]) - flat_points[off[nearer]], axis=-1)
+    return out.reshape(s, p, 3), float(miss.max(initial=0.0))
 
 
 def _geometry_chunks(asset: HairAsset, geometry: _Geometry) -> list[container.Chunk]:

@@ -129,6 +129,14 @@ class CardMap:
                            np.ascontiguousarray(uvd, np.float64), out)
         return out
 
+    def invert(self, card: np.ndarray, uvd: np.ndarray, points: np.ndarray, steps: int = 4) -> np.ndarray:
+        """Card coordinates ``[N, 3]`` (float64) that map to ``points [N, 3]`` on cards ``card [N]``:
+        Newton steps from ``uvd`` (a nearby guess, such as the coordinates on slightly other cards)."""
+        out = np.array(uvd, np.float64, order="C")
+        _native.invert_points(self.frames, self.segments, np.ascontiguousarray(card, np.int64), out,
+                              np.ascontiguousarray(points, np.float64), steps)
+        return out
+
 
 def strand_points(cards: Cards, strand_card: np.ndarray, uvd: np.ndarray) -> np.ndarray:
     """World positions ``[S, P, 3]`` of strand points given by card coordinates ``uvd [S, P, 3]``.

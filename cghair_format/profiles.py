@@ -19,6 +19,7 @@ class Profile:
     logit_floor: float = -16.0  # ... and a stored 0 decodes to this logit
     weight_bits: int = 5  # codebook and MLP weights: this many bits of symmetric levels per row (in int8)
     half_bias: bool = True  # MLP biases as float16 (else float32)
+    normal_bits: int = 8  # card normals: octahedral bits per coordinate (8..24), about 2 / 2^(bits-1) rad
     base_stride: int = 16  # hierarchical predictor: coarse samples every this many points
     zstd_level: int = 19
     description: str = ""
@@ -32,7 +33,7 @@ PROFILES: dict[str, Profile] = {
     "lossless": Profile("lossless", lossless=True, zstd_level=9,
                         description="every float32 value stored exactly (byte-shuffled + zstd)"),
     "high": Profile("high", position_tolerance=2e-5, opacity_scale=1023.5, logit_levels=8191,
-                    logit_floor=-24.0, weight_bits=8, half_bias=False,
+                    logit_floor=-24.0, weight_bits=8, half_bias=False, normal_bits=12,
                     description="points within 2e-5 of the bbox diagonal, opacity within 1/2047"),
     "compact": Profile("compact", description="the default: points within 2e-4 of the bbox diagonal, "
                                               "opacity within 1/255, 5-bit weights"),

@@ -1,5 +1,6 @@
 """HairAsset <-> .cgh: round trips within each profile's bound, sources, atomic writes."""
 
+import dataclasses
 import io
 import mmap
 import os
@@ -152,36 +153,43 @@ def test_info_reports_counts_and_bits():
     assert sum(c["stored_bytes"] for c in info["chunks"]) < len(data)
 
 
-def test_points_far_from_their_card_get_finer_normals():
-    """A large displacement magnifies normal quantization; the writer adds octahedral bits."""
+def _quant(data: bytes) -> dict:
     import json
 
     from cghair_format import container
 
+    return json.loads(container.unpack(data, set(cgh.codec.REQUIRED_CHUNKS))[2]["META"])["quant"]
+
+
+@pytest.mark.parametrize("profile", ["compact", "high"])
+def test_points_are_coded_on_the_quantized_cards_so_their_error_does_not_add(profile):
+    """Points far off their card magnify every normal error (2 units off, the hair is 0.3 units tall):
+    the writer codes their coordinates on the cards as quantized, so a few normal bits (the profile's,
+    or enough to keep a step in u from moving such points far more than the strip) and a card step 4x
+    the point step still meet the point bound."""
     a = example_asset(12)
-    a.uvd[..., 2] *= 400  # points up to about 1 unit off their card, the hair is 0.3 units tall
-    data, report = cgh.encode(a, "high")
-    meta = json.loads(container.unpack(data, {"META"} | set(cgh.codec.REQUIRED_CHUNKS))[2]["META"])
-    assert meta["quant"]["normal_bits"] > 16
-    b = cgh.decode(data)
-    a = report.in_file_order(a)
-    assert np.linalg.norm(cgh.decode_points(b) - cgh.decode_points(a), axis=-1).max() <= 2e-5 * report.bbox_diagonal
+    a.uvd[..., 2] *= 400
+    data, report = cgh.encode(a, profile)
+    quant = _quant(data)
+    assert cgh.PROFILES[profile].normal_bits <= quant["normal_bits"] <= 12
+    assert quant["card_step"] == 4 * quant["step"]
+    bound = cgh.PROFILES[profile].position_tolerance * report.bbox_diagonal
+    b, a = cgh.decode(data), report.in_file_order(a)
+    expected = cgh.decode_points(a)
+    assert np.linalg.norm(cgh.decode_points(b) - expected, axis=-1).max() <= bound
+    # the input's own card coordinates on the quantized cards would miss the bound
+    on_quantized = cgh.decode_points(dataclasses.replace(a, cards=b.cards))
+    assert np.linalg.norm(on_quantized - expected, axis=-1).max() > 2 * bound
 
 
-def test_cards_that_magnify_their_own_error_get_a_finer_card_step():
-    """A very short first card segment turns small spine errors into large bitangent (rail) errors;
-    the writer quantizes such cards finer than 1/8 of the point step and still meets the bound."""
-    import json
-
-    from cghair_format import container
-
+def test_cards_too_coarse_to_hold_every_point_get_a_finer_card_step(monkeypatch):
+    """A card step so coarse that narrow cards lose their width leaves points with no coordinates
+    near them: the writer halves the card step until every point has them, and meets the bound."""
     a = example_asset(7)
-    spine = a.cards.spine.astype(np.float64)
-    spine[:, 0] = spine[:, 1] - 1e-2 * (spine[:, 1] - spine[:, 0])
-    a.cards.spine = spine.astype(np.float32)
+    monkeypatch.setattr(cgh.codec, "CARD_STEP_FRACTION", 4096)
     data, report = cgh.encode(a, "compact")
-    quant = json.loads(container.unpack(data, set(cgh.codec.REQUIRED_CHUNKS))[2]["META"])["quant"]
-    assert quant["card_step"] < quant["step"] / 8
+    quant = _quant(data)
+    assert quant["card_step"] < 4096 * quant["step"]
     decoded = cgh.decode_points(cgh.decode(data))
     a = report.in_file_order(a)
     assert np.linalg.norm(decoded - cgh.decode_points(a), axis=-1).max() <= 2e-4 * report.bbox_diagonal
