@@ -87,20 +87,17 @@ def strand_latents(appearance: Appearance, strand_group: np.ndarray) -> np.ndarr
 
 def run_mlp(appearance: Appearance, latents: np.ndarray) -> np.ndarray:
     """The global MLP applied to latents ``[S, D]``, in float32; ``[S, out]``. Each layer is one matrix
-    product over all strands (BLAS runs it on every core; measured steadier than our threads calling
-    BLAS on blocks), then its bias and activation in place, by blocks of strands on every core. The
-    output of the paper-scale model's last layer is 475 MB: :func:`.memory.empty`."""
+    product over all strands, its bias included (a column of ones on the input: the paper-scale
+    model's last layer writes its 475 MB output once, in :func:`.memory.empty`); BLAS runs it on every
+    core, measured steadier than our threads calling BLAS on blocks. A ReLU then runs in place, by
+    blocks of strands on every core."""
     h = latents.astype(np.float32)
     for layer in appearance.mlp:
-        h = np.matmul(h, layer.weight.astype(np.float32).T, out=memory.empty((len(h), len(layer.weight)), np.float32))
-        bias = layer.bias.astype(np.float32)
-
-        def finish(b: slice, h=h, bias=bias, relu=layer.activation == "relu") -> None:
-            h[b] += bias
-            if relu:
-                np.maximum(h[b], 0, out=h[b])
-
-        map_blocks(finish, len(h))
+        x = np.concatenate([h, np.ones((len(h), 1), np.float32)], axis=1)
+        w = np.concatenate([layer.weight.astype(np.float32).T, layer.bias.astype(np.float32)[None, :]])
+        h = np.matmul(x, w, out=memory.empty((len(h), w.shape[1]), np.float32))
+        if layer.activation == "relu":
+            map_blocks(lambda b, h=h: np.maximum(h[b], 0, out=h[b]), len(h))
     return h
 
 

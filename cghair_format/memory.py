@@ -1,10 +1,12 @@
-"""Large output arrays in memory of the system's default page size.
+"""Large output arrays, mapped and faulted in by the kernel in one go.
 
-numpy advises the kernel to back every large array with transparent huge pages (``madvise``). Where
-the kernel then defragments on demand for such requests (``/sys/kernel/mm/transparent_hugepage/defrag``
-= ``madvise``, a common default), a fresh array of hundreds of MB can stall for half a second while it
-compacts memory. Decoding the paper-scale asset to Gaussians allocates 475 MB of SH at once: 8 decodes
-took 0.66-1.71 s with numpy's arrays and 0.70-1.01 s with these (README, "Decode time").
+A fresh array of hundreds of MB costs more to fault in than to fill: decoding the paper-scale asset
+to Gaussians writes 475 MB of SH, a matrix product of about 0.1 s. numpy's own allocation asks for
+transparent huge pages, which are quick once the process has freed some, but the first such array
+of a process (and, now and then, a later one) stalls while the kernel finds them: 1.05 s, then
+0.05-0.22 s, for 475 MB on this project's 2-core machine (README, "Decode time"). An anonymous
+mapping that the kernel populates at once (``MAP_POPULATE``, Linux) takes 0.16-0.20 s every time,
+page by page faulting 0.27-0.33 s.
 """
 
 from __future__ import annotations
@@ -14,13 +16,15 @@ import mmap
 import numpy as np
 
 LARGE_BYTES = 64 << 20  # smaller arrays come from numpy as usual
+_FLAGS = {"flags": mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS | getattr(mmap, "MAP_POPULATE", 0)} \
+    if hasattr(mmap, "MAP_ANONYMOUS") else {}
 
 
 def empty(shape: tuple[int, ...], dtype) -> np.ndarray:
-    """An uninitialised C-order array; from its own anonymous mapping when it has LARGE_BYTES or more
-    (freed with the array, like any other)."""
+    """An uninitialised C-order array; from its own populated anonymous mapping when it has LARGE_BYTES
+    or more (freed with the array, like any other)."""
     dtype = np.dtype(dtype)
     size = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
     if size < LARGE_BYTES:
         return np.empty(shape, dtype)
-    return np.frombuffer(mmap.mmap(-1, size), dtype).reshape(shape)
+    return np.frombuffer(mmap.mmap(-1, size, **_FLAGS), dtype).reshape(shape)

@@ -95,6 +95,11 @@ def test_large_sh_outputs_live_in_their_own_mapping_and_match_numpy(monkeypatch)
     assert isinstance(mapped.base.base, memoryview) and isinstance(mapped.base.base.obj, mmap.mmap)
     assert mapped.flags.writeable and mapped.dtype == np.float32
     assert np.array_equal(mapped, small)
+    h = latents  # spec 6.3, in float64: each layer W h + b, then its activation
+    for layer in app.mlp:
+        h = h @ layer.weight.astype(np.float64).T + layer.bias
+        h = np.maximum(h, 0) if layer.activation == "relu" else h
+    np.testing.assert_allclose(small, h, rtol=1e-5, atol=1e-5)
 
 
 def test_sources_path_bytes_and_file_objects(tmp_path):
