@@ -142,20 +142,6 @@ cdef check_cards(const i64[::1] card, Py_ssize_t triangles, int segments):
             raise ValueError(f"card index {card[i]} outside [0, {cards})")
 
 
-cdef inline bint fits(const double* frames, int m, i64 card, const double* pred, const i64* r,
-                      const double* inv_sc, const double* target, double dist2) noexcept nogil:
-    """Whether ``pred + r`` (scaled card coordinates) maps within ``sqrt(dist2)`` of ``target``."""
-    cdef double p[3]
-    cdef double x[3]
-    cdef int ch
-    for ch in range(3):
-        p[ch] = pred[ch] + r[ch]
-    to_world(frames, m, card, p, inv_sc, x)
-    for ch in range(3):
-        x[ch] = x[ch] - target[ch]
-    return dot3(x, x) <= dist2
-
-
 cdef inline double miss2(const double* frames, int m, i64 card, const double* pred, const i64* r,
                          const double* inv_sc, const double* target) noexcept nogil:
     """The squared world distance from ``pred + r`` (scaled card coordinates) to ``target``."""
@@ -168,6 +154,12 @@ cdef inline double miss2(const double* frames, int m, i64 card, const double* pr
     for ch in range(3):
         x[ch] = x[ch] - target[ch]
     return dot3(x, x)
+
+
+cdef inline bint fits(const double* frames, int m, i64 card, const double* pred, const i64* r,
+                      const double* inv_sc, const double* target, double dist2) noexcept nogil:
+    """Whether ``pred + r`` (scaled card coordinates) maps within ``sqrt(dist2)`` of ``target``."""
+    return miss2(frames, m, card, pred, r, inv_sc, target) <= dist2
 
 
 cdef inline void nearest(const double* frames, int m, i64 card, const double* pred, const double* inv_sc,
