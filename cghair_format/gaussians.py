@@ -76,12 +76,17 @@ def strand_weights(appearance: Appearance) -> np.ndarray:
 
 
 def strand_latents(appearance: Appearance, strand_group: np.ndarray) -> np.ndarray:
-    """Each strand's latent ``[S, D]``: its weights over its card group's codebook."""
+    """Each strand's latent ``[S, D]``: its weights over its card group's codebook (one small matrix
+    product per group, over that group's strands)."""
     w = strand_weights(appearance)
     codebooks = appearance.codebooks.astype(np.float64)
-    latents = np.zeros((len(strand_group), appearance.latent_dim))
-    for k in range(appearance.k):  # gathers one latent per strand at a time: no [S, K, D] temporary
-        latents += w[:, k:k + 1] * codebooks[strand_group, k]
+    group = np.asarray(strand_group, np.int64)
+    order = np.argsort(group, kind="stable")
+    bounds = np.searchsorted(group[order], np.arange(appearance.n_groups + 1))
+    latents = np.empty((len(group), appearance.latent_dim))
+    for g in range(appearance.n_groups):
+        members = order[bounds[g]:bounds[g + 1]]
+        latents[members] = w[members] @ codebooks[g]
     return latents
 
 

@@ -85,10 +85,13 @@ def test_gaussians_decode_shapes_and_values():
     assert np.allclose(zaxis, d, atol=1e-5)
 
 
-def test_large_sh_outputs_live_in_their_own_mapping_and_match_numpy(monkeypatch):
+def test_latents_and_mlp_follow_the_spec_and_large_outputs_live_in_their_own_mapping(monkeypatch):
     a = example_asset(3, sh_degree=3)
     app = a.appearance
-    latents = strand_latents(app, a.cards.group[a.strand_card])
+    group = a.cards.group[a.strand_card]
+    latents = strand_latents(app, group)  # each strand's weights over its group's codebook
+    np.testing.assert_allclose(latents, np.einsum("sk,skd->sd", strand_weights(app), app.codebooks[group]),
+                               rtol=1e-6, atol=1e-6)
     small = run_mlp(app, latents)
     monkeypatch.setattr(memory, "LARGE_BYTES", 1)  # every layer's output from memory.empty's mapping
     mapped = run_mlp(app, latents)
