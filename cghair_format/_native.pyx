@@ -248,7 +248,7 @@ def invert_points(const double[:, ::1] frames, int segments, const i64[::1] card
 
 def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int segments,
                 const i64[::1] strand_card, const double[:, ::1] scale,
-                const i64[::1] base, int base_order, const i64[::1] level_start, const i64[::1] idx,
+                const i64[::1] base, const i64[::1] base_order, const i64[::1] level_start, const i64[::1] idx,
                 const i64[:, ::1] nb, const double[:, ::1] wt, int newton_steps, double max_step_ratio,
                 double[:, :, ::1] rec, double[:, :, ::1] world, i64[:, :, ::1] res,
                 const double[:, :, ::1] y=None, const double[:, :, ::1] dz_points=None, double dz_dist=-1.0,
@@ -325,7 +325,7 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                 for ch in range(3):
                     if j == 0:
                         pred[ch] = 0.0
-                    elif j == 1 or base_order == 1:
+                    elif j == 1 or base_order[ch] == 1:
                         pred[ch] = R[3 * base[j - 1] + ch]
                     else:
                         a = base[j - 2]

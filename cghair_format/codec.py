@@ -191,7 +191,7 @@ def _meta(asset: HairAsset, prof: Profile, step: float | None, diag: float) -> d
         "bbox_diagonal": diag, "profile": prof.name,
         "quant": {"lossless": True} if step is None else {
             "lossless": False, "step": step, "card_step": step * CARD_STEP_FRACTION,
-            "normal_bits": _normal_bits(asset, prof), "base_stride": prof.base_stride, "base_order": 2,
+            "normal_bits": _normal_bits(asset, prof), "base_stride": prof.base_stride, "base_order": [2, 2, 2],
             "newton_steps": NEWTON_STEPS, "opacity_scale": prof.opacity_scale,
             "logit_levels": prof.logit_levels, "logit_floor": prof.logit_floor, "half_bias": prof.half_bias},
     }
@@ -260,7 +260,11 @@ def _parse_meta(raw: bytes) -> dict:
         need("normal_bits", int, 8, 24, src=quant)
         need("base_stride", int, 1, 256, src=quant)
         need("newton_steps", int, 0, 8, src=quant)
-        need("base_order", int, 1, 2, src=quant)
+        orders = quant.get("base_order")
+        if (not isinstance(orders, list) or len(orders) != 3
+                or not all(isinstance(k, int) and not isinstance(k, bool) and k in (1, 2) for k in orders)):
+            raise InvalidContentError(f"META quant.base_order must list 3 orders (u, v, delta), each 1 or 2, got "
+                                      f"{orders!r}", chunk="META")
         need("half_bias", bool, src=quant)
         arrays = 1 + len(level_plan(meta["points"], quant["base_stride"])[1])
         masks = quant.get("neighbour")
@@ -277,7 +281,7 @@ class _Choices(NamedTuple):
     """The writer's per-file choices for the strand points, made on the first step it tries and kept
     for the others (they hardly depend on the step)."""
 
-    base_order: int
+    base_order: tuple[int, int, int]
     newton_steps: int
     neighbour_zone: bool
 
@@ -316,7 +320,7 @@ def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag
                                             Prediction(q["base_stride"], base_order, NEWTON_STEPS))
         choices = _Choices(base_order, newton_steps, _choose_neighbour_zone(
             cmap, asset.strand_card, y, scale, Prediction(q["base_stride"], base_order, newton_steps), zone))
-    q["base_order"], q["newton_steps"] = choices.base_order, choices.newton_steps
+    q["base_order"], q["newton_steps"] = list(choices.base_order), choices.newton_steps
     base, levels, decoded_points = encode_uvd(cmap, asset.strand_card, y, scale, _prediction(q),
                                               dead_zone=zone._replace(neighbour=choices.neighbour_zone))
     return _Geometry(meta, cards_w, [base] + levels, decoded_points, choices)
@@ -457,21 +461,22 @@ def _estimate(residuals: np.ndarray) -> float:
 
 
 def _prediction(q: dict) -> Prediction:
-    return Prediction(q["base_stride"], q["base_order"], q["newton_steps"])
+    return Prediction(q["base_stride"], tuple(q["base_order"]), q["newton_steps"])
 
 
-def _choose_base_order(strand_card: np.ndarray, y: np.ndarray, base_stride: int) -> int:
-    """The base samples' predictor, linear extrapolation (2) or the previous sample (1), whichever the
-    coder's estimate finds smaller once neighbour prediction has had its say: strands of a card that
-    run parallel share their steps more than their bends, which favours 1."""
+def _choose_base_order(strand_card: np.ndarray, y: np.ndarray, base_stride: int) -> tuple[int, int, int]:
+    """Per channel (u, v, delta), the base samples' predictor, linear extrapolation (2) or the previous
+    sample (1), whichever the coder's estimate finds smaller once neighbour prediction has had its
+    say: strands of a card that run parallel share their steps more than their bends, which favours
+    1; a strand advancing along its card at an even pace favours 2 for u."""
     base, _ = level_plan(y.shape[1], base_stride)
     order, starts = neighbour_order(strand_card)
     sizes = {}
     for k in (2, 1):
-        r = base_residuals(y, base, k)[:, 1:]
-        sizes[k] = sum(min(_estimate(r[..., ch]), _estimate(neighbour_encode(r[..., ch], order, starts)))
-                       for ch in range(3))
-    return min(sizes, key=sizes.get)
+        r = base_residuals(y, base, (k, k, k))[:, 1:]
+        sizes[k] = [min(_estimate(r[..., ch]), _estimate(neighbour_encode(r[..., ch], order, starts)))
+                    for ch in range(3)]
+    return tuple(1 if sizes[1][ch] < sizes[2][ch] else 2 for ch in range(3))
 
 
 def _choose_newton_steps(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray,
@@ -557,8 +562,19 @@ def _decode_cards(r: StreamReader, c: int, m1: int, q: dict, group: np.ndarray |
     octv = _get_hier(r, c * 2, m1, s, "normal").reshape(c, 2, m1).transpose(0, 2, 1)
     normal = oct_decode(octv, q["normal_bits"])
     half_width = np.maximum(_get_hier(r, c, m1, s, "half_width") * cq, 0.0)
-    return Cards(spine.astype(np.float32), normal.astype(np.float32), half_width.astype(np.float32),
+    return Cards(_float32(spine, "card spines", "CARD"), normal.astype(np.float32),
+                 _float32(half_width, "card half-widths", "CARD"),
                  group if group is not None else np.zeros(c, np.int32))
+
+
+def _float32(a: np.ndarray, what: str, chunk: str) -> np.ndarray:
+    """``a`` as float32, or the error a corrupt step or residual stream deserves if it does not fit."""
+    with np.errstate(over="raise"):
+        try:
+            return a.astype(np.float32)
+        except FloatingPointError:
+            raise InvalidContentError(f"{what} decode beyond float32's range (a corrupt step, scale or "
+                                      f"residuals)", chunk=chunk) from None
 
 
 def _uvd_scale(su: np.ndarray, sv: np.ndarray, strand_card: np.ndarray, step: float) -> np.ndarray:
@@ -625,7 +641,8 @@ def _decode_chunks(meta: dict, payloads: dict[str, bytes]) -> HairAsset:
         reader.finish()
     appearance = Appearance(np.asarray(logits, np.float32), np.asarray(codebooks, np.float32), mlp,
                             meta["sh_degree"], meta["weight_mode"], float(meta["temperature"]))
-    asset = HairAsset(cards, strand_card.astype(np.int32), uvd.astype(np.float32), opacity.astype(np.float32),
+    asset = HairAsset(cards, strand_card.astype(np.int32), _float32(uvd, "strand points", "STRD"),
+                      opacity.astype(np.float32),
                       appearance, float(meta["thickness"]), float(meta["meters_per_unit"]), meta["up_axis"],
                       meta["generator"], meta["attribution"])
     _decode_optional(asset, payloads, s, p)

@@ -43,23 +43,26 @@ class DeadZone(NamedTuple):
 @dataclass(frozen=True)
 class Prediction:
     """How strand points are predicted (META quant): the base stride, the base samples' predictor
-    order (1: the previous base sample, 2: linear extrapolation) and the Newton steps per level."""
+    order per channel u, v, delta (1: the previous base sample, 2: linear extrapolation) and the
+    Newton steps per level."""
 
     base_stride: int
-    base_order: int
+    base_order: tuple[int, int, int]
     newton_steps: int
 
 
-def base_residuals(y: np.ndarray, base: np.ndarray, order: int) -> np.ndarray:
+def base_residuals(y: np.ndarray, base: np.ndarray, orders: tuple[int, int, int]) -> np.ndarray:
     """The residuals ``[S, nb, 3]`` of the base samples of ``y [S, n, 3]`` alone (no dead zone): what
-    the compiled recurrence stores for them, in numpy, for the writer's choice of ``order``."""
+    the compiled recurrence stores for them, in numpy, with the predictor ``orders`` of channels u, v,
+    delta (the writer's choice)."""
     yt = y.transpose(1, 0, 2)  # sample-major, as base_prediction takes it
     rec = np.zeros(yt.shape)
     out = np.zeros((len(y), len(base), 3), np.int64)
-    for j, i in enumerate(base):
-        pred = base_prediction(rec, base, j, order)
-        out[:, j] = np.rint(yt[i] - pred)
-        rec[i] = pred + out[:, j]
+    for ch, order in enumerate(orders):
+        for j, i in enumerate(base):
+            pred = base_prediction(rec[..., ch], base, j, order)
+            out[:, j, ch] = np.rint(yt[i, :, ch] - pred)
+            rec[i, :, ch] = pred + out[:, j, ch]
     return out
 
 
@@ -97,9 +100,10 @@ def _code_strands(cmap: CardMap, strand_card: np.ndarray, scale: np.ndarray, n: 
     # stay in cache while its strands are coded
     by_card, _ = neighbour_order(card)
     base = base.astype(np.int64)
+    orders = np.asarray(plan.base_order, np.int64)
 
     def block(b: slice) -> None:
-        _native.run_strands(by_card[b], cmap.frames, cmap.segments, card, scale, base, plan.base_order,
+        _native.run_strands(by_card[b], cmap.frames, cmap.segments, card, scale, base, orders,
                             level_start, idx, nb, wt, plan.newton_steps, MAX_STEP_RATIO, rec, world, residuals,
                             y=y, dz_points=near, dz_dist=-1.0 if dead_zone is None else float(dead_zone.distance),
                             neighbour_zone=dead_zone is not None and dead_zone.neighbour)
