@@ -10,7 +10,8 @@ and is called on independent blocks of strands from several threads (:mod:`.para
 - :func:`decode_residuals`: the STRD token stream and extra bits (spec 4.3.2), decoded.
 """
 
-from libc.math cimport fabs, floor, isfinite, rint, sqrt
+from libc.float cimport FLT_MAX
+from libc.math cimport INFINITY, fabs, floor, isfinite, rint, sqrt
 from libc.stdint cimport uint8_t, uint16_t, uint32_t, uint64_t
 from libc.stdlib cimport calloc, free
 
@@ -252,11 +253,13 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                 const i64[:, ::1] nb, const double[:, ::1] wt, int newton_steps, double max_step_ratio,
                 double[:, :, ::1] rec, double[:, :, ::1] world, i64[:, :, ::1] res,
                 const double[:, :, ::1] y=None, const double[:, :, ::1] dz_points=None, double dz_dist=-1.0,
-                bint neighbour_zone=False):
+                bint neighbour_zone=False, float[:, :, ::1] uvd=None):
     """The recurrence of spec 4.3 for the strands ``strands_to_code`` (indices into ``[S]``; best
     grouped by card, whose triangles then stay in cache) of ``n`` points, into ``rec`` (scaled card
-    coordinates ``[S, n, 3]``) and ``world`` (their world points; when decoding, all but the last
-    level's, which nothing is predicted from).
+    coordinates ``[S, n, 3]``) and ``world`` (their world points). Decoding into ``uvd`` (float32
+    ``[S, n, 3]``, given): ``rec`` and ``world`` are one strand's scratch (``[1, n, 3]``), and each
+    strand's card coordinates ``rec / scale`` go to ``uvd``; returns how many of them float32 cannot
+    hold (inf or NaN there: a corrupt file). Otherwise returns 0.
 
     Levels: ``level_start [L + 1]`` delimits rows of ``idx [R]`` (the new indices), ``nb [R, 4]`` and
     ``wt [R, 4]`` (their interpolation neighbours and weights). Decoding (``y`` None) reads the
@@ -269,6 +272,9 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
     cdef Py_ssize_t t, s, j, li, row, kk, i, ch
     cdef Py_ssize_t strands = strands_to_code.shape[0], nbase = base.shape[0], levels = level_start.shape[0] - 1
     cdef int encode = y is not None, dead_zone = encode and dz_points is not None and dz_dist >= 0
+    cdef int scratch = uvd is not None
+    cdef Py_ssize_t unrepresentable = 0, npts = rec.shape[1]
+    cdef double v
     cdef double pred[3]
     cdef double goal[3]
     cdef double inv_sc[3]
@@ -288,11 +294,13 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
     zero[1] = 0
     zero[2] = 0
     if strands == 0:
-        return
+        return 0
     check_cards(strand_card, frames.shape[0], segments)
     shape = (strand_card.shape[0], rec.shape[1], 3)
-    if (frames.shape[1] != 18 or tuple(scale.shape)[:2] != shape[::2] or tuple(rec.shape)[:3] != shape
-            or tuple(world.shape)[:3] != shape or tuple(res.shape)[:3] != (shape[0], nbase + idx.shape[0], 3)
+    own = (1,) + shape[1:] if scratch else shape  # the shape of rec and world
+    if (frames.shape[1] != 18 or tuple(scale.shape)[:2] != shape[::2] or tuple(rec.shape)[:3] != own
+            or tuple(world.shape)[:3] != own or tuple(res.shape)[:3] != (shape[0], nbase + idx.shape[0], 3)
+            or (scratch and (encode or tuple(uvd.shape)[:3] != shape))
             or (y is not None and tuple(y.shape)[:3] != shape)
             or (dz_points is not None and tuple(dz_points.shape)[:3] != shape)
             or nb.shape[0] != idx.shape[0] or wt.shape[0] != idx.shape[0] or nb.shape[1] != 4 or wt.shape[1] != 4
@@ -309,8 +317,8 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
             sc = &scale[s, 0]
             for ch in range(3):
                 inv_sc[ch] = 1.0 / sc[ch]
-            R = &rec[s, 0, 0]
-            W = &world[s, 0, 0]
+            R = &rec[0 if scratch else s, 0, 0]
+            W = &world[0 if scratch else s, 0, 0]
             BR = &res[s, 0, 0]
             LR = BR + 3 * nbase
             NB = NULL  # encoding: the residuals of this strand's neighbour (spec 4.3), when coded already
@@ -373,6 +381,16 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                         R[3 * i + ch] = pred[ch] + LR[3 * row + ch]
                     if encode or li + 1 < levels:  # a decoder predicts nothing from the last level
                         to_world(fr, segments, card, R + 3 * i, inv_sc, W + 3 * i)
+            if scratch:
+                for i in range(npts):
+                    for ch in range(3):
+                        v = R[3 * i + ch] / sc[ch]
+                        if fabs(v) <= FLT_MAX:
+                            uvd[s, i, ch] = <float> v
+                        else:
+                            uvd[s, i, ch] = <float> (v if v != v else (INFINITY if v > 0 else -INFINITY))
+                            unrepresentable += 1
+    return unrepresentable
 
 
 def undo_neighbour(i64[:, :, ::1] values, const i64[::1] order, const uint8_t[::1] starts,

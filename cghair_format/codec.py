@@ -641,10 +641,9 @@ def _decode_chunks(meta: dict, payloads: dict[str, bytes]) -> HairAsset:
         reader.finish()
     appearance = Appearance(np.asarray(logits, np.float32), np.asarray(codebooks, np.float32), mlp,
                             meta["sh_degree"], meta["weight_mode"], float(meta["temperature"]))
-    asset = HairAsset(cards, strand_card.astype(np.int32), _float32(uvd, "strand points", "STRD"),
-                      opacity.astype(np.float32),
-                      appearance, float(meta["thickness"]), float(meta["meters_per_unit"]), meta["up_axis"],
-                      meta["generator"], meta["attribution"])
+    asset = HairAsset(cards, strand_card.astype(np.int32), uvd, opacity.astype(np.float32), appearance,
+                      float(meta["thickness"]), float(meta["meters_per_unit"]), meta["up_axis"], meta["generator"],
+                      meta["attribution"])
     _decode_optional(asset, payloads, s, p)
     return asset
 

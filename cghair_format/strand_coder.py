@@ -21,6 +21,7 @@ import numpy as np
 
 from . import _native
 from .asset import Cards
+from .errors import InvalidContentError
 from .geometry import CardMap, card_scales
 from .parallel import map_blocks
 from .quantize import base_prediction, level_plan
@@ -66,60 +67,49 @@ def base_residuals(y: np.ndarray, base: np.ndarray, orders: tuple[int, int, int]
     return out
 
 
-def _code_strands(cmap: CardMap, strand_card: np.ndarray, scale: np.ndarray, n: int, plan: Prediction,
-                  y: np.ndarray | None = None, residuals: np.ndarray | None = None,
-                  dead_zone: DeadZone | None = None):
-    """Encode (``y`` given, scaled card coordinates ``[S, n, 3]``) or decode (``residuals`` given) with
-    the compiled recurrence :func:`._native.run_strands`, over blocks of strands in parallel.
-
-    ``dead_zone`` (encoding): see :class:`DeadZone`. The error stays bounded, the residuals it picks
-    cost the least, and as the decoder predicts from what it reconstructs, later samples simply see
-    that reconstruction.
-
-    Returns the reconstruction ``[S, n, 3]`` (scaled units), its world points ``[S, n, 3]`` (when
-    decoding, all but the last level's) and the residuals ``[S, N, 3]``: the base samples' columns,
-    then each level's."""
+def _run_strands(cmap: CardMap, strand_card: np.ndarray, scale: np.ndarray, residuals: np.ndarray, n: int,
+                 plan: Prediction, **arrays) -> int:
+    """The compiled recurrence :func:`._native.run_strands` over blocks of strands in parallel, card by
+    card, each strand after its neighbour (which the dead zone may copy; a card's triangles stay in
+    cache while its strands are coded). ``arrays``: encoding, ``rec``, ``world``, ``y`` and the dead
+    zone's arguments; decoding, ``uvd`` (each block then gets its own one-strand scratch)."""
     base, levels = level_plan(n, plan.base_stride)
-    s = len(strand_card)
     level_start = np.cumsum([0] + [len(idx) for idx, _, _ in levels], dtype=np.int64)
     idx = np.concatenate([np.zeros(0, np.int64)] + [lv[0] for lv in levels]).astype(np.int64)
     nb = np.concatenate([np.zeros((0, 4), np.int64)] + [lv[1] for lv in levels]).astype(np.int64)
     wt = np.concatenate([np.zeros((0, 4))] + [lv[2] for lv in levels])
-    rec = np.empty((s, n, 3))
-    world = np.empty((s, n, 3))
-    if residuals is None:
-        residuals = np.empty((s, len(base) + len(idx), 3), np.int64)
-    else:
-        residuals = np.ascontiguousarray(residuals, np.int64)
     card = np.ascontiguousarray(strand_card, np.int64)
-    scale = np.ascontiguousarray(scale, np.float64)
-    y = None if y is None else np.ascontiguousarray(y, np.float64)
-    near = None if dead_zone is None else np.ascontiguousarray(dead_zone.points, np.float64)
-
-    # card by card, each strand after its neighbour (which the dead zone may copy); a card's triangles
-    # stay in cache while its strands are coded
     by_card, _ = neighbour_order(card)
-    base = base.astype(np.int64)
-    orders = np.asarray(plan.base_order, np.int64)
+    scale = np.ascontiguousarray(scale, np.float64)
+    base, orders = base.astype(np.int64), np.asarray(plan.base_order, np.int64)
 
-    def block(b: slice) -> None:
-        _native.run_strands(by_card[b], cmap.frames, cmap.segments, card, scale, base, orders,
-                            level_start, idx, nb, wt, plan.newton_steps, MAX_STEP_RATIO, rec, world, residuals,
-                            y=y, dz_points=near, dz_dist=-1.0 if dead_zone is None else float(dead_zone.distance),
-                            neighbour_zone=dead_zone is not None and dead_zone.neighbour)
+    def block(b: slice) -> int:
+        given = dict(arrays)
+        if "uvd" in given:  # decoding: one strand's scratch per block
+            given["rec"], given["world"] = np.empty((1, n, 3)), np.empty((1, n, 3))
+        rec, world = given.pop("rec"), given.pop("world")
+        return _native.run_strands(by_card[b], cmap.frames, cmap.segments, card, scale, base, orders, level_start,
+                                   idx, nb, wt, plan.newton_steps, MAX_STEP_RATIO, rec, world, residuals, **given)
 
-    map_blocks(block, s)
-    return rec, world, residuals
+    return sum(map_blocks(block, len(card)))
 
 
 def encode_uvd(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray, plan: Prediction,
                dead_zone: DeadZone | None = None):
     """Residuals (base, levels) of scaled card coordinates ``y [S, P, 3]`` (``uvd * scale``) on the cards
-    of ``cmap``, and the
-    world points ``[S, P, 3]`` the decoder will reconstruct. Every reconstructed value is within 0.5
-    of ``y``, except samples where ``dead_zone`` (:class:`DeadZone`) lets a cheaper residual stand."""
-    _, world, residuals = _code_strands(cmap, strand_card, scale, y.shape[1], plan, y=y, dead_zone=dead_zone)
-    base, *levels = np.split(residuals, np.cumsum(level_widths(y.shape[1], plan.base_stride))[:-1], axis=1)
+    of ``cmap``, and the world points ``[S, P, 3]`` the decoder will reconstruct. Every reconstructed
+    value is within 0.5 of ``y``, except samples where ``dead_zone`` (:class:`DeadZone`) lets a cheaper
+    residual stand: the error stays bounded, the residuals it picks cost the least, and as the decoder
+    predicts from what it reconstructs, later samples simply see that reconstruction."""
+    s, n = y.shape[:2]
+    world = np.empty((s, n, 3))
+    residuals = np.empty((s, sum(level_widths(n, plan.base_stride)), 3), np.int64)
+    zone = {} if dead_zone is None else {
+        "dz_points": np.ascontiguousarray(dead_zone.points, np.float64), "dz_dist": float(dead_zone.distance),
+        "neighbour_zone": dead_zone.neighbour}
+    _run_strands(cmap, strand_card, scale, residuals, n, plan, rec=np.empty((s, n, 3)), world=world,
+                 y=np.ascontiguousarray(y, np.float64), **zone)
+    base, *levels = np.split(residuals, np.cumsum(level_widths(n, plan.base_stride))[:-1], axis=1)
     return base, levels, world
 
 
@@ -131,10 +121,15 @@ def level_widths(n: int, base_stride: int) -> list[int]:
 
 def decode_uvd(cmap: CardMap, strand_card: np.ndarray, residuals: np.ndarray, n: int, scale: np.ndarray,
                plan: Prediction) -> np.ndarray:
-    """Card coordinates ``[S, n, 3]`` (float64) from the residuals of :func:`encode_uvd`, side by side in
-    one array ``[S, N, 3]`` (base samples, then each level)."""
-    rec, _, _ = _code_strands(cmap, strand_card, scale, n, plan, residuals=residuals)
-    return rec / scale[:, None, :]
+    """Card coordinates ``[S, n, 3]`` (float32) from the residuals of :func:`encode_uvd`, side by side in
+    one array ``[S, N, 3]`` (base samples, then each level). Raises InvalidContentError where float32
+    cannot hold them (a corrupt step or residuals)."""
+    uvd = np.empty((len(strand_card), n, 3), np.float32)
+    bad = _run_strands(cmap, strand_card, scale, np.ascontiguousarray(residuals, np.int64), n, plan, uvd=uvd)
+    if bad:
+        raise InvalidContentError(f"{bad} strand point coordinates decode beyond float32's range (a corrupt "
+                                  f"step, scale or residuals)", chunk="STRD")
+    return uvd
 
 
 # --- neighbour prediction across the strands of a card (spec 4.3) ----------------------------------

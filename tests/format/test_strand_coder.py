@@ -117,6 +117,12 @@ def test_bad_base_orders_are_refused(orders):
         cgh.decode(_vector_with_quant(lambda quant: quant.update(base_order=orders)))
 
 
+def test_a_step_that_decodes_beyond_float32_is_refused():
+    """A corrupt but well-formed step (1e40 scene units) scales the residuals past what float32 holds."""
+    with pytest.raises(InvalidContentError, match="beyond float32's range"):
+        cgh.decode(_vector_with_quant(lambda quant: quant.update(step=1e40)))
+
+
 def _vector_with_quant(edit) -> bytes:
     """spec/vectors/small_compact.cgh with its META quant changed by ``edit`` (checksums redone)."""
     data = (codec.Path(__file__).parents[2] / "spec" / "vectors" / "small_compact.cgh").read_bytes()
