@@ -122,7 +122,7 @@ def encode(asset: HairAsset, profile: str | Profile = "compact", keep_order: boo
     The quantized profiles store the strands card by card, alike strands one after another (spec 4.3),
     which codes smaller: ``report.strand_order`` maps them back to the input's (the asset's optional
     per-strand data travel with their strands). ``keep_order`` keeps the input's order instead, at a
-    cost (the paper-scale straight.hair benchmark file grows by 27 %); the lossless profile always
+    cost (the paper-scale straight.hair benchmark file grows by 28 %); the lossless profile always
     keeps it."""
     prof = get_profile(profile)
     asset.validate()
