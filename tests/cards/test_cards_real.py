@@ -11,6 +11,7 @@ import pytest
 from cards_helpers import MAX_TARGET, MEAN_TARGET, SMALL_REAL, STRIP_TOLERANCE, load_real
 from hairdata import REAL_FILES
 
+import cghair_format as cgh
 from cghair_format.cards import build_cards
 from cghair_format.geometry import spine_tangents
 
@@ -30,10 +31,23 @@ def _check(build):
     assert build.error.max_rel <= MAX_TARGET, build.error.line("error")
 
 
+def _check_quantized(asset):
+    """Both quantized profiles meet their point bound on the built cards (the writer codes the points on
+    its coarsely quantized cards, spec 7)."""
+    for profile in ("compact", "high"):
+        data, report = cgh.encode(asset, profile)
+        decoded = cgh.decode_points(cgh.decode(data)).astype(np.float64)
+        expected = cgh.decode_points(report.in_file_order(asset)).astype(np.float64)
+        bound = cgh.PROFILES[profile].position_tolerance * report.bbox_diagonal
+        assert np.linalg.norm(decoded - expected, axis=-1).max() <= bound, (profile, report.max_point_error / bound)
+
+
 @pytest.mark.parametrize("name", SMALL_REAL)
 def test_small_real_models(name):
     strands = load_real(name)
-    _check(build_cards(strands, n_cards=10, n_groups=3, segments=16, points=50, progress=False))
+    build = build_cards(strands, n_cards=10, n_groups=3, segments=16, points=50, progress=False)
+    _check(build)
+    _check_quantized(build.asset)
 
 
 def test_real_colours_are_used():
@@ -57,6 +71,7 @@ def test_every_real_model_at_its_own_size():
         seconds = time.perf_counter() - start
         rows.append((name, build, seconds))
         _check(build)
+        _check_quantized(build.asset)
     print("\nmodel                         strands  cards groups  mean rel   max rel    seconds")
     for name, b, sec in rows:
         print(f"{name:<29}{b.info['strands']:>8}{b.info['cards']:>7}{b.info['groups']:>7}  "
