@@ -203,9 +203,10 @@ def map_points(const double[:, ::1] frames, int segments, const i64[::1] card, c
 
 
 def invert_points(const double[:, ::1] frames, int segments, const i64[::1] card, double[:, ::1] uvd,
-                  const double[:, ::1] goal, int steps):
+                  const double[:, ::1] goal, int steps, double[::1] miss_out):
     """Card coordinates of world points, in place: from ``uvd[i]``, up to ``steps`` Newton steps on
-    ``map(card[i], uvd) = goal[i]``, each kept only where it brings the point nearer."""
+    ``map(card[i], uvd) = goal[i]``, each kept only where it brings the point nearer; ``miss_out[i]``
+    gets the distance left."""
     cdef Py_ssize_t i, n = card.shape[0]
     cdef int step, ch
     cdef double c[3]
@@ -218,7 +219,7 @@ def invert_points(const double[:, ::1] frames, int segments, const i64[::1] card
     cdef double sol[3]
     cdef double d2, d2t
     if (frames.shape[1] != 18 or uvd.shape[0] != n or goal.shape[0] != n or uvd.shape[1] != 3
-            or goal.shape[1] != 3):
+            or goal.shape[1] != 3 or miss_out.shape[0] != n):
         raise ValueError("invert_points: mismatched shapes")
     check_cards(card, frames.shape[0], segments)
     with nogil:
@@ -245,6 +246,7 @@ def invert_points(const double[:, ::1] frames, int segments, const i64[::1] card
                     miss[ch] = x[ch]
             for ch in range(3):
                 uvd[i, ch] = c[ch]
+            miss_out[i] = sqrt(d2)
 
 
 def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int segments,

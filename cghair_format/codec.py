@@ -354,19 +354,18 @@ def _on_cards(cards: Cards, cmap: CardMap, strand_card: np.ndarray, uvd: np.ndar
     s, p = uvd.shape[:2]
     card = np.repeat(strand_card.astype(np.int64), p)
     flat_uvd, flat_points = uvd.reshape(-1, 3), points.reshape(-1, 3)
-    out = np.empty((s * p, 3))
+    out, miss = np.empty((s * p, 3)), np.empty(s * p)
 
     def block(b: slice) -> None:
-        out[b] = cmap.invert(card[b], flat_uvd[b], flat_points[b])
+        out[b], miss[b] = cmap.invert(card[b], flat_uvd[b], flat_points[b])
 
     map_blocks(block, s * p, 1 << 16)
-    miss = np.linalg.norm(cmap(card, out) - flat_points, axis=-1)
     off = np.flatnonzero(miss > atol)
     if len(off):
         exact, _ = solve_uvd(cards, flat_points[off], card[off], out[off, 0] * cards.segments)
-        nearer = np.linalg.norm(cmap(card[off], exact) - flat_points[off], axis=-1) < miss[off]
-        out[off[nearer]] = exact[nearer]
-        miss[off[nearer]] = np.linalg.norm(cmap(card[off[nearer]], exact[nearer]) - flat_points[off[nearer]], axis=-1)
+        exact_miss = np.linalg.norm(cmap(card[off], exact) - flat_points[off], axis=-1)
+        nearer = exact_miss < miss[off]
+        out[off[nearer]], miss[off[nearer]] = exact[nearer], exact_miss[nearer]
     return out.reshape(s, p, 3), float(miss.max(initial=0.0))
 
 

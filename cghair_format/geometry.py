@@ -129,13 +129,16 @@ class CardMap:
                            np.ascontiguousarray(uvd, np.float64), out)
         return out
 
-    def invert(self, card: np.ndarray, uvd: np.ndarray, points: np.ndarray, steps: int = 4) -> np.ndarray:
-        """Card coordinates ``[N, 3]`` (float64) that map to ``points [N, 3]`` on cards ``card [N]``:
-        Newton steps from ``uvd`` (a nearby guess, such as the coordinates on slightly other cards)."""
+    def invert(self, card: np.ndarray, uvd: np.ndarray, points: np.ndarray, steps: int = 4
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """Card coordinates ``[N, 3]`` (float64) that map to ``points [N, 3]`` on cards ``card [N]``,
+        and the distance ``[N]`` each is left from its point: Newton steps from ``uvd`` (a nearby guess,
+        such as the coordinates on slightly other cards)."""
         out = np.array(uvd, np.float64, order="C")
+        miss = np.empty(len(out))
         _native.invert_points(self.frames, self.segments, np.ascontiguousarray(card, np.int64), out,
-                              np.ascontiguousarray(points, np.float64), steps)
-        return out
+                              np.ascontiguousarray(points, np.float64), steps, miss)
+        return out, miss
 
 
 def strand_points(cards: Cards, strand_card: np.ndarray, uvd: np.ndarray) -> np.ndarray:
