@@ -263,8 +263,8 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
     strand's card coordinates ``rec / scale`` go to ``uvd``; returns how many of them float32 cannot
     hold (inf or NaN there: a corrupt file). Otherwise returns 0.
 
-    Levels: ``level_start [L + 1]`` delimits rows of ``idx [R]`` (the new indices), ``nb [R, 4]`` and
-    ``wt [R, 4]`` (their interpolation neighbours and weights). Decoding (``y`` None) reads the
+    Levels: ``level_start [L + 1]`` delimits rows of ``idx [R]`` (the new indices), ``nb [R, W]`` and
+    ``wt [R, W]`` (their interpolation neighbours and weights, summed left to right). Decoding (``y`` None) reads the
     residuals ``res [S, len(base) + R, 3]`` (base samples, then the levels' rows); encoding writes
     them from ``y`` (``[S, n, 3]``), leaving a refinement residual at zero where the prediction alone maps within
     ``dz_dist`` of ``dz_points`` (``dz_dist < 0``: no dead zone). With ``neighbour_zone`` a sample
@@ -305,7 +305,7 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
             or (scratch and (encode or tuple(uvd.shape)[:3] != shape))
             or (y is not None and tuple(y.shape)[:3] != shape)
             or (dz_points is not None and tuple(dz_points.shape)[:3] != shape)
-            or nb.shape[0] != idx.shape[0] or wt.shape[0] != idx.shape[0] or nb.shape[1] != 4 or wt.shape[1] != 4
+            or nb.shape[0] != idx.shape[0] or wt.shape[0] != idx.shape[0] or nb.shape[1] != wt.shape[1]
             or level_start[levels] != idx.shape[0]):
         raise ValueError("run_strands: mismatched shapes")
     for t in range(strands):
@@ -358,7 +358,7 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                     for ch in range(3):
                         pred[ch] = 0.0
                         goal[ch] = 0.0
-                    for kk in range(4):
+                    for kk in range(nb.shape[1]):
                         w = wt[row, kk]
                         j = 3 * nb[row, kk]
                         for ch in range(3):

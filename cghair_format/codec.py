@@ -9,7 +9,7 @@ import json
 import math
 import os
 import tempfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import BinaryIO, NamedTuple
 
@@ -22,6 +22,7 @@ from .geometry import CardMap, card_scales, strand_points
 from .parallel import map_blocks
 from .profiles import Profile, get_profile
 from .quantize import (
+    TAPS,
     hier_decode,
     hier_encode,
     level_plan,
@@ -61,6 +62,8 @@ MAX_TIGHTENINGS = 8
 STEP_START = 1.0  # first step, as a fraction of the position tolerance
 TIGHTEN_TARGET = 0.97  # a retry aims the measured error at this fraction of the tolerance ...
 GROW_BELOW = 0.9  # ... and a first step whose error is below this fraction is retried larger, once
+TAPS_SAMPLE_CARDS = 200  # the interpolation widths are chosen on this many cards' strands (64: too few to
+# tell widths apart that differ by 1-3 %, as on straight.hair)
 DEAD_ZONE = 0.97  # a refinement residual stays zero where the prediction is this close to the input (x tol)
 
 
@@ -192,7 +195,8 @@ def _meta(asset: HairAsset, prof: Profile, step: float | None, diag: float) -> d
         "quant": {"lossless": True} if step is None else {
             "lossless": False, "step": step, "card_step": step * CARD_STEP_FRACTION,
             "normal_bits": _normal_bits(asset, prof), "base_stride": prof.base_stride, "base_order": [2, 2, 2],
-            "newton_steps": NEWTON_STEPS, "opacity_scale": prof.opacity_scale,
+            "newton_steps": NEWTON_STEPS,
+            "level_taps": [4] * len(level_plan(asset.points_per_strand, prof.base_stride)[1]), "opacity_scale": prof.opacity_scale,
             "logit_levels": prof.logit_levels, "logit_floor": prof.logit_floor, "half_bias": prof.half_bias},
     }
 
@@ -248,10 +252,12 @@ def _parse_meta(raw: bytes) -> dict:
     quant = meta.get("quant")
     if not isinstance(quant, dict):
         raise InvalidContentError("META quant must be an object", chunk="META")
-    if "logit_step" in quant and "logit_levels" not in quant:
-        raise InvalidContentError("written by a pre-release draft of .cgh 1.0 (before the rANS strand coder), which "
-                                  "this reader cannot decode: write the asset again from its source (cgh encode, "
-                                  "or cgh train --resume CHECKPOINT)", chunk="META")
+    if ("logit_step" in quant and "logit_levels" not in quant) or (quant.get("lossless") is False
+                                                                    and "level_taps" not in quant):
+        raise InvalidContentError("written by a pre-release draft of .cgh 1.0 (before the rANS strand coder, or "
+                                  "before per-level interpolation widths), which this reader cannot decode: write "
+                                  "the asset again from its source (cgh encode, or cgh train --resume CHECKPOINT)",
+                                  chunk="META")
     if not need("lossless", bool, src=quant):
         for key in ("step", "card_step", "opacity_scale"):
             need(key, (int, float), 1e-30, src=quant)
@@ -267,6 +273,11 @@ def _parse_meta(raw: bytes) -> dict:
                                       f"{orders!r}", chunk="META")
         need("half_bias", bool, src=quant)
         arrays = 1 + len(level_plan(meta["points"], quant["base_stride"])[1])
+        taps = quant.get("level_taps")
+        if (not isinstance(taps, list) or len(taps) != arrays - 1
+                or not all(isinstance(t, int) and not isinstance(t, bool) and t in TAPS for t in taps)):
+            raise InvalidContentError(f"META quant.level_taps must list {arrays - 1} interpolation widths, each one of "
+                                      f"{', '.join(map(str, TAPS))}, got {taps!r}", chunk="META")
         masks = quant.get("neighbour")
         if (not isinstance(masks, list) or len(masks) != arrays
                 or not all(isinstance(m, int) and not isinstance(m, bool) and 0 <= m <= 7 for m in masks)):
@@ -284,6 +295,7 @@ class _Choices(NamedTuple):
     base_order: tuple[int, int, int]
     newton_steps: int
     neighbour_zone: bool
+    level_taps: tuple[int, ...]
 
 
 class _Geometry(NamedTuple):
@@ -318,9 +330,13 @@ def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag
         base_order = _choose_base_order(asset.strand_card, y, q["base_stride"])
         newton_steps = _choose_newton_steps(cmap, asset.strand_card, y, scale,
                                             Prediction(q["base_stride"], base_order, NEWTON_STEPS))
-        choices = _Choices(base_order, newton_steps, _choose_neighbour_zone(
-            cmap, asset.strand_card, y, scale, Prediction(q["base_stride"], base_order, newton_steps), zone))
+        plan = Prediction(q["base_stride"], base_order, newton_steps)
+        neighbour_zone = _choose_neighbour_zone(cmap, asset.strand_card, y, scale, plan, zone)
+        zone = zone._replace(neighbour=neighbour_zone)
+        choices = _Choices(base_order, newton_steps, neighbour_zone,
+                           _choose_level_taps(cmap, asset.strand_card, y, scale, plan, zone))
     q["base_order"], q["newton_steps"] = list(choices.base_order), choices.newton_steps
+    q["level_taps"] = list(choices.level_taps)
     base, levels, decoded_points = encode_uvd(cmap, asset.strand_card, y, scale, _prediction(q),
                                               dead_zone=zone._replace(neighbour=choices.neighbour_zone))
     return _Geometry(meta, cards_w, [base] + levels, decoded_points, choices)
@@ -460,7 +476,7 @@ def _estimate(residuals: np.ndarray) -> float:
 
 
 def _prediction(q: dict) -> Prediction:
-    return Prediction(q["base_stride"], tuple(q["base_order"]), q["newton_steps"])
+    return Prediction(q["base_stride"], tuple(q["base_order"]), q["newton_steps"], tuple(q["level_taps"]))
 
 
 def _choose_base_order(strand_card: np.ndarray, y: np.ndarray, base_stride: int) -> tuple[int, int, int]:
@@ -486,28 +502,49 @@ def _choose_newton_steps(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, 
     pick = np.linspace(0, len(strand_card) - 1, min(sample, len(strand_card))).astype(np.int64)
     sizes = {}
     for steps in (plan.newton_steps, 0):
-        trial = Prediction(plan.base_stride, plan.base_order, steps)
+        trial = replace(plan, newton_steps=steps)
         base, levels, _ = encode_uvd(cmap, strand_card[pick], y[pick], scale[pick], trial)
         sizes[steps] = sum(_estimate(r) for r in [base] + levels)
     return min(sizes, key=sizes.get)
 
 
 def _choose_neighbour_zone(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray,
-                           plan: Prediction, zone: DeadZone, sample_cards: int = 64) -> bool:
+                           plan: Prediction, zone: DeadZone) -> bool:
     """Whether the dead zone first tries the card neighbour's residual: whichever codes the strands of
-    an evenly spaced sample of cards smaller. It pays where a card's strands are much alike (strands
-    densified from fewer, 10-18 % off STRD at the paper's scale) and costs a little where they are
-    not (the Ratboy model: 1.5 %)."""
+    a sample of cards smaller. It pays where a card's strands are much alike (strands densified from
+    fewer, 10-18 % off STRD at the paper's scale) and costs a little where they are not (the Ratboy
+    model: 1.5 %)."""
+    sizes = {neighbour: sum(_sample_sizes(cmap, strand_card, y, scale, plan, zone._replace(neighbour=neighbour)))
+             for neighbour in (True, False)}
+    return min(sizes, key=sizes.get)
+
+
+def _choose_level_taps(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray,
+                       plan: Prediction, zone: DeadZone) -> tuple[int, ...]:
+    """Per refinement level, the interpolation width (one of TAPS) whose residuals code the strands of a
+    sample of cards smallest, each width tried on every level at once (a level's residuals hardly
+    depend on how the finer levels are predicted, and a coarser level's only through its
+    reconstruction, which stays within the tolerance either way). Wavy strands want wide
+    interpolation at the middle levels (harolongo at the paper's scale: 2, 6, 6, 6, 4 % off the whole
+    file); the coarsest level, whose neighbours lie B points apart, is often best linear."""
+    levels = len(level_plan(y.shape[1], plan.base_stride)[1])
+    sizes = np.array([_sample_sizes(cmap, strand_card, y, scale, replace(plan, level_taps=(t,) * levels), zone,
+                                    TAPS_SAMPLE_CARDS)[1:] for t in TAPS])  # [taps, levels]
+    return tuple(int(TAPS[k]) for k in np.argmin(sizes, axis=0))
+
+
+def _sample_sizes(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray, plan: Prediction,
+                  zone: DeadZone, sample_cards: int = 64) -> list[float]:
+    """The estimated stored size of each residual array (base, then each level) of the strands of an
+    evenly spaced sample of cards (whole cards: neighbour prediction works within them), coded with
+    ``plan`` and ``zone``."""
     ids = np.unique(strand_card)
     picked = ids[np.linspace(0, len(ids) - 1, min(sample_cards, len(ids))).astype(np.int64)]
     pick = np.flatnonzero(np.isin(strand_card, picked))
-    sizes = {}
-    for neighbour in (True, False):
-        trial = zone._replace(points=zone.points[pick], neighbour=neighbour)
-        base, levels, _ = encode_uvd(cmap, strand_card[pick], y[pick], scale[pick], plan, dead_zone=trial)
-        stored, _ = _with_neighbour_prediction(strand_card[pick], [base] + levels)
-        sizes[neighbour] = sum(_estimate(r) for r in stored)
-    return min(sizes, key=sizes.get)
+    base, levels, _ = encode_uvd(cmap, strand_card[pick], y[pick], scale[pick], plan,
+                                 dead_zone=zone._replace(points=zone.points[pick]))
+    stored, _ = _with_neighbour_prediction(strand_card[pick], [base] + levels)
+    return [_estimate(r) for r in stored]
 
 
 def _optional_chunks(asset: HairAsset) -> list[container.Chunk]:

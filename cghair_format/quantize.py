@@ -25,15 +25,24 @@ def unzigzag(u: np.ndarray) -> np.ndarray:
 
 # --- hierarchical interpolating predictor along strands ------------------------------------------
 
+TAPS = (2, 4, 6, 8)  # interpolation neighbours a level may use; 4 unless a plan says otherwise
+
+
 @lru_cache(maxsize=64)
-def level_plan(n: int, base_stride: int) -> tuple[np.ndarray, tuple[tuple[np.ndarray, np.ndarray, np.ndarray], ...]]:
+def level_plan(n: int, base_stride: int, taps: tuple[int, ...] | None = None
+               ) -> tuple[np.ndarray, tuple[tuple[np.ndarray, np.ndarray, np.ndarray], ...]]:
     """The coding order of ``n`` samples: base indices, then refinement levels.
 
     Base: ``0, B, 2B, ...`` and ``n - 1``. Each later level (stride ``h = B/2, B/4, ..., 1``) adds the
     indices ``i`` with ``i mod 2h == h``, ``i < n - 1``, predicted by Lagrange interpolation through
-    the (up to) two nearest known indices on each side. Returns the base indices and, per level,
-    ``(indices [L], neighbour indices [L, 4], weights [L, 4])`` (unused neighbour slots have weight 0).
+    the (up to) ``T / 2`` nearest known indices on each side, ``T = taps[level]`` (one of TAPS; 4 for
+    every level when ``taps`` is None). Returns the base indices and, per level, ``(indices [L],
+    neighbour indices [L, W], weights [L, W])``, ``W`` the largest ``T`` (unused slots have weight 0).
     """
+    if taps is not None and (len(taps) != len(level_plan(n, base_stride)[1]) or not set(taps) <= set(TAPS)):
+        raise ValueError(f"taps {taps} do not fit the {len(level_plan(n, base_stride)[1])} levels of {n} points "
+                         f"(each one of {TAPS})")
+    width = 4 if not taps else max(taps)
     base = sorted(set(range(0, n, base_stride)) | {n - 1})
     known = np.zeros(n, bool)
     known[base] = True
@@ -42,12 +51,13 @@ def level_plan(n: int, base_stride: int) -> tuple[np.ndarray, tuple[tuple[np.nda
     while h >= 1:
         idx = [i for i in range(h, n - 1, 2 * h) if not known[i]]
         if idx:
+            half = (4 if taps is None else taps[len(levels)]) // 2
             kn = np.flatnonzero(known)
-            nb = np.zeros((len(idx), 4), np.int64)
-            wt = np.zeros((len(idx), 4), np.float64)
+            nb = np.zeros((len(idx), width), np.int64)
+            wt = np.zeros((len(idx), width), np.float64)
             for row, i in enumerate(idx):
                 pos = np.searchsorted(kn, i)
-                pts = list(kn[max(0, pos - 2):pos]) + list(kn[pos:pos + 2])
+                pts = list(kn[max(0, pos - half):pos]) + list(kn[pos:pos + half])
                 for col, j in enumerate(pts):
                     w = 1.0
                     for m in pts:
@@ -117,7 +127,10 @@ def base_prediction(rec: np.ndarray, base: np.ndarray, j: int, order: int = 2) -
 def _interp(rec: np.ndarray, nb: np.ndarray, wt: np.ndarray) -> np.ndarray:
     """Lagrange predictions ``[L, ...]`` of one level from the sample-major ``rec [n, ...]``."""
     w = wt.reshape(wt.shape + (1,) * (rec.ndim - 1))
-    return rec[nb[:, 0]] * w[:, 0] + rec[nb[:, 1]] * w[:, 1] + rec[nb[:, 2]] * w[:, 2] + rec[nb[:, 3]] * w[:, 3]
+    out = rec[nb[:, 0]] * w[:, 0]
+    for k in range(1, nb.shape[1]):  # left to right, as the spec sums
+        out = out + rec[nb[:, k]] * w[:, k]
+    return out
 
 
 # --- unit vectors ------------------------------------------------------------------------------

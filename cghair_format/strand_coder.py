@@ -44,12 +44,13 @@ class DeadZone(NamedTuple):
 @dataclass(frozen=True)
 class Prediction:
     """How strand points are predicted (META quant): the base stride, the base samples' predictor
-    order per channel u, v, delta (1: the previous base sample, 2: linear extrapolation) and the
-    Newton steps per level."""
+    order per channel u, v, delta (1: the previous base sample, 2: linear extrapolation), the Newton
+    steps per level and the interpolation neighbours of each level (None: 4 each)."""
 
     base_stride: int
     base_order: tuple[int, int, int]
     newton_steps: int
+    level_taps: tuple[int, ...] | None = None
 
 
 def base_residuals(y: np.ndarray, base: np.ndarray, orders: tuple[int, int, int]) -> np.ndarray:
@@ -73,11 +74,12 @@ def _run_strands(cmap: CardMap, strand_card: np.ndarray, scale: np.ndarray, resi
     card, each strand after its neighbour (which the dead zone may copy; a card's triangles stay in
     cache while its strands are coded). ``arrays``: encoding, ``rec``, ``world``, ``y`` and the dead
     zone's arguments; decoding, ``uvd`` (each block then gets its own one-strand scratch)."""
-    base, levels = level_plan(n, plan.base_stride)
+    base, levels = level_plan(n, plan.base_stride, plan.level_taps)
     level_start = np.cumsum([0] + [len(idx) for idx, _, _ in levels], dtype=np.int64)
     idx = np.concatenate([np.zeros(0, np.int64)] + [lv[0] for lv in levels]).astype(np.int64)
-    nb = np.concatenate([np.zeros((0, 4), np.int64)] + [lv[1] for lv in levels]).astype(np.int64)
-    wt = np.concatenate([np.zeros((0, 4))] + [lv[2] for lv in levels])
+    width = levels[0][1].shape[1] if levels else 4
+    nb = np.concatenate([np.zeros((0, width), np.int64)] + [lv[1] for lv in levels]).astype(np.int64)
+    wt = np.concatenate([np.zeros((0, width))] + [lv[2] for lv in levels])
     card = np.ascontiguousarray(strand_card, np.int64)
     by_card, _ = neighbour_order(card)
     scale = np.ascontiguousarray(scale, np.float64)

@@ -39,6 +39,34 @@ def test_hierarchical_coder_is_within_half_a_step(n, stride, seed, scale):
     assert len(base_idx) + sum(len(idx) for idx, _, _ in plan) == n  # every sample coded exactly once
 
 
+@pytest.mark.parametrize("taps", [(2, 2, 2, 2), (4, 4, 4, 4), (6, 6, 6, 6), (8, 8, 8, 8), (2, 6, 6, 4)])
+def test_level_interpolation_is_exact_on_polynomials_of_its_degree(taps):
+    """A level of width T interpolates through T neighbours (spec 4.1), T/2 a side where the strand has
+    them: exact on polynomials of degree T - 1 wherever it has all T."""
+    n = 100
+    base, levels = level_plan(n, 16, taps)
+    x = np.arange(n, dtype=np.float64) / n
+    for t, (idx, nb, wt) in zip(taps, levels, strict=True):
+        used = (wt != 0).sum(axis=1)
+        assert used.max() == t and (nb[wt != 0] % 1 == 0).all()
+        full = used == t
+        assert full.any()
+        for degree in range(t):
+            y = x**degree
+            assert np.allclose((y[nb] * wt).sum(axis=1)[full], y[idx][full], atol=1e-9)
+        left = np.where(wt != 0, nb < idx[:, None], False).sum(axis=1)
+        assert (left[full] == t // 2).all()
+    assert level_plan(n, 16, None)[1][0][1].shape[1] == 4
+    for (_, nb4, wt4), (_, nb, wt) in zip(level_plan(n, 16)[1], level_plan(n, 16, (4,) * 4)[1], strict=True):
+        assert np.array_equal(nb4, nb) and np.array_equal(wt4, wt)
+
+
+@pytest.mark.parametrize("taps", [(4, 4, 4), (4, 4, 4, 4, 4), (4, 4, 4, 3), (4, 4, 4, 10), (0, 4, 4, 4)])
+def test_level_plan_refuses_widths_that_do_not_fit(taps):
+    with pytest.raises(ValueError, match="do not fit"):
+        level_plan(100, 16, taps)
+
+
 def test_hierarchical_coder_zeroes_smooth_curves():
     t = np.linspace(0, 1, 100)
     y = 400 * np.sin(2 * t)[None, :]  # smooth: refinement residuals vanish

@@ -117,6 +117,49 @@ def test_bad_base_orders_are_refused(orders):
         cgh.decode(_vector_with_quant(lambda quant: quant.update(base_order=orders)))
 
 
+@pytest.mark.parametrize("taps", [[4, 4, 4], [4, 4, 4, 4, 4], [4, 4, 4, 3], [4, 4, 4, 10], [4, 4, 4, True],
+                                  ["4", 4, 4, 4], 4])
+def test_bad_level_taps_are_refused(taps):
+    with pytest.raises(InvalidContentError, match="level_taps must list 4"):
+        cgh.decode(_vector_with_quant(lambda quant: quant.update(level_taps=taps)))
+
+
+def test_a_file_without_level_taps_is_a_draft():
+    with pytest.raises(InvalidContentError, match="pre-release draft.*write the asset again"):
+        cgh.decode(_vector_with_quant(lambda quant: quant.pop("level_taps")))
+
+
+@pytest.mark.parametrize("taps", [(2, 2, 2, 2), (6, 6, 6, 6), (8, 8, 8, 8), (2, 6, 8, 4)])
+def test_every_interpolation_width_decodes_within_the_bound(taps, monkeypatch):
+    """The writer picks each level's interpolation width per file (spec 4.3); each decodes."""
+    from cghair_format.examples import example_asset
+
+    monkeypatch.setattr(codec, "_choose_level_taps", lambda *_: taps)
+    asset = example_asset(5)
+    data, report = cgh.encode(asset, "compact")
+    quant = json.loads(container.unpack(data, set(codec.REQUIRED_CHUNKS))[2]["META"])["quant"]
+    assert quant["level_taps"] == list(taps)
+    decoded = cgh.decode_points(cgh.decode(data))
+    expected = cgh.decode_points(report.in_file_order(asset))
+    assert np.linalg.norm(decoded - expected, axis=-1).max() <= 2e-4 * report.bbox_diagonal
+
+
+def test_wavy_strands_choose_wide_interpolation_and_code_smaller(monkeypatch):
+    """Strands that wave with a period of a few tens of points are under-sampled at the middle levels
+    for 4-point interpolation: the writer takes wider ones there, and the file is smaller for it."""
+    from cghair_format.cards import build_cards
+    from cghair_format.strands import resample
+
+    strands = resample(load_hair("harolongo.data"), 100, method="bspline")  # wavy, 21 points a strand
+    asset = build_cards(strands, n_cards=120, n_groups=4, points=100, seed=0, progress=False).asset
+    data, _ = cgh.encode(asset, "compact")
+    taps = json.loads(container.unpack(data, set(codec.REQUIRED_CHUNKS))[2]["META"])["quant"]["level_taps"]
+    assert max(taps) > 4, taps
+    monkeypatch.setattr(codec, "_choose_level_taps", lambda *_: (4,) * len(taps))
+    fours, _ = cgh.encode(asset, "compact")
+    assert len(data) < len(fours)
+
+
 def test_a_step_that_decodes_beyond_float32_is_refused():
     """A corrupt but well-formed step (1e40 scene units) scales the residuals past what float32 holds."""
     with pytest.raises(InvalidContentError, match="beyond float32's range"):
