@@ -62,8 +62,6 @@ MAX_TIGHTENINGS = 8
 STEP_START = 1.0  # first step, as a fraction of the position tolerance
 TIGHTEN_TARGET = 0.97  # a retry aims the measured error at this fraction of the tolerance ...
 GROW_BELOW = 0.9  # ... and a first step whose error is below this fraction is retried larger, once
-TAPS_SAMPLE_CARDS = 200  # the interpolation widths are chosen on this many cards' strands (64: too few to
-# tell widths apart that differ by 1-3 %, as on straight.hair)
 DEAD_ZONE = 0.97  # a refinement residual stays zero where the prediction is this close to the input (x tol)
 
 
@@ -514,37 +512,55 @@ def _choose_neighbour_zone(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray
     a sample of cards smaller. It pays where a card's strands are much alike (strands densified from
     fewer, 10-18 % off STRD at the paper's scale) and costs a little where they are not (the Ratboy
     model: 1.5 %)."""
-    sizes = {neighbour: sum(_sample_sizes(cmap, strand_card, y, scale, plan, zone._replace(neighbour=neighbour)))
+    sizes = {neighbour: sum(map(_estimate, _sample_residuals(cmap, strand_card, y, scale, plan,
+                                                             zone._replace(neighbour=neighbour), 64)))
              for neighbour in (True, False)}
     return min(sizes, key=sizes.get)
 
 
 def _choose_level_taps(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray,
                        plan: Prediction, zone: DeadZone) -> tuple[int, ...]:
-    """Per refinement level, the interpolation width (one of TAPS) whose residuals code the strands of a
-    sample of cards smallest, each width tried on every level at once (a level's residuals hardly
-    depend on how the finer levels are predicted, and a coarser level's only through its
-    reconstruction, which stays within the tolerance either way). Wavy strands want wide
+    """Per refinement level, the interpolation width (2, 4 or 6; the format allows 8 too, which never
+    won on our models) whose residuals the estimate finds
+    smallest on the strands of a sample of cards, each width tried on every level at once; kept if the
+    strand coder then codes that sample smaller than with 4 everywhere. Wavy strands want wide
     interpolation at the middle levels (harolongo at the paper's scale: 2, 6, 6, 6, 4 % off the whole
-    file); the coarsest level, whose neighbours lie B points apart, is often best linear."""
+    file); the coarsest level, whose neighbours lie B points apart, is often best linear. The widths
+    interact (the dead zone leaves a coarser level's reconstruction on its prediction, from which
+    the finer levels predict) and the estimate ignores the coder's contexts, so close calls can come
+    out the other way (Ratboy: 2 at h = 1, 0.5 % smaller estimated, 0.08 % larger coded): hence the
+    check."""
     levels = len(level_plan(y.shape[1], plan.base_stride)[1])
-    sizes = np.array([_sample_sizes(cmap, strand_card, y, scale, replace(plan, level_taps=(t,) * levels), zone,
-                                    TAPS_SAMPLE_CARDS)[1:] for t in TAPS])  # [taps, levels]
-    return tuple(int(TAPS[k]) for k in np.argmin(sizes, axis=0))
+    widths = (2, 4, 6)
+    trial = {t: _sample_residuals(cmap, strand_card, y, scale, replace(plan, level_taps=(t,) * levels), zone)
+             for t in widths}
+    chosen = tuple(widths[k] for k in np.argmin([list(map(_estimate, trial[t][1:])) for t in widths], axis=0))
+    if chosen == (4,) * levels:
+        return chosen
+    mixed = _sample_residuals(cmap, strand_card, y, scale, replace(plan, level_taps=chosen), zone)
+    return chosen if _coded_bytes(mixed) < _coded_bytes(trial[4]) else (4,) * levels
 
 
-def _sample_sizes(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray, plan: Prediction,
-                  zone: DeadZone, sample_cards: int = 64) -> list[float]:
-    """The estimated stored size of each residual array (base, then each level) of the strands of an
-    evenly spaced sample of cards (whole cards: neighbour prediction works within them), coded with
-    ``plan`` and ``zone``."""
+def _sample_residuals(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray, plan: Prediction,
+                      zone: DeadZone, cards: int = 200) -> list[np.ndarray]:
+    """The residual arrays as stored (base, then each level; after neighbour prediction) of the strands
+    of ``cards`` evenly spaced cards (whole cards: neighbour prediction works within them), coded with
+    ``plan`` and ``zone``. 64 cards tell the neighbour zone's choice (10-18 % either way) but not
+    interpolation widths that differ by 1-3 %, as on straight.hair: those take 200."""
     ids = np.unique(strand_card)
-    picked = ids[np.linspace(0, len(ids) - 1, min(sample_cards, len(ids))).astype(np.int64)]
+    picked = ids[np.linspace(0, len(ids) - 1, min(cards, len(ids))).astype(np.int64)]
     pick = np.flatnonzero(np.isin(strand_card, picked))
     base, levels, _ = encode_uvd(cmap, strand_card[pick], y[pick], scale[pick], plan,
                                  dead_zone=zone._replace(points=zone.points[pick]))
-    stored, _ = _with_neighbour_prediction(strand_card[pick], [base] + levels)
-    return [_estimate(r) for r in stored]
+    return _with_neighbour_prediction(strand_card[pick], [base] + levels)[0]
+
+
+def _coded_bytes(stored: list[np.ndarray]) -> int:
+    """The bytes a file spends on these residual arrays: coded, then packed as a chunk (zstd at level 19
+    shrinks the frequency tables, a large share of a small file's STRD; level 3 misranks them)."""
+    w = StreamWriter()
+    write_residuals(w, stored)
+    return len(container.pack([container.Chunk("STRD", w.getvalue())]))
 
 
 def _optional_chunks(asset: HairAsset) -> list[container.Chunk]:
