@@ -251,7 +251,8 @@ def invert_points(const double[:, ::1] frames, int segments, const i64[::1] card
 
 def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int segments,
                 const i64[::1] strand_card, const double[:, ::1] scale,
-                const i64[::1] base, const i64[::1] base_order, const i64[::1] level_start, const i64[::1] idx,
+                const i64[::1] base, const i64[::1] base_order, const i64[::1] level_start,
+                const i64[::1] level_taps, const i64[::1] idx,
                 const i64[:, ::1] nb, const double[:, ::1] wt, int newton_steps, double max_step_ratio,
                 double[:, :, ::1] rec, double[:, :, ::1] world, i64[:, :, ::1] res,
                 const double[:, :, ::1] y=None, const double[:, :, ::1] dz_points=None, double dz_dist=-1.0,
@@ -264,7 +265,8 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
     hold (inf or NaN there: a corrupt file). Otherwise returns 0.
 
     Levels: ``level_start [L + 1]`` delimits rows of ``idx [R]`` (the new indices), ``nb [R, W]`` and
-    ``wt [R, W]`` (their interpolation neighbours and weights, summed left to right). Decoding (``y`` None) reads the
+    ``wt [R, W]`` (their interpolation neighbours and weights, summed left to right over the first
+    ``level_taps[l]`` columns of level ``l``; the rest are padding). Decoding (``y`` None) reads the
     residuals ``res [S, len(base) + R, 3]`` (base samples, then the levels' rows); encoding writes
     them from ``y`` (``[S, n, 3]``), leaving a refinement residual at zero where the prediction alone maps within
     ``dz_dist`` of ``dz_points`` (``dz_dist < 0``: no dead zone). With ``neighbour_zone`` a sample
@@ -306,11 +308,14 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
             or (y is not None and tuple(y.shape)[:3] != shape)
             or (dz_points is not None and tuple(dz_points.shape)[:3] != shape)
             or nb.shape[0] != idx.shape[0] or wt.shape[0] != idx.shape[0] or nb.shape[1] != wt.shape[1]
-            or level_start[levels] != idx.shape[0]):
+            or level_taps.shape[0] != levels or level_start[levels] != idx.shape[0]):
         raise ValueError("run_strands: mismatched shapes")
     for t in range(strands):
         if strands_to_code[t] < 0 or strands_to_code[t] >= shape[0]:
             raise ValueError("run_strands: a strand index is out of range")
+    for li in range(levels):
+        if level_taps[li] < 0 or level_taps[li] > nb.shape[1]:
+            raise ValueError("run_strands: a level's interpolation width exceeds its neighbour columns")
     fr = &frames[0, 0]
     with nogil:
         for t in range(strands):
@@ -358,7 +363,7 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                     for ch in range(3):
                         pred[ch] = 0.0
                         goal[ch] = 0.0
-                    for kk in range(nb.shape[1]):
+                    for kk in range(level_taps[li]):
                         w = wt[row, kk]
                         j = 3 * nb[row, kk]
                         for ch in range(3):

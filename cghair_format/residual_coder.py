@@ -77,8 +77,8 @@ def write_residuals(w: StreamWriter, arrays: list[np.ndarray]) -> None:
 
 def read_residuals(r: StreamReader, strands: int, widths: list[int]) -> np.ndarray:
     """Inverse of :func:`write_residuals`: the residual arrays side by side, ``[S, sum(widths), 3]``
-    (int64), decoded by the
-    compiled :func:`._native.decode_residuals` (one strand per lane, as the spec's step order has it)."""
+    (int64), decoded by the compiled :func:`._native.decode_residuals` (one strand per lane, as the
+    spec's step order has it)."""
     column_array, first, lanes, _ = _plan(widths, strands)
     n_tables = len(widths) * 3 * CONTEXTS
     tables = rans.Tables(r.array((n_tables, rans.ALPHABET), "token tables", ("<u2",)), "STRD token tables")

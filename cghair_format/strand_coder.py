@@ -8,8 +8,8 @@ the card-space interpolation, and only the residual in card coordinates is store
 
 Strands of one card run side by side, so their residuals are alike too: with neighbour prediction
 (spec 4.3) a strand's residuals are stored as differences from those of the strand before it on
-the card (the writer stores strands by card and root position), array by array and channel by
-channel where that is smaller.
+the card (the writer stores strands card by card, alike strands in turn: :func:`canonical_order`),
+array by array and channel by channel where that is smaller.
 """
 
 from __future__ import annotations
@@ -84,6 +84,7 @@ def _run_strands(cmap: CardMap, strand_card: np.ndarray, scale: np.ndarray, resi
     by_card, _ = neighbour_order(card)
     scale = np.ascontiguousarray(scale, np.float64)
     base, orders = base.astype(np.int64), np.asarray(plan.base_order, np.int64)
+    taps = np.asarray(plan.level_taps or (4,) * len(levels), np.int64)  # the columns of nb, wt each level uses
 
     def block(b: slice) -> int:
         given = dict(arrays)
@@ -91,7 +92,8 @@ def _run_strands(cmap: CardMap, strand_card: np.ndarray, scale: np.ndarray, resi
             given["rec"], given["world"] = np.empty((1, n, 3)), np.empty((1, n, 3))
         rec, world = given.pop("rec"), given.pop("world")
         return _native.run_strands(by_card[b], cmap.frames, cmap.segments, card, scale, base, orders, level_start,
-                                   idx, nb, wt, plan.newton_steps, MAX_STEP_RATIO, rec, world, residuals, **given)
+                                   taps, idx, nb, wt, plan.newton_steps, MAX_STEP_RATIO, rec, world, residuals,
+                                   **given)
 
     return sum(map_blocks(block, len(card)))
 
@@ -104,14 +106,15 @@ def encode_uvd(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.
     residual stand: the error stays bounded, the residuals it picks cost the least, and as the decoder
     predicts from what it reconstructs, later samples simply see that reconstruction."""
     s, n = y.shape[:2]
+    widths = level_widths(n, plan.base_stride)
     world = np.empty((s, n, 3))
-    residuals = np.empty((s, sum(level_widths(n, plan.base_stride)), 3), np.int64)
+    residuals = np.empty((s, sum(widths), 3), np.int64)
     zone = {} if dead_zone is None else {
         "dz_points": np.ascontiguousarray(dead_zone.points, np.float64), "dz_dist": float(dead_zone.distance),
         "neighbour_zone": dead_zone.neighbour}
     _run_strands(cmap, strand_card, scale, residuals, n, plan, rec=np.empty((s, n, 3)), world=world,
                  y=np.ascontiguousarray(y, np.float64), **zone)
-    base, *levels = np.split(residuals, np.cumsum(level_widths(n, plan.base_stride))[:-1], axis=1)
+    base, *levels = np.split(residuals, np.cumsum(widths)[:-1], axis=1)
     return base, levels, world
 
 

@@ -81,8 +81,8 @@ class CardBuild:
         from ..codec import decode, encode
 
         data, report = encode(self.asset, profile)
-        points = self.points if report.strand_order is None else self.points[report.strand_order]
-        return ReconstructionError.measure(points, decode_points(decode(data))), len(data)
+        error = ReconstructionError.measure(report.strands_in_file_order(self.points), decode_points(decode(data)))
+        return error, len(data)
 
     def timing_table(self) -> str:
         out = io.StringIO()

@@ -64,8 +64,7 @@ def run(args: argparse.Namespace) -> int:
     if args.attribution is not None:
         build.asset.attribution = args.attribution
     report = write(build.asset, out, profile=args.profile, keep_order=args.keep_order)
-    points = build.points if report.strand_order is None else build.points[report.strand_order]
-    after = ReconstructionError.measure(points, decode_points(read(out)))
+    after = ReconstructionError.measure(report.strands_in_file_order(build.points), decode_points(read(out)))
     info = build.info
     print(f"{out}: {info['strands']:,} strands x {info['points']} points on {info['cards']:,} cards of "
           f"{args.segments} segments, {info['groups']} groups; {out.stat().st_size:,} bytes ({args.profile})")

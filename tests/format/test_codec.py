@@ -7,6 +7,7 @@ import os
 
 import numpy as np
 import pytest
+from cghfile import quant_of
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -161,14 +162,6 @@ def test_info_reports_counts_and_bits():
     assert sum(c["stored_bytes"] for c in info["chunks"]) < len(data)
 
 
-def _quant(data: bytes) -> dict:
-    import json
-
-    from cghair_format import container
-
-    return json.loads(container.unpack(data, set(cgh.codec.REQUIRED_CHUNKS))[2]["META"])["quant"]
-
-
 @pytest.mark.parametrize("profile", ["compact", "high"])
 def test_points_are_coded_on_the_quantized_cards_so_their_error_does_not_add(profile):
     """Points far off their card magnify every normal error (2 units off, the hair is 0.3 units tall):
@@ -178,7 +171,7 @@ def test_points_are_coded_on_the_quantized_cards_so_their_error_does_not_add(pro
     a = example_asset(12)
     a.uvd[..., 2] *= 400
     data, report = cgh.encode(a, profile)
-    quant = _quant(data)
+    quant = quant_of(data)
     assert cgh.PROFILES[profile].normal_bits <= quant["normal_bits"] <= 12
     assert quant["card_step"] == 4 * quant["step"]
     bound = cgh.PROFILES[profile].position_tolerance * report.bbox_diagonal
@@ -196,7 +189,7 @@ def test_cards_too_coarse_to_hold_every_point_get_a_finer_card_step(monkeypatch)
     a = example_asset(7)
     monkeypatch.setattr(cgh.codec, "CARD_STEP_FRACTION", 4096)
     data, report = cgh.encode(a, "compact")
-    quant = _quant(data)
+    quant = quant_of(data)
     assert quant["card_step"] < 4096 * quant["step"]
     decoded = cgh.decode_points(cgh.decode(data))
     a = report.in_file_order(a)

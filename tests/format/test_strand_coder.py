@@ -6,6 +6,7 @@ import unittest.mock
 
 import numpy as np
 import pytest
+from cghfile import quant_of
 from hairdata import load_hair
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -90,7 +91,7 @@ def test_real_hair_stores_neighbour_differences_and_decodes_the_same_points(monk
     asset = build_cards(load_hair("Ratboy_mohawk.tfx"), n_cards=60, n_groups=4, points=32, seed=0,
                         progress=False).asset
     data, report = cgh.encode(asset, "compact")
-    masks = json.loads(container.unpack(data, set(codec.REQUIRED_CHUNKS))[2]["META"])["quant"]["neighbour"]
+    masks = quant_of(data)["neighbour"]
     assert any(masks), masks
     decoded = cgh.decode_points(cgh.decode(data))
     expected = cgh.decode_points(report.in_file_order(asset))
@@ -124,26 +125,6 @@ def test_bad_level_taps_are_refused(taps):
         cgh.decode(_vector_with_quant(lambda quant: quant.update(level_taps=taps)))
 
 
-def test_a_file_without_level_taps_is_a_draft():
-    with pytest.raises(InvalidContentError, match="pre-release draft.*write the asset again"):
-        cgh.decode(_vector_with_quant(lambda quant: quant.pop("level_taps")))
-
-
-@pytest.mark.parametrize("taps", [(2, 2, 2, 2), (6, 6, 6, 6), (8, 8, 8, 8), (2, 6, 8, 4)])
-def test_every_interpolation_width_decodes_within_the_bound(taps, monkeypatch):
-    """The writer picks each level's interpolation width per file (spec 4.3); each decodes."""
-    from cghair_format.examples import example_asset
-
-    monkeypatch.setattr(codec, "_choose_level_taps", lambda *_: taps)
-    asset = example_asset(5)
-    data, report = cgh.encode(asset, "compact")
-    quant = json.loads(container.unpack(data, set(codec.REQUIRED_CHUNKS))[2]["META"])["quant"]
-    assert quant["level_taps"] == list(taps)
-    decoded = cgh.decode_points(cgh.decode(data))
-    expected = cgh.decode_points(report.in_file_order(asset))
-    assert np.linalg.norm(decoded - expected, axis=-1).max() <= 2e-4 * report.bbox_diagonal
-
-
 def test_wavy_strands_choose_wide_interpolation_and_code_smaller(monkeypatch):
     """Strands that wave with a period of a few tens of points are under-sampled at the middle levels
     for 4-point interpolation: the writer takes wider ones there, and the file is smaller for it."""
@@ -153,11 +134,31 @@ def test_wavy_strands_choose_wide_interpolation_and_code_smaller(monkeypatch):
     strands = resample(load_hair("harolongo.data"), 100, method="bspline")  # wavy, 21 points a strand
     asset = build_cards(strands, n_cards=120, n_groups=4, points=100, seed=0, progress=False).asset
     data, _ = cgh.encode(asset, "compact")
-    taps = json.loads(container.unpack(data, set(codec.REQUIRED_CHUNKS))[2]["META"])["quant"]["level_taps"]
+    taps = quant_of(data)["level_taps"]
     assert max(taps) > 4, taps
     monkeypatch.setattr(codec, "_choose_level_taps", lambda *_: (4,) * len(taps))
     fours, _ = cgh.encode(asset, "compact")
     assert len(data) < len(fours)
+
+
+def test_a_mix_of_widths_the_estimate_prefers_is_kept_only_where_it_codes_smaller(monkeypatch):
+    """On small_compact's asset the order-0 estimate prefers wider interpolation at the fine levels, but
+    the coded sample is larger (the contexts and the frequency tables disagree): the writer keeps 4."""
+    from cghair_format.examples import example_asset
+
+    coded = []
+    real = codec._coded_bytes
+
+    def spy(stored):
+        coded.append(real(stored))
+        return coded[-1]
+
+    monkeypatch.setattr(codec, "_coded_bytes", spy)
+    data, _ = cgh.encode(example_asset(0), "compact")
+    mixed, fours = coded[:2]  # the first step's choice, made once
+    assert mixed >= fours and quant_of(data)["level_taps"] == [4, 4, 4, 4]
+    monkeypatch.setattr(codec, "_choose_level_taps", lambda *_: (2, 4, 6, 6))  # the estimate's pick, forced
+    assert len(cgh.encode(example_asset(0), "compact")[0]) > len(data)
 
 
 def test_a_step_that_decodes_beyond_float32_is_refused():
@@ -177,23 +178,29 @@ def _vector_with_quant(edit) -> bytes:
     return container.pack([container.Chunk(i.type, payloads[i.type], i.required) for i in infos])
 
 
-def test_a_pre_release_draft_file_gets_a_clear_error():
-    """Drafts of 1.0 written before the rANS strand coder stored ``logit_step``; say so, and what to do."""
-    draft = _vector_with_quant(lambda quant: quant.update(logit_step=quant.pop("logit_levels") / 16384))
+@pytest.mark.parametrize("edit", [
+    lambda quant: quant.update(logit_step=quant.pop("logit_levels") / 16384),  # before the rANS strand coder
+    lambda quant: quant.pop("level_taps")])  # before per-level interpolation widths
+def test_a_pre_release_draft_file_gets_a_clear_error(edit):
+    """Drafts of 1.0 stored ``logit_step``, or no ``level_taps``; say so, and what to do."""
     with pytest.raises(InvalidContentError, match="pre-release draft.*write the asset again"):
-        cgh.decode(draft)
+        cgh.decode(_vector_with_quant(edit))
 
 
-@pytest.mark.parametrize("order", [(1, 1, 1), (2, 2, 2), (2, 1, 1), (1, 2, 1)])
-def test_both_base_predictors_decode_within_the_bound(order, monkeypatch):
-    """The writer picks the base samples' predictor per file and channel (spec 4.3); each decodes."""
+@pytest.mark.parametrize(("chooser", "key", "choice"), [
+    ("_choose_base_order", "base_order", (1, 1, 1)), ("_choose_base_order", "base_order", (2, 2, 2)),
+    ("_choose_base_order", "base_order", (2, 1, 1)), ("_choose_base_order", "base_order", (1, 2, 1)),
+    ("_choose_level_taps", "level_taps", (2, 2, 2, 2)), ("_choose_level_taps", "level_taps", (6, 6, 6, 6)),
+    ("_choose_level_taps", "level_taps", (8, 8, 8, 8)), ("_choose_level_taps", "level_taps", (2, 6, 8, 4))])
+def test_every_predictor_choice_decodes_within_the_bound(chooser, key, choice, monkeypatch):
+    """The writer picks the base samples' predictor per channel and each level's interpolation width
+    per file (spec 4.3); every choice decodes."""
     from cghair_format.examples import example_asset
 
-    monkeypatch.setattr(codec, "_choose_base_order", lambda *_: order)
+    monkeypatch.setattr(codec, chooser, lambda *_: choice)
     asset = example_asset(5)
     data, report = cgh.encode(asset, "compact")
-    quant = json.loads(container.unpack(data, set(codec.REQUIRED_CHUNKS))[2]["META"])["quant"]
-    assert quant["base_order"] == list(order)
+    assert quant_of(data)[key] == list(choice)
     decoded = cgh.decode_points(cgh.decode(data))
     expected = cgh.decode_points(report.in_file_order(asset))
     assert np.linalg.norm(decoded - expected, axis=-1).max() <= 2e-4 * report.bbox_diagonal
