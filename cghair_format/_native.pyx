@@ -100,34 +100,51 @@ cdef inline void to_world(const double* frames, int m, i64 card, const double* s
 
 
 cdef inline void newton(const double* frames, int m, i64 card, const double* sc, const double* inv_sc,
-                        const double* goal, int steps, double max_step_ratio, double* p) noexcept nogil:
-    """``steps`` Newton steps on ``map(card, p / sc) = goal`` from ``p`` (scaled card coordinates);
-    a step is kept only where it is finite and at most ``max_step_ratio`` x the miss in steps + 1."""
+                        const double* goal, int steps, int halvings, double* p) noexcept nogil:
+    """Up to ``steps`` Newton steps on ``map(card, p / sc) = goal`` from ``p`` (scaled card coordinates),
+    each searched back (spec 4.3): the full step, else up to ``halvings`` times half the last, the first
+    that maps nearer ``goal`` than the point it starts from; none (or a step that is not finite) ends
+    the search."""
     cdef double c[3]
     cdef double x[3]
-    cdef double ju[3]
-    cdef double jv[3]
-    cdef double jd[3]
+    cdef double j[9]
+    cdef double cand[3]
+    cdef double xc[3]
+    cdef double jc[9]
     cdef double miss[3]
     cdef double sol[3]
-    cdef double bound, d
-    cdef int i, step, ok
+    cdef double m2, t
+    cdef int i, step, h, ok
     for i in range(3):
         c[i] = p[i] * inv_sc[i]
+    if steps > 0:
+        card_map(frames, m, card, c, x, j, j + 3, j + 6)
     for step in range(steps):
-        card_map(frames, m, card, c, x, ju, jv, jd)
         for i in range(3):
             miss[i] = goal[i] - x[i]
-        solve3(ju, jv, jd, miss, sol)
-        bound = max_step_ratio * sqrt(dot3(miss, miss)) * sc[2] + 1.0
-        ok = 1
-        for i in range(3):
-            d = sol[i] * sc[i]
-            if not isfinite(d) or fabs(d) > bound:
-                ok = 0
-        if ok:
+        m2 = dot3(miss, miss)
+        solve3(j, j + 3, j + 6, miss, sol)
+        if not (isfinite(sol[0]) and isfinite(sol[1]) and isfinite(sol[2])):
+            break
+        t = 1.0
+        ok = 0
+        for h in range(halvings + 1):
             for i in range(3):
-                c[i] = c[i] + sol[i]
+                cand[i] = c[i] + t * sol[i]
+            card_map(frames, m, card, cand, xc, jc, jc + 3, jc + 6)
+            for i in range(3):
+                miss[i] = goal[i] - xc[i]
+            if dot3(miss, miss) < m2:
+                ok = 1
+                break
+            t = 0.5 * t
+        if not ok:
+            break
+        for i in range(3):
+            c[i] = cand[i]
+            x[i] = xc[i]
+        for i in range(9):
+            j[i] = jc[i]
     for i in range(3):
         x[i] = c[i] * sc[i]
     if isfinite(x[0]) and isfinite(x[1]) and isfinite(x[2]):
@@ -253,7 +270,7 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                 const i64[::1] strand_card, const double[:, ::1] scale,
                 const i64[::1] base, const i64[::1] base_order, const i64[::1] level_start,
                 const i64[::1] level_taps, const i64[::1] idx,
-                const i64[:, ::1] nb, const double[:, ::1] wt, int newton_steps, double max_step_ratio,
+                const i64[:, ::1] nb, const double[:, ::1] wt, int newton_steps, int newton_halvings,
                 double[:, :, ::1] rec, double[:, :, ::1] world, i64[:, :, ::1] res,
                 const double[:, :, ::1] y=None, const double[:, :, ::1] dz_points=None, double dz_dist=-1.0,
                 bint neighbour_zone=False, float[:, :, ::1] uvd=None):
@@ -370,7 +387,7 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                             pred[ch] = pred[ch] + R[j + ch] * w
                             goal[ch] = goal[ch] + W[j + ch] * w
                     if newton_steps:
-                        newton(fr, segments, card, sc, inv_sc, goal, newton_steps, max_step_ratio, pred)
+                        newton(fr, segments, card, sc, inv_sc, goal, newton_steps, newton_halvings, pred)
                     if encode:
                         for ch in range(3):
                             LR[3 * row + ch] = <i64> rint(Y[3 * i + ch] - pred[ch])

@@ -36,6 +36,7 @@ from .quantize import (
 )
 from .residual_coder import read_residuals, write_residuals
 from .strand_coder import (
+    NEWTON_HALVINGS,
     NEWTON_STEPS,
     DeadZone,
     Prediction,
@@ -198,7 +199,7 @@ def _meta(asset: HairAsset, prof: Profile, step: float | None, diag: float) -> d
             "lossless": False, "step": step, "card_step": step * CARD_STEP_FRACTION,
             "normal_bits": _normal_bits(asset, prof), "base_stride": prof.base_stride,
             # the writer's choices (_Choices) replace these three in _quantize_geometry
-            "base_order": None, "newton_steps": None, "level_taps": None,
+            "base_order": None, "newton_steps": None, "level_taps": None, "newton_halvings": NEWTON_HALVINGS,
             "opacity_scale": prof.opacity_scale, "logit_levels": prof.logit_levels, "logit_floor": prof.logit_floor,
             "half_bias": prof.half_bias},
     }
@@ -256,9 +257,9 @@ def _parse_meta(raw: bytes) -> dict:
     if not isinstance(quant, dict):
         raise InvalidContentError("META quant must be an object", chunk="META")
     if ("logit_step" in quant and "logit_levels" not in quant) or (quant.get("lossless") is False
-                                                                    and "level_taps" not in quant):
+                                                                    and "newton_halvings" not in quant):
         raise InvalidContentError("written by a pre-release draft of .cgh 1.0 (before the rANS strand coder, or "
-                                  "before per-level interpolation widths), which this reader cannot decode: write "
+                                  "before searched Newton steps), which this reader cannot decode: write "
                                   "the asset again from its source (cgh encode, or cgh train --resume CHECKPOINT)",
                                   chunk="META")
     if not need("lossless", bool, src=quant):
@@ -269,6 +270,7 @@ def _parse_meta(raw: bytes) -> dict:
         need("normal_bits", int, 8, 24, src=quant)
         need("base_stride", int, 1, 256, src=quant)
         need("newton_steps", int, 0, 8, src=quant)
+        need("newton_halvings", int, 0, 16, src=quant)
         orders = quant.get("base_order")
         if (not isinstance(orders, list) or len(orders) != 3
                 or not all(isinstance(k, int) and not isinstance(k, bool) and k in (1, 2) for k in orders)):
@@ -332,8 +334,9 @@ def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag
     if choices is None:
         base_order = _choose_base_order(asset.strand_card, y, q["base_stride"])
         newton_steps = _choose_newton_steps(cmap, asset.strand_card, y, scale,
-                                            Prediction(q["base_stride"], base_order, NEWTON_STEPS))
-        plan = Prediction(q["base_stride"], base_order, newton_steps)
+                                            Prediction(q["base_stride"], base_order, NEWTON_STEPS,
+                                                       newton_halvings=q["newton_halvings"]))
+        plan = Prediction(q["base_stride"], base_order, newton_steps, newton_halvings=q["newton_halvings"])
         neighbour_zone = _choose_neighbour_zone(cmap, asset.strand_card, y, scale, plan, zone)
         zone = zone._replace(neighbour=neighbour_zone)
         choices = _Choices(base_order, newton_steps, neighbour_zone,
@@ -479,7 +482,8 @@ def _estimate(residuals: np.ndarray) -> float:
 
 
 def _prediction(q: dict) -> Prediction:
-    return Prediction(q["base_stride"], tuple(q["base_order"]), q["newton_steps"], tuple(q["level_taps"]))
+    return Prediction(q["base_stride"], tuple(q["base_order"]), q["newton_steps"], tuple(q["level_taps"]),
+                      q["newton_halvings"])
 
 
 def _choose_base_order(strand_card: np.ndarray, y: np.ndarray, base_stride: int) -> tuple[int, int, int]:
