@@ -75,7 +75,7 @@ def main() -> None:
     data = cgh.encode(curly, "compact")[0]
     points = cgh.decode_points(cgh.decode(data))
     for fewer in (0, 3):
-        other = _rechunk(data, lambda c: _meta_edit(c, lambda m: m["quant"].update(newton_halvings=fewer)))
+        other = _rechunk(data, lambda c, h=fewer: _meta_edit(c, lambda m: m["quant"].update(newton_halvings=h)))
         assert not np.allclose(cgh.decode_points(cgh.decode(other)), points, rtol=0, atol=1e-3)
     _expected("synth_curly_compact", data)
 
