@@ -1,7 +1,7 @@
 """Training speed on this machine, with a per-stage breakdown.
 
     python -m training.bench --strands ../shared/data/hair/Ratboy_mohawk.tfx --iters 2000 \
-        --views 32 --res 128 --points 32 [--threads 1] [--work bench_out]
+        --views 32 --res 128 --points 32 [--threads 1] [--device cuda] [--work bench_out]
 
 Renders a splat dataset if the work folder has none, builds the cards (timed apart), trains the
 latents variant and prints iterations per second and the seconds spent per stage. It reports
@@ -27,6 +27,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--points", type=int, default=32)
     p.add_argument("--n-cards", type=int, default=800)
     p.add_argument("--threads", type=int, default=None)
+    p.add_argument("--device", default="cpu", help="torch device, e.g. cpu or cuda (default: cpu)")
     p.add_argument("--engine", choices=("splat", "cycles"), default="splat")
     p.add_argument("--dataset", default=None, help="use this rendered dataset instead of rendering one")
     args = p.parse_args(argv)
@@ -47,16 +48,17 @@ def main(argv: list[str] | None = None) -> int:
     ds_dir = Path(args.dataset) if args.dataset else work / f"dataset_{args.engine}_{args.res}"
     strands = load_strands(args.strands)
     if not (ds_dir / "transforms_test.json").is_file():
-        render_dataset(strands, ds_dir, views=args.views, res=args.res, engine=args.engine)
+        render_dataset(strands, ds_dir, views=args.views, res=args.res, engine=args.engine, device=args.device)
     cfg = scaled_config("latents", args.iters, n_cards=args.n_cards, points_per_strand=args.points)
     t = time.perf_counter()
     base = base_asset(cfg, strands, progress=False)
     cards_s = time.perf_counter() - t
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    result = train(ds_dir, cards=base, out=work / "latents.cgh", config=cfg, progress=True)
-    ev = evaluate(work / "latents.cgh", ds_dir, use_lpips=False)
+    result = train(ds_dir, cards=base, out=work / "latents.cgh", config=cfg, progress=True, device=args.device)
+    ev = evaluate(work / "latents.cgh", ds_dir, use_lpips=False, device=args.device)
     total = sum(result.stage_seconds.values())
-    print(f"machine: {os.cpu_count()} cores, torch threads {torch.get_num_threads()}, load average at start "
+    gpu = f", {torch.cuda.get_device_name()}" if args.device.startswith("cuda") else ""
+    print(f"machine: {os.cpu_count()} cores{gpu}, torch threads {torch.get_num_threads()}, load average at start "
           f"{load:.2f}, at end {os.getloadavg()[0]:.2f}")
     print(f"scene: {base.n_strands} strands x {base.points_per_strand} points = {base.n_gaussians} Gaussians, "
           f"{args.views} views at {args.res} x {args.res}")

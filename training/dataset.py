@@ -228,12 +228,12 @@ def default_thickness(strands: Strands) -> float:
 
 def render_dataset(strands: Strands, out_dir: str | Path, views: int = 32, res: int = 128,
                    engine: str = "splat", preset: str = "brown", seed: int = 0, samples: int = 16,
-                   thickness: float | None = None, progress: bool = False) -> Dataset:
+                   thickness: float | None = None, progress: bool = False, device: str = "cpu") -> Dataset:
     """Render ``views`` orbit views of ``strands`` at ``res`` x ``res`` and write the dataset.
 
-    ``engine="splat"`` renders the strands' segment Gaussians with the reference splatter (fast,
-    known appearance); ``engine="cycles"`` renders curves with Blender Cycles and the Principled
-    Hair BSDF (needs bpy). Every 8th view goes to the test split.
+    ``engine="splat"`` renders the strands' segment Gaussians with the reference splatter on the torch
+    ``device`` (fast, known appearance); ``engine="cycles"`` renders curves with Blender Cycles and the
+    Principled Hair BSDF (needs bpy). Every 8th view goes to the test split.
     """
     if engine not in ENGINES:
         raise DatasetError(f"unknown engine {engine!r}; choose {' or '.join(ENGINES)}")
@@ -253,7 +253,7 @@ def render_dataset(strands: Strands, out_dir: str | Path, views: int = 32, res: 
         g = reference_gaussians(strands, thickness, preset, seed)
         images = []
         for cam in _progress(cams, progress, "splat"):
-            out = render_gaussians(g, cam)
+            out = render_gaussians(g, cam, device=device)
             a = out["alpha"][..., None]
             straight = np.where(a > 1e-6, out["rgb"] / np.maximum(a, 1e-6), 0.0)
             images.append(np.concatenate([straight, a], -1).astype(np.float32))

@@ -91,8 +91,10 @@ def evaluate_renders(render_fn: Callable[[View], np.ndarray], views: list[View],
 
 
 def evaluate(cgh: str | Path | HairAsset, dataset: str | Path | Dataset, out_dir: str | Path | None = None,
-             split: str = "test", background=(0.0, 0.0, 0.0), use_lpips: bool = True) -> EvalResult:
-    """Render a .cgh (decoded exactly as stored) at the dataset's ``split`` views and compare."""
+             split: str = "test", background=(0.0, 0.0, 0.0), use_lpips: bool = True,
+             device: str = "cpu") -> EvalResult:
+    """Render a .cgh (decoded exactly as stored) at the dataset's ``split`` views on the torch
+    ``device`` and compare."""
     from cghair_format import decode_gaussians, read
 
     from .splatter import render_gaussians
@@ -100,7 +102,7 @@ def evaluate(cgh: str | Path | HairAsset, dataset: str | Path | Dataset, out_dir
     asset = cgh if isinstance(cgh, HairAsset) else read(cgh)
     ds = dataset if isinstance(dataset, Dataset) else read_dataset(dataset)
     g = decode_gaussians(asset)
-    result = evaluate_renders(lambda v: render_gaussians(g, v.camera, tuple(background))["rgb"],
+    result = evaluate_renders(lambda v: render_gaussians(g, v.camera, tuple(background), device)["rgb"],
                               ds.split(split), out_dir, background, use_lpips)
     if out_dir is not None:
         (Path(out_dir) / "metrics.json").write_text(json.dumps(result.to_dict(), indent=2) + "\n")

@@ -221,6 +221,12 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
     targets, masks = (t.to(device) for t in _targets(ds.train, config.background))
     n_views = len(ds.train)
     stage = dict.fromkeys(STAGES, 0.0)
+
+    def clock() -> float:  # on a GPU the kernels run asynchronously: wait for them, so each stage is timed
+        if dev.type == "cuda":
+            torch.cuda.synchronize(dev)
+        return time.perf_counter()
+
     t_start = time.perf_counter()
     bar = None
     if progress:
@@ -242,25 +248,25 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
         v = view_at(config.seed, it, n_views)
         tau = tau_at(config, it)
 
-        t0 = time.perf_counter()
+        t0 = clock()
         if geometry_on:
             frozen = None
         elif frozen is None:  # frozen geometry: the Gaussians' positions are computed once
             with torch.no_grad():
                 frozen = model.gaussian_geometry()
         gauss = model("gumbel", tau, frozen)
-        t1 = time.perf_counter()
+        t1 = clock()
         out_img = render(*gauss, ds.train[v].camera, tuple(config.background))
-        t2 = time.perf_counter()
+        t2 = clock()
         loss = (losses.image_loss(out_img.rgb, targets[v], config.lambda_dssim)
                 + config.lambda_alpha * losses.l1(out_img.alpha, masks[v])
                 + config.lambda_opacity_smooth * losses.opacity_smoothness(model.opacities()))
-        t3 = time.perf_counter()
+        t3 = clock()
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
-        t4 = time.perf_counter()
+        t4 = clock()
         optimizer.step()
-        t5 = time.perf_counter()
+        t5 = clock()
         for name, dt in zip(STAGES, (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4), strict=True):
             stage[name] += dt
         if not torch.isfinite(loss.detach()):
