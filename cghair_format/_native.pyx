@@ -99,30 +99,25 @@ cdef inline void to_world(const double* frames, int m, i64 card, const double* s
     card_map(frames, m, card, uvd, x, NULL, NULL, NULL)
 
 
-cdef inline void newton(const double* frames, int m, i64 card, const double* sc, const double* inv_sc,
-                        const double* goal, int steps, int halvings, double* p) noexcept nogil:
-    """Up to ``steps`` Newton steps on ``map(card, p / sc) = goal`` from ``p`` (scaled card coordinates),
-    each searched back (spec 4.3): the full step, else up to ``halvings`` times half the last, the first
-    that maps nearer ``goal`` than the point it starts from; none (or a step that is not finite) ends
-    the search."""
-    cdef double c[3]
+cdef inline double newton_solve(const double* frames, int m, i64 card, const double* goal, int steps,
+                                int halvings, double* c) noexcept nogil:
+    """Up to ``steps`` Newton steps on ``map(card, c) = goal`` from the card coordinates ``c`` (in
+    place), each searched back (spec 4.3): the full step, else up to ``halvings`` times half the last,
+    the first that maps nearer ``goal`` than the point it starts from; none (or a step that is not
+    finite) ends the search. Returns the squared distance left."""
     cdef double x[3]
     cdef double j[9]
     cdef double cand[3]
-    cdef double xc[3]
     cdef double jc[9]
     cdef double miss[3]
     cdef double sol[3]
-    cdef double m2, t
+    cdef double m2, d2, t
     cdef int i, step, h, ok
+    card_map(frames, m, card, c, x, j, j + 3, j + 6)
     for i in range(3):
-        c[i] = p[i] * inv_sc[i]
-    if steps > 0:
-        card_map(frames, m, card, c, x, j, j + 3, j + 6)
+        miss[i] = goal[i] - x[i]
+    m2 = dot3(miss, miss)
     for step in range(steps):
-        for i in range(3):
-            miss[i] = goal[i] - x[i]
-        m2 = dot3(miss, miss)
         solve3(j, j + 3, j + 6, miss, sol)
         if not (isfinite(sol[0]) and isfinite(sol[1]) and isfinite(sol[2])):
             break
@@ -131,20 +126,36 @@ cdef inline void newton(const double* frames, int m, i64 card, const double* sc,
         for h in range(halvings + 1):
             for i in range(3):
                 cand[i] = c[i] + t * sol[i]
-            card_map(frames, m, card, cand, xc, jc, jc + 3, jc + 6)
+            card_map(frames, m, card, cand, x, jc, jc + 3, jc + 6)
             for i in range(3):
-                miss[i] = goal[i] - xc[i]
-            if dot3(miss, miss) < m2:
+                miss[i] = goal[i] - x[i]
+            d2 = dot3(miss, miss)
+            if d2 < m2:
                 ok = 1
                 break
             t = 0.5 * t
         if not ok:
             break
+        m2 = d2
         for i in range(3):
             c[i] = cand[i]
-            x[i] = xc[i]
         for i in range(9):
             j[i] = jc[i]
+    return m2
+
+
+cdef inline void newton(const double* frames, int m, i64 card, const double* sc, const double* inv_sc,
+                        const double* goal, int steps, int halvings, double* p) noexcept nogil:
+    """:func:`newton_solve` on scaled card coordinates ``p``, which keep their value where the result
+    is not finite."""
+    cdef double c[3]
+    cdef double x[3]
+    cdef int i
+    if steps <= 0:
+        return
+    for i in range(3):
+        c[i] = p[i] * inv_sc[i]
+    newton_solve(frames, m, card, goal, steps, halvings, c)
     for i in range(3):
         x[i] = c[i] * sc[i]
     if isfinite(x[0]) and isfinite(x[1]) and isfinite(x[2]):
@@ -222,19 +233,11 @@ def map_points(const double[:, ::1] frames, int segments, const i64[::1] card, c
 def invert_points(const double[:, ::1] frames, int segments, const i64[::1] card, double[:, ::1] uvd,
                   const double[:, ::1] goal, int steps, double[::1] miss_out):
     """Card coordinates of world points, in place: from ``uvd[i]``, up to ``steps`` Newton steps on
-    ``map(card[i], uvd) = goal[i]``, each kept only where it brings the point nearer; ``miss_out[i]``
-    gets the distance left."""
+    ``map(card[i], uvd) = goal[i]``, each kept only where it brings the point nearer (no halving);
+    ``miss_out[i]`` gets the distance left."""
     cdef Py_ssize_t i, n = card.shape[0]
-    cdef int step, ch
+    cdef int ch
     cdef double c[3]
-    cdef double t[3]
-    cdef double x[3]
-    cdef double ju[3]
-    cdef double jv[3]
-    cdef double jd[3]
-    cdef double miss[3]
-    cdef double sol[3]
-    cdef double d2, d2t
     if (frames.shape[1] != 18 or uvd.shape[0] != n or goal.shape[0] != n or uvd.shape[1] != 3
             or goal.shape[1] != 3 or miss_out.shape[0] != n):
         raise ValueError("invert_points: mismatched shapes")
@@ -243,27 +246,9 @@ def invert_points(const double[:, ::1] frames, int segments, const i64[::1] card
         for i in range(n):
             for ch in range(3):
                 c[ch] = uvd[i, ch]
-            card_map(&frames[0, 0], segments, card[i], c, x, ju, jv, jd)
-            for ch in range(3):
-                miss[ch] = goal[i, ch] - x[ch]
-            d2 = dot3(miss, miss)
-            for step in range(steps):
-                solve3(ju, jv, jd, miss, sol)
-                for ch in range(3):
-                    t[ch] = c[ch] + sol[ch]
-                card_map(&frames[0, 0], segments, card[i], t, x, ju, jv, jd)
-                for ch in range(3):
-                    x[ch] = goal[i, ch] - x[ch]
-                d2t = dot3(x, x)
-                if not d2t < d2:
-                    break
-                d2 = d2t
-                for ch in range(3):
-                    c[ch] = t[ch]
-                    miss[ch] = x[ch]
+            miss_out[i] = sqrt(newton_solve(&frames[0, 0], segments, card[i], &goal[i, 0], steps, 0, c))
             for ch in range(3):
                 uvd[i, ch] = c[ch]
-            miss_out[i] = sqrt(d2)
 
 
 def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int segments,
