@@ -29,6 +29,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="strand radius in scene units (default: the card builder's rule)")
     p.add_argument("--seed", type=int, default=0, help="seed of the per-strand colour variation (default: 0)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--device", default="cpu", help="torch device of the splat engine, e.g. cpu or cuda (default: cpu)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -39,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
     strands = load_strands(args.strands)
     ds = render_dataset(strands, args.output, views=args.views, res=args.res, engine=args.engine,
                         preset=args.preset, seed=args.seed, samples=args.samples, thickness=args.thickness,
-                        progress=not args.no_progress)
+                        progress=not args.no_progress, device=args.device)
     print(f"wrote {len(ds.train)} train + {len(ds.test)} test views ({args.res} x {args.res}, "
           f"engine {args.engine}) to {args.output}")
     return 0

@@ -248,8 +248,9 @@ def render_dataset(strands: Strands, out_dir: str | Path, views: int = 32, res: 
         thickness = default_thickness(strands)
     cams = orbit_cameras(strands.points.astype(np.float64), views, res, strands.up_axis)
     if engine == "splat":
-        from .splatter import render_gaussians
+        from .splatter import render_gaussians, torch_device
 
+        device = torch_device(device)
         g = reference_gaussians(strands, thickness, preset, seed)
         images = []
         for cam in _progress(cams, progress, "splat"):

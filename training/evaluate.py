@@ -97,8 +97,9 @@ def evaluate(cgh: str | Path | HairAsset, dataset: str | Path | Dataset, out_dir
     ``device`` and compare."""
     from cghair_format import decode_gaussians, read
 
-    from .splatter import render_gaussians
+    from .splatter import render_gaussians, torch_device
 
+    device = torch_device(device)
     asset = cgh if isinstance(cgh, HairAsset) else read(cgh)
     ds = dataset if isinstance(dataset, Dataset) else read_dataset(dataset)
     g = decode_gaussians(asset)

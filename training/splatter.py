@@ -26,17 +26,36 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from cghair_format.errors import CghError
 from cghair_format.gaussians import sh_polynomial
 
 if TYPE_CHECKING:
     from cghair_format.camera import Camera
     from cghair_format.gaussians import Gaussians
 
+
 NEAR_PLANE = 0.01  # camera-space z below which a Gaussian is culled
 DILATION = 0.3  # px^2 added to the 2D covariance's diagonal (low-pass filter)
 ALPHA_MAX = 0.99  # per-contribution alpha clamp
 ALPHA_MIN = 1.0 / 255.0  # contributions below this are skipped
 SIGMA_SUPPORT = 3.0  # support half-size in standard deviations (largest axis)
+
+
+class DeviceError(CghError, ValueError):
+    """A torch device name this torch cannot use."""
+
+
+def torch_device(name: str | torch.device) -> torch.device:
+    """The torch device ``name`` ("cpu", "cuda", "cuda:1", ...), or a DeviceError that says why not."""
+    try:
+        dev = torch.device(name)
+    except (RuntimeError, TypeError) as exc:
+        raise DeviceError(f"unknown torch device {name!r} ({exc})") from None
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        raise DeviceError(f"device {name!r} asked for, but this torch has no usable CUDA device (install a CUDA "
+                          "build of torch: see the README)")
+    return dev
+
 
 @dataclass
 class RenderOutput:
@@ -220,7 +239,10 @@ def render_batch(means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor
 
 def render_gaussians(g: Gaussians, camera: Camera, background=(0.0, 0.0, 0.0),
                      device: str | torch.device = "cpu") -> dict[str, np.ndarray]:
-    """Render a :class:`cghair_format.Gaussians` set; returns numpy ``rgb``, ``alpha``, ``depth``."""
+    """Render a :class:`cghair_format.Gaussians` set on the torch ``device``; returns numpy ``rgb``,
+    ``alpha``, ``depth``."""
+    device = torch_device(device)
+
     def t(a: np.ndarray) -> Tensor:
         return torch.as_tensor(np.ascontiguousarray(a, np.float32), device=device)
 

@@ -19,7 +19,7 @@ from . import losses
 from .config import TrainConfig
 from .dataset import Dataset, View, read_dataset
 from .model import HairModel, tau_at
-from .splatter import render
+from .splatter import render, torch_device
 
 CHECKPOINT_VERSION = 1
 EXPORT_PROBE_VIEWS = 4  # training views used to choose hard or soft weights at export
@@ -141,9 +141,9 @@ def render_model(model: HairModel, camera, mode: str, tau: float, background) ->
 
 
 def choose_export(model: HairModel, base: HairAsset, views: list[View], config: TrainConfig,
-                  profile: str) -> tuple[HairAsset | None, str | None, dict]:
+                  profile: str, device: str | torch.device = "cpu") -> tuple[HairAsset | None, str | None, dict]:
     """Export with hard and with soft weights, decode each through the codec with ``profile``, and
-    keep the one with the higher PSNR on a few training views."""
+    keep the one with the higher PSNR on a few training views (rendered on the torch ``device``)."""
     from cghair_format import decode, decode_gaussians, encode
 
     from .splatter import render_gaussians
@@ -157,7 +157,7 @@ def choose_export(model: HairModel, base: HairAsset, views: list[View], config: 
     for mode in ("hard", "soft"):
         asset = model.to_asset(base, mode, tau)
         g = decode_gaussians(decode(encode(asset, profile)[0]))
-        rgbs = [render_gaussians(g, v.camera, tuple(config.background))["rgb"] for v in probe]
+        rgbs = [render_gaussians(g, v.camera, tuple(config.background), device)["rgb"] for v in probe]
         scores[mode] = losses.psnr(torch.as_tensor(np.stack(rgbs)), target)
         assets[mode] = asset
     best = max(scores, key=scores.get)
@@ -180,12 +180,7 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
     that iteration as if interrupted (checkpoint written, nothing exported); resume continues it.
     """
     log = log if log is not None else sys.stderr
-    try:
-        dev = torch.device(device)
-    except (RuntimeError, TypeError) as exc:
-        raise TrainError(f"unknown torch device {device!r} ({exc})") from exc
-    if dev.type == "cuda" and not torch.cuda.is_available():
-        raise TrainError("--device cuda asked for, but this torch has no usable CUDA device")
+    dev = torch_device(device)
     if threads:
         torch.set_num_threads(threads)
     ds = dataset if isinstance(dataset, Dataset) else read_dataset(dataset)
@@ -297,7 +292,7 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
                          iterations_run=iterations_run, out_path=out_path)
     if end < config.iterations:
         return result
-    asset, mode, scores = choose_export(model, base, ds.train, config, profile)
+    asset, mode, scores = choose_export(model, base, ds.train, config, profile, dev)
     result.asset, result.weight_mode, result.export_psnr = asset, mode, scores
     summary = {
         "config": config.to_dict(), "dataset": dataset_name, "iterations_run": iterations_run,

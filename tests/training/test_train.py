@@ -13,6 +13,7 @@ from training.config import TrainConfig
 from training.dataset import read_dataset, render_dataset
 from training.evaluate import evaluate, evaluate_model
 from training.model import HairModel
+from training.splatter import DeviceError
 from training.train import TrainError, base_asset, load_checkpoint, mean_hair_colour, train, view_at
 
 
@@ -100,8 +101,8 @@ def test_bad_inputs(tiny, tmp_path):
         train(root / "ds", resume=tmp_path / "bad.pt", progress=False)
     with pytest.raises(TrainError, match="does not exist"):
         load_checkpoint(tmp_path / "missing.pt")
-    with pytest.raises(TrainError, match="unknown torch device"):
+    with pytest.raises(DeviceError, match="unknown torch device"):
         train(root / "ds", strands=tiny[1], config=_tiny_config(), progress=False, device="gpu9")
     if not torch.cuda.is_available():
-        with pytest.raises(TrainError, match="no usable CUDA"):
+        with pytest.raises(DeviceError, match="no usable CUDA"):
             train(root / "ds", strands=tiny[1], config=_tiny_config(), progress=False, device="cuda")

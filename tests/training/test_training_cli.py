@@ -58,6 +58,9 @@ def test_unique_variant_writes_no_cgh(tmp_path, strands_file, capsys):
     (["train", "DS", "-o", "x.cgh"], "give --strands"),
     (["train", "MISSING", "--strands", "S", "-o", "x.cgh"], "does not exist"),
     (["eval", "NOTCGH", "DS"], "not a .cgh file"),
+    (["eval", "NOTCGH", "DS", "--device", "gpu9"], "unknown torch device 'gpu9'"),
+    (["render-dataset", "S", "-o", "OUT", "--views", "4", "--res", "8", "--device", "gpu9"],
+     "unknown torch device 'gpu9'"),
     (["render-dataset", "S", "-o", "OUT", "--engine", "splat", "--views", "4", "--preset", "red",
       "--thickness", "0.01", "--res", "8"], None),
 ])
