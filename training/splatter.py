@@ -54,6 +54,9 @@ def torch_device(name: str | torch.device) -> torch.device:
     if dev.type == "cuda" and not torch.cuda.is_available():
         raise DeviceError(f"device {name!r} asked for, but this torch has no usable CUDA device (install a CUDA "
                           "build of torch: see the README)")
+    if dev.type == "cuda" and dev.index is not None and dev.index >= torch.cuda.device_count():
+        raise DeviceError(f"device {name!r} asked for, but this machine has {torch.cuda.device_count()} CUDA "
+                          f"device(s)")
     return dev
 
 

@@ -148,3 +148,11 @@ def test_cuda_matches_cpu():
     gpu = splatter.render(*(x.cuda() for x in scene), cam)
     assert gpu.rgb.is_cuda
     assert torch.max(torch.abs(gpu.rgb.cpu() - cpu.rgb)) <= 1e-5
+
+
+@pytest.mark.parametrize("name", ["gpu9", "cuda:99"])
+def test_a_device_this_torch_cannot_use_gets_a_clear_error(name):
+    """Without CUDA both names fail the first check; with it, cuda:99 names a device that isn't there."""
+    with pytest.raises(splatter.DeviceError, match=f"{name}'"):
+        splatter.torch_device(name)
+    assert splatter.torch_device("cpu") == torch.device("cpu")
