@@ -270,7 +270,7 @@ def _parse_meta(raw: bytes) -> dict:
         need("normal_bits", int, 8, 24, src=quant)
         need("base_stride", int, 1, 256, src=quant)
         need("newton_steps", int, 0, 8, src=quant)
-        need("newton_halvings", int, 0, 16, src=quant)
+        need("newton_halvings", int, 0, 8, src=quant)
         orders = quant.get("base_order")
         if (not isinstance(orders, list) or len(orders) != 3
                 or not all(isinstance(k, int) and not isinstance(k, bool) and k in (1, 2) for k in orders)):

@@ -125,7 +125,7 @@ def test_bad_level_taps_are_refused(taps):
         cgh.decode(_vector_with_quant(lambda quant: quant.update(level_taps=taps)))
 
 
-@pytest.mark.parametrize("halvings", [-1, 17, 2.5, "4", True, None])
+@pytest.mark.parametrize("halvings", [-1, 9, 2.5, "4", True, None])
 def test_bad_newton_halvings_are_refused(halvings):
     with pytest.raises(InvalidContentError, match="newton_halvings"):
         cgh.decode(_vector_with_quant(lambda quant: quant.update(newton_halvings=halvings)))
