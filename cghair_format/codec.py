@@ -198,8 +198,9 @@ def _meta(asset: HairAsset, prof: Profile, step: float | None, diag: float) -> d
         "quant": {"lossless": True} if step is None else {
             "lossless": False, "step": step, "card_step": step * CARD_STEP_FRACTION,
             "normal_bits": _normal_bits(asset, prof), "base_stride": prof.base_stride,
+            "newton_halvings": NEWTON_HALVINGS,
             # the writer's choices (_Choices) replace these three in _quantize_geometry
-            "base_order": None, "newton_steps": None, "level_taps": None, "newton_halvings": NEWTON_HALVINGS,
+            "base_order": None, "newton_steps": None, "level_taps": None,
             "opacity_scale": prof.opacity_scale, "logit_levels": prof.logit_levels, "logit_floor": prof.logit_floor,
             "half_bias": prof.half_bias},
     }
