@@ -99,12 +99,17 @@ cdef inline void to_world(const double* frames, int m, i64 card, const double* s
     card_map(frames, m, card, uvd, x, NULL, NULL, NULL)
 
 
+# A Newton search stops once the miss is within a hundredth of a step: (miss / q)^2 <= 1e-4 (spec 4.3)
+cdef double NEWTON_CLOSE2 = 1e-4
+
+
 cdef inline double newton_solve(const double* frames, int m, i64 card, const double* goal, int steps,
-                                int halvings, double* c) noexcept nogil:
+                                int halvings, double* c, double per_unit2=0.0) noexcept nogil:
     """Up to ``steps`` Newton steps on ``map(card, c) = goal`` from the card coordinates ``c`` (in
     place), each searched back (spec 4.3): the full step, else up to ``halvings`` times half the last,
     the first that maps nearer ``goal`` than the point it starts from; none (or a step that is not
-    finite) ends the search. Returns the squared distance left."""
+    finite) ends the search, and so does a miss whose square times ``per_unit2`` is at most
+    NEWTON_CLOSE2 (``per_unit2`` 0: never). Returns the squared distance left."""
     cdef double x[3]
     cdef double j[9]
     cdef double cand[3]
@@ -118,6 +123,8 @@ cdef inline double newton_solve(const double* frames, int m, i64 card, const dou
         miss[i] = goal[i] - x[i]
     m2 = dot3(miss, miss)
     for step in range(steps):
+        if per_unit2 > 0 and m2 * per_unit2 <= NEWTON_CLOSE2:
+            break
         solve3(j, j + 3, j + 6, miss, sol)
         if not (isfinite(sol[0]) and isfinite(sol[1]) and isfinite(sol[2])):
             break
@@ -146,8 +153,8 @@ cdef inline double newton_solve(const double* frames, int m, i64 card, const dou
 
 cdef inline void newton(const double* frames, int m, i64 card, const double* sc, const double* inv_sc,
                         const double* goal, int steps, int halvings, double* p) noexcept nogil:
-    """:func:`newton_solve` on scaled card coordinates ``p``, which keep their value where the result
-    is not finite."""
+    """:func:`newton_solve` on scaled card coordinates ``p`` (stopping within a hundredth of a step of
+    ``goal``: ``sc[2]`` is 1 / q), which keep their value where the result is not finite."""
     cdef double c[3]
     cdef double x[3]
     cdef int i
@@ -155,7 +162,7 @@ cdef inline void newton(const double* frames, int m, i64 card, const double* sc,
         return
     for i in range(3):
         c[i] = p[i] * inv_sc[i]
-    newton_solve(frames, m, card, goal, steps, halvings, c)
+    newton_solve(frames, m, card, goal, steps, halvings, c, sc[2] * sc[2])
     for i in range(3):
         x[i] = c[i] * sc[i]
     if isfinite(x[0]) and isfinite(x[1]) and isfinite(x[2]):

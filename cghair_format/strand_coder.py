@@ -26,7 +26,9 @@ from .geometry import CardMap, card_scales
 from .parallel import map_blocks
 from .quantize import base_prediction, level_plan
 
-NEWTON_STEPS = 2
+# At most this many Newton steps per refinement sample; most samples stop after one, within a
+# hundredth of a step (spec 4.3). 4 rather than 2: harolongo 0.6 % smaller, decoding no slower.
+NEWTON_STEPS = 4
 # Halving a Newton step that overshoots (the card map is only piecewise smooth: a full step from one
 # triangle can land where another bends away): 4 keeps harolongo's finest levels from residuals of
 # thousands of steps, 0.4 % of samples, and takes 2.9 % off its paper-scale file; 8 saves 0.1 % more.
