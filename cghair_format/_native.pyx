@@ -8,6 +8,7 @@ and is called on independent blocks of strands from several threads (:mod:`.para
   (residuals from scaled card coordinates) or decoding (scaled card coordinates from residuals).
 - :func:`undo_neighbour`: the neighbour prediction across the strands of a card (spec 4.3), undone.
 - :func:`decode_residuals`: the STRD token stream and extra bits (spec 4.3.2), decoded.
+- :func:`pack_bits`: the extra bits, packed (the writer's side of spec 4.3.2).
 """
 
 from libc.float cimport FLT_MAX
@@ -561,6 +562,30 @@ def decode_residuals(const uint8_t[::1] flat_slot, const uint32_t[::1] flat_freq
 
 
 # --- the writer's strand order (spec 4.3, informative) ---------------------------------------------
+
+def pack_bits(const uint8_t[::1] width, const uint64_t[::1] value, uint8_t[::1] out):
+    """Each ``value[i]``'s ``width[i]`` low bits (at most 64), most significant first, one after another
+    into ``out`` from the most significant bit of its first byte; ``out`` must be zeroed and hold
+    ``ceil(sum(width) / 8)`` bytes."""
+    cdef Py_ssize_t i, n = width.shape[0]
+    cdef uint64_t pos = 0, total = 0, v
+    cdef int b
+    if value.shape[0] != n:
+        raise ValueError("pack_bits: mismatched shapes")
+    for i in range(n):
+        if width[i] > 64:
+            raise ValueError("pack_bits: a width exceeds 64 bits")
+        total += width[i]
+    if <uint64_t> out.shape[0] != (total + 7) // 8:
+        raise ValueError("pack_bits: the output does not have the bytes the widths need")
+    with nogil:
+        for i in range(n):
+            v = value[i]
+            for b in range(width[i] - 1, -1, -1):
+                if (v >> b) & 1:
+                    out[pos >> 3] |= <uint8_t> (0x80 >> (pos & 7))
+                pos += 1
+
 
 def chain_order(const double[:, ::1] features, const i64[::1] by_card, const i64[::1] group_start, int window,
                 i64[::1] out):

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import _native
 from .errors import InvalidContentError
 
 DIRECT = 16
@@ -60,17 +61,12 @@ def token_widths(sym: np.ndarray) -> np.ndarray:
 
 
 def pack_bits(width: np.ndarray, value: np.ndarray) -> np.ndarray:
-    """Concatenate each value's ``width`` low bits, MSB first, into bytes (zero padded)."""
-    has = np.flatnonzero(width.ravel())
-    width = width.ravel()[has].astype(np.int64)
-    value = value.ravel()[has].astype(np.uint64)
-    total = int(width.sum())
-    if total == 0:
-        return np.zeros(0, np.uint8)
-    owner = np.repeat(np.arange(len(width)), width)
-    pos = np.arange(total) - np.repeat(np.cumsum(width) - width, width)
-    bits = (value[owner] >> (width[owner] - 1 - pos).astype(np.uint64)) & np.uint64(1)
-    return np.packbits(bits.astype(np.uint8))
+    """Concatenate each value's ``width`` low bits, MSB first, into bytes (zero padded; compiled)."""
+    width = np.ascontiguousarray(width.ravel(), np.uint8)
+    value = np.ascontiguousarray(value.ravel(), np.uint64)
+    out = np.zeros((int(width.sum(dtype=np.int64)) + 7) // 8, np.uint8)
+    _native.pack_bits(width, value, out)
+    return out
 
 
 def normalize(counts: np.ndarray) -> np.ndarray:

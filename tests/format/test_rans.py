@@ -22,6 +22,16 @@ def test_tokens_and_extra_bits_are_exact(values):
     assert len(rans.pack_bits(width, extra)) == (int(width.sum()) + 7) // 8
 
 
+def test_extra_bits_are_packed_most_significant_first():
+    """Spec 4.3.2: each value's bits below its leading one, MSB first, from each byte's top bit; the
+    last byte padded with zeros."""
+    packed = rans.pack_bits(np.array([3, 0, 5, 1, 64], np.uint8),
+                            np.array([0b101, 7, 0b10011, 1, 2**63 + 1], np.uint64))
+    bits = "101" + "10011" + "1" + "1" + "0" * 62 + "1"
+    bits += "0" * (-len(bits) % 8)
+    assert packed.tolist() == [int(bits[i:i + 8], 2) for i in range(0, len(bits), 8)]
+
+
 def test_token_layout_matches_the_spec():
     sym, extra = rans.tokens(np.array([0, 15, 16, 31, 32, 2**63], np.uint64))
     assert sym.tolist() == [0, 15, 16, 16, 17, 75]
