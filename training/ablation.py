@@ -37,7 +37,7 @@ def scaled_config(variant: str, iters: int, **overrides) -> TrainConfig:
 
 def run_ablation(strands_path: str, work: Path, iters: int, views: int, res: int, engine: str,
                  variants: list[str], samples: int, threads: int | None, n_cards: int, points: int,
-                 dataset: Path | None = None, log=sys.stderr) -> list[dict]:
+                 dataset: Path | None = None, log=sys.stderr, device: str = "cpu") -> list[dict]:
     import torch
 
     from cghair_format.exchange import load_strands
@@ -54,7 +54,8 @@ def run_ablation(strands_path: str, work: Path, iters: int, views: int, res: int
     strands = load_strands(strands_path)
     if not (ds_dir / "transforms_test.json").is_file():
         t = time.perf_counter()
-        render_dataset(strands, ds_dir, views=views, res=res, engine=engine, samples=samples, progress=True)
+        render_dataset(strands, ds_dir, views=views, res=res, engine=engine, samples=samples, progress=True,
+                       device=device)
         print(f"rendered {views} views with {engine} in {time.perf_counter() - t:.1f} s", file=log)
     ds = read_dataset(ds_dir)
     base = base_asset(scaled_config("latents", iters, n_cards=n_cards, points_per_strand=points), strands,
@@ -63,7 +64,7 @@ def run_ablation(strands_path: str, work: Path, iters: int, views: int, res: int
     for variant in variants:
         cfg = scaled_config(variant, iters, n_cards=n_cards, points_per_strand=points)
         out = work / f"{variant}.cgh"
-        result = train(ds, cards=base, out=out, config=cfg, progress=True, log=log)
+        result = train(ds, cards=base, out=out, config=cfg, progress=True, log=log, device=device)
         tau = tau_at(cfg, cfg.iterations)
         mode = result.weight_mode or "soft"
         ev = evaluate_model(result.model, ds.test, mode, tau, out_dir=work / f"{variant}_test")
@@ -72,7 +73,7 @@ def run_ablation(strands_path: str, work: Path, iters: int, views: int, res: int
                "iterations": cfg.iterations, "weight_mode": result.weight_mode,
                "train_psnr": result.history[-1]["psnr"] if result.history else None}
         if result.asset is not None:
-            fev = evaluate(out, ds, use_lpips=False)
+            fev = evaluate(out, ds, use_lpips=False, device=device)
             row.update(file_psnr=fev.psnr, file_ssim=fev.ssim, file_bytes=out.stat().st_size)
         rows.append(row)
         print(f"{variant}: test PSNR {ev.psnr:.2f} dB, SSIM {ev.ssim:.4f}", file=log)
@@ -113,6 +114,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--n-cards", type=int, default=800)
     p.add_argument("--points", type=int, default=32)
     p.add_argument("--threads", type=int, default=None)
+    p.add_argument("--device", default="cpu", help="torch device, e.g. cpu or cuda (default: cpu)")
     args = p.parse_args(argv)
     variants = [v for v in args.variants.split(",") if v]
     bad = [v for v in variants if v not in VARIANTS]
@@ -123,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         rows = run_ablation(args.strands, Path(args.work), args.iters, args.views, args.res, args.engine,
                             variants, args.samples, args.threads, args.n_cards, args.points,
-                            Path(args.dataset) if args.dataset else None)
+                            Path(args.dataset) if args.dataset else None, device=args.device)
     except CghError as exc:
         print(f"ablation: error: {exc}", file=sys.stderr)
         return 2

@@ -31,7 +31,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--engine", choices=("splat", "cycles"), default="splat")
     p.add_argument("--dataset", default=None, help="use this rendered dataset instead of rendering one")
     args = p.parse_args(argv)
+    from cghair_format.errors import CghError
 
+    try:
+        return _run(args)
+    except CghError as exc:
+        print(f"bench: error: {exc}", file=sys.stderr)
+        return 2
+
+
+def _run(args: argparse.Namespace) -> int:
     import torch
 
     from cghair_format.exchange import load_strands

@@ -21,6 +21,14 @@ def test_ablation_table(tmp_path, strands_file, capsys):
     assert rows["unique"]["ratio_vs_unique"] == 1.0 and "file_psnr" in rows["latents"]
 
 
+@pytest.mark.parametrize("script", [ablation, bench])
+def test_scripts_refuse_a_device_this_torch_cannot_use(tmp_path, strands_file, script, capsys):
+    assert script.main(["--strands", str(strands_file), "--work", str(tmp_path / "w"), "--iters", "2",
+                        "--views", "2", "--res", "8", "--engine", "splat", "--n-cards", "4", "--points", "4",
+                        "--device", "gpu9"]) == 2
+    assert "unknown torch device 'gpu9'" in capsys.readouterr().err
+
+
 def test_ablation_rejects_unknown_variant(tmp_path, strands_file):
     with pytest.raises(SystemExit):
         ablation.main(["--strands", str(strands_file), "--variants", "latents,bogus"])
