@@ -379,8 +379,7 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                         for ch in range(3):
                             pred[ch] = pred[ch] + R[j + ch] * w
                             goal[ch] = goal[ch] + W[j + ch] * w
-                    if newton_steps:
-                        newton(fr, segments, card, sc, inv_sc, goal, newton_steps, newton_halvings, pred)
+                    newton(fr, segments, card, sc, inv_sc, goal, newton_steps, newton_halvings, pred)
                     if encode:
                         for ch in range(3):
                             LR[3 * row + ch] = <i64> rint(Y[3 * i + ch] - pred[ch])
@@ -561,8 +560,6 @@ def decode_residuals(const uint8_t[::1] flat_slot, const uint32_t[::1] flat_freq
     return fault
 
 
-# --- the writer's strand order (spec 4.3, informative) ---------------------------------------------
-
 def pack_bits(const uint8_t[::1] width, const uint64_t[::1] value, uint8_t[::1] out):
     """Each ``value[i]``'s ``width[i]`` low bits (at most 64), most significant first, one after another
     into ``out`` from the most significant bit of its first byte; ``out`` must be zeroed and hold
@@ -586,6 +583,8 @@ def pack_bits(const uint8_t[::1] width, const uint64_t[::1] value, uint8_t[::1] 
                     out[pos >> 3] |= <uint8_t> (0x80 >> (pos & 7))
                 pos += 1
 
+
+# --- the writer's strand order (spec 4.3, informative) ---------------------------------------------
 
 def chain_order(const double[:, ::1] features, const i64[::1] by_card, const i64[::1] group_start, int window,
                 i64[::1] out):

@@ -334,13 +334,11 @@ def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag
     zone = DeadZone(points, DEAD_ZONE * prof.position_tolerance * diag)
     if choices is None:
         base_order = _choose_base_order(asset.strand_card, y, q["base_stride"])
-        newton_steps = _choose_newton_steps(cmap, asset.strand_card, y, scale,
-                                            Prediction(q["base_stride"], base_order, NEWTON_STEPS,
-                                                       newton_halvings=q["newton_halvings"]))
-        plan = Prediction(q["base_stride"], base_order, newton_steps, newton_halvings=q["newton_halvings"])
+        plan = Prediction(q["base_stride"], base_order, NEWTON_STEPS, newton_halvings=q["newton_halvings"])
+        plan = replace(plan, newton_steps=_choose_newton_steps(cmap, asset.strand_card, y, scale, plan))
         neighbour_zone = _choose_neighbour_zone(cmap, asset.strand_card, y, scale, plan, zone)
         zone = zone._replace(neighbour=neighbour_zone)
-        choices = _Choices(base_order, newton_steps, neighbour_zone,
+        choices = _Choices(base_order, plan.newton_steps, neighbour_zone,
                            _choose_level_taps(cmap, asset.strand_card, y, scale, plan, zone))
     q["base_order"], q["newton_steps"] = list(choices.base_order), choices.newton_steps
     q["level_taps"] = list(choices.level_taps)

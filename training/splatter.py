@@ -243,8 +243,9 @@ def render_batch(means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor
 def render_gaussians(g: Gaussians, camera: Camera, background=(0.0, 0.0, 0.0),
                      device: str | torch.device = "cpu") -> dict[str, np.ndarray]:
     """Render a :class:`cghair_format.Gaussians` set on the torch ``device``; returns numpy ``rgb``,
-    ``alpha``, ``depth``."""
-    device = torch_device(device)
+    ``alpha``, ``depth``. Entry points pass a checked torch.device; a name is checked here."""
+    if not isinstance(device, torch.device):
+        device = torch_device(device)
 
     def t(a: np.ndarray) -> Tensor:
         return torch.as_tensor(np.ascontiguousarray(a, np.float32), device=device)
