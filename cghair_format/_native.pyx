@@ -105,14 +105,14 @@ cdef double NEWTON_CLOSE2 = 1e-4
 
 
 cdef inline double newton_solve(const double* frames, int m, i64 card, const double* goal, int steps,
-                                int halvings, double* c, double per_unit2=0.0) noexcept nogil:
+                                int halvings, double* c, double per_unit2, double* j) noexcept nogil:
     """Up to ``steps`` Newton steps on ``map(card, c) = goal`` from the card coordinates ``c`` (in
     place), each searched back (spec 4.3): the full step, else up to ``halvings`` times half the last,
     the first that maps nearer ``goal`` than the point it starts from; none (or a step that is not
     finite) ends the search, and so does a miss whose square times ``per_unit2`` is at most
-    NEWTON_CLOSE2 (``per_unit2`` 0: never). Returns the squared distance left."""
+    NEWTON_CLOSE2 (``per_unit2`` 0: never). Returns the squared distance left; ``j [9]`` gets the
+    Jacobian columns at the final ``c``."""
     cdef double x[3]
-    cdef double j[9]
     cdef double cand[3]
     cdef double jc[9]
     cdef double miss[3]
@@ -153,22 +153,43 @@ cdef inline double newton_solve(const double* frames, int m, i64 card, const dou
 
 
 cdef inline void newton(const double* frames, int m, i64 card, const double* sc, const double* inv_sc,
-                        const double* goal, int steps, int halvings, double* p) noexcept nogil:
+                        const double* goal, int steps, int halvings, double* p, double* j) noexcept nogil:
     """:func:`newton_solve` on scaled card coordinates ``p`` (stopping within a hundredth of a step of
-    ``goal``: ``sc[2]`` is 1 / q), which keep their value where the result is not finite."""
+    ``goal``: ``sc[2]`` is 1 / q), which keep their value where the result is not finite; ``j [9]``
+    gets the Jacobian columns at the card coordinates ``p / sc`` (spec 4.3: at ``z``)."""
     cdef double c[3]
     cdef double x[3]
     cdef int i
-    if steps <= 0:
-        return
     for i in range(3):
         c[i] = p[i] * inv_sc[i]
-    newton_solve(frames, m, card, goal, steps, halvings, c, sc[2] * sc[2])
-    for i in range(3):
-        x[i] = c[i] * sc[i]
-    if isfinite(x[0]) and isfinite(x[1]) and isfinite(x[2]):
+    if steps > 0:
+        newton_solve(frames, m, card, goal, steps, halvings, c, sc[2] * sc[2], j)
         for i in range(3):
-            p[i] = x[i]
+            x[i] = c[i] * sc[i]
+        if isfinite(x[0]) and isfinite(x[1]) and isfinite(x[2]):
+            for i in range(3):
+                p[i] = x[i]
+            return
+        for i in range(3):
+            c[i] = p[i] * inv_sc[i]
+    card_map(frames, m, card, c, x, j, j + 3, j + 6)
+
+
+cdef inline void residual_steps(const double* j, const double* sc, double stretch_max, double* f) noexcept nogil:
+    """The steps ``f`` of a refinement residual in scaled card coordinates (spec 4.3), from the Jacobian
+    columns ``j [9]`` at its prediction: on u and v, the card's scale over the local one
+    (``g / (|J| g_d)``: one step then moves the point by about ``q``), within [1, ``stretch_max``];
+    1 on delta."""
+    cdef double v
+    cdef int ch
+    f[2] = 1.0
+    for ch in range(2):
+        v = sc[ch] / (sqrt(dot3(j + 3 * ch, j + 3 * ch)) * sc[2])
+        if v > stretch_max:  # also inf
+            v = stretch_max
+        if not (v >= 1.0):  # also NaN, and stretch_max 1
+            v = 1.0
+        f[ch] = v
 
 
 cdef check_cards(const i64[::1] card, Py_ssize_t triangles, int segments):
@@ -180,32 +201,33 @@ cdef check_cards(const i64[::1] card, Py_ssize_t triangles, int segments):
 
 
 cdef inline double miss2(const double* frames, int m, i64 card, const double* pred, const i64* r,
-                         const double* inv_sc, const double* target) noexcept nogil:
-    """The squared world distance from ``pred + r`` (scaled card coordinates) to ``target``."""
+                         const double* f, const double* inv_sc, const double* target) noexcept nogil:
+    """The squared world distance from ``pred + r * f`` (scaled card coordinates; ``f`` the residual's
+    step per channel) to ``target``."""
     cdef double p[3]
     cdef double x[3]
     cdef int ch
     for ch in range(3):
-        p[ch] = pred[ch] + r[ch]
+        p[ch] = pred[ch] + r[ch] * f[ch]
     to_world(frames, m, card, p, inv_sc, x)
     for ch in range(3):
         x[ch] = x[ch] - target[ch]
     return dot3(x, x)
 
 
-cdef inline bint fits(const double* frames, int m, i64 card, const double* pred, const i64* r,
+cdef inline bint fits(const double* frames, int m, i64 card, const double* pred, const i64* r, const double* f,
                       const double* inv_sc, const double* target, double dist2) noexcept nogil:
-    """Whether ``pred + r`` (scaled card coordinates) maps within ``sqrt(dist2)`` of ``target``."""
-    return miss2(frames, m, card, pred, r, inv_sc, target) <= dist2
+    """Whether ``pred + r * f`` (scaled card coordinates) maps within ``sqrt(dist2)`` of ``target``."""
+    return miss2(frames, m, card, pred, r, f, inv_sc, target) <= dist2
 
 
-cdef inline void nearest(const double* frames, int m, i64 card, const double* pred, const double* inv_sc,
-                         const double* point, double dist2, i64* r) noexcept nogil:
-    """Where the rounded residual ``r`` maps farther than ``sqrt(dist2)`` from ``point``: the one of
-    its 26 neighbours that maps nearest instead, if nearer (the writer's dead zone, spec 4.3)."""
+cdef inline void nearest(const double* frames, int m, i64 card, const double* pred, const double* f,
+                         const double* inv_sc, const double* point, double dist2, i64* r) noexcept nogil:
+    """Where the rounded residual ``r`` (steps ``f``) maps farther than ``sqrt(dist2)`` from ``point``: the
+    one of its 26 neighbours that maps nearest instead, if nearer (the writer's dead zone, spec 4.3)."""
     cdef i64 c[3]
     cdef i64 best[3]
-    cdef double d, best_d = miss2(frames, m, card, pred, r, inv_sc, point)
+    cdef double d, best_d = miss2(frames, m, card, pred, r, f, inv_sc, point)
     cdef int ch, du, dv, dd
     if best_d <= dist2:
         return
@@ -217,7 +239,7 @@ cdef inline void nearest(const double* frames, int m, i64 card, const double* pr
                 c[0] = r[0] + du
                 c[1] = r[1] + dv
                 c[2] = r[2] + dd
-                d = miss2(frames, m, card, pred, c, inv_sc, point)
+                d = miss2(frames, m, card, pred, c, f, inv_sc, point)
                 if d < best_d:
                     best_d = d
                     for ch in range(3):
@@ -246,6 +268,7 @@ def invert_points(const double[:, ::1] frames, int segments, const i64[::1] card
     cdef Py_ssize_t i, n = card.shape[0]
     cdef int ch
     cdef double c[3]
+    cdef double j[9]
     if (frames.shape[1] != 18 or uvd.shape[0] != n or goal.shape[0] != n or uvd.shape[1] != 3
             or goal.shape[1] != 3 or miss_out.shape[0] != n):
         raise ValueError("invert_points: mismatched shapes")
@@ -254,7 +277,7 @@ def invert_points(const double[:, ::1] frames, int segments, const i64[::1] card
         for i in range(n):
             for ch in range(3):
                 c[ch] = uvd[i, ch]
-            miss_out[i] = sqrt(newton_solve(&frames[0, 0], segments, card[i], &goal[i, 0], steps, 0, c))
+            miss_out[i] = sqrt(newton_solve(&frames[0, 0], segments, card[i], &goal[i, 0], steps, 0, c, 0.0, j))
             for ch in range(3):
                 uvd[i, ch] = c[ch]
 
@@ -264,7 +287,7 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                 const i64[::1] base, const i64[::1] base_order, const i64[::1] level_start,
                 const i64[::1] level_taps, const i64[::1] idx,
                 const i64[:, ::1] nb, const double[:, ::1] wt, int newton_steps, int newton_halvings,
-                double[:, :, ::1] rec, double[:, :, ::1] world, i64[:, :, ::1] res,
+                double stretch_max, double[:, :, ::1] rec, double[:, :, ::1] world, i64[:, :, ::1] res,
                 const double[:, :, ::1] y=None, const double[:, :, ::1] dz_points=None, double dz_dist=-1.0,
                 bint neighbour_zone=False, float[:, :, ::1] uvd=None):
     """The recurrence of spec 4.3 for the strands ``strands_to_code`` (indices into ``[S]``; best
@@ -276,7 +299,8 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
 
     Levels: ``level_start [L + 1]`` delimits rows of ``idx [R]`` (the new indices), ``nb [R, W]`` and
     ``wt [R, W]`` (their interpolation neighbours and weights, summed left to right over the first
-    ``level_taps[l]`` columns of level ``l``; the rest are padding). Decoding (``y`` None) reads the
+    ``level_taps[l]`` columns of level ``l``; the rest are padding). A refinement residual's steps on
+    u and v stretch with the card's local scale up to ``stretch_max`` times (:func:`residual_steps`). Decoding (``y`` None) reads the
     residuals ``res [S, len(base) + R, 3]`` (base samples, then the levels' rows); encoding writes
     them from ``y`` (``[S, n, 3]``), leaving a refinement residual at zero where the prediction alone maps within
     ``dz_dist`` of ``dz_points`` (``dz_dist < 0``: no dead zone). With ``neighbour_zone`` a sample
@@ -292,6 +316,9 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
     cdef double pred[3]
     cdef double goal[3]
     cdef double inv_sc[3]
+    cdef double unit[3]
+    cdef double f[3]
+    cdef double jac[9]
     cdef double w, ratio, dist2 = dz_dist * dz_dist
     cdef const double* fr
     cdef const double* sc
@@ -307,6 +334,9 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
     zero[0] = 0
     zero[1] = 0
     zero[2] = 0
+    unit[0] = 1.0
+    unit[1] = 1.0
+    unit[2] = 1.0
     if strands == 0:
         return 0
     check_cards(strand_card, frames.shape[0], segments)
@@ -323,6 +353,8 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
     for t in range(strands):
         if strands_to_code[t] < 0 or strands_to_code[t] >= shape[0]:
             raise ValueError("run_strands: a strand index is out of range")
+    if not stretch_max >= 1.0:
+        raise ValueError("run_strands: stretch_max must be at least 1")
     for li in range(levels):
         if level_taps[li] < 0 or level_taps[li] > nb.shape[1]:
             raise ValueError("run_strands: a level's interpolation width exceeds its neighbour columns")
@@ -360,8 +392,8 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                     if encode:
                         BR[3 * j + ch] = <i64> rint(Y[3 * c + ch] - pred[ch])
                 if dead_zone:
-                    nearest(fr, segments, card, pred, inv_sc, Z + 3 * c, dist2, BR + 3 * j)
-                if NB != NULL and fits(fr, segments, card, pred, NB + 3 * j, inv_sc, Z + 3 * c, dist2):
+                    nearest(fr, segments, card, pred, unit, inv_sc, Z + 3 * c, dist2, BR + 3 * j)
+                if NB != NULL and fits(fr, segments, card, pred, NB + 3 * j, unit, inv_sc, Z + 3 * c, dist2):
                     for ch in range(3):  # the neighbour's residual will do: its difference is zero
                         BR[3 * j + ch] = NB[3 * j + ch]
                 for ch in range(3):
@@ -379,22 +411,23 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                         for ch in range(3):
                             pred[ch] = pred[ch] + R[j + ch] * w
                             goal[ch] = goal[ch] + W[j + ch] * w
-                    newton(fr, segments, card, sc, inv_sc, goal, newton_steps, newton_halvings, pred)
+                    newton(fr, segments, card, sc, inv_sc, goal, newton_steps, newton_halvings, pred, jac)
+                    residual_steps(jac, sc, stretch_max, f)
                     if encode:
                         for ch in range(3):
-                            LR[3 * row + ch] = <i64> rint(Y[3 * i + ch] - pred[ch])
+                            LR[3 * row + ch] = <i64> rint((Y[3 * i + ch] - pred[ch]) / f[ch])
                         if dead_zone:
-                            nearest(fr, segments, card, pred, inv_sc, Z + 3 * i, dist2, LR + 3 * row)
-                        if NB != NULL and fits(fr, segments, card, pred, NB + 3 * (nbase + row), inv_sc,
+                            nearest(fr, segments, card, pred, f, inv_sc, Z + 3 * i, dist2, LR + 3 * row)
+                        if NB != NULL and fits(fr, segments, card, pred, NB + 3 * (nbase + row), f, inv_sc,
                                                Z + 3 * i, dist2):
                             for ch in range(3):  # the neighbour's residual will do: its difference is zero
                                 LR[3 * row + ch] = NB[3 * (nbase + row) + ch]
-                        elif dead_zone and fits(fr, segments, card, pred, zero, inv_sc, Z + 3 * i, dist2):
+                        elif dead_zone and fits(fr, segments, card, pred, zero, f, inv_sc, Z + 3 * i, dist2):
                             LR[3 * row] = 0
                             LR[3 * row + 1] = 0
                             LR[3 * row + 2] = 0
                     for ch in range(3):
-                        R[3 * i + ch] = pred[ch] + LR[3 * row + ch]
+                        R[3 * i + ch] = pred[ch] + LR[3 * row + ch] * f[ch]
                     if encode or li + 1 < levels:  # a decoder predicts nothing from the last level
                         to_world(fr, segments, card, R + 3 * i, inv_sc, W + 3 * i)
             if scratch:

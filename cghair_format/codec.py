@@ -38,6 +38,7 @@ from .residual_coder import read_residuals, write_residuals
 from .strand_coder import (
     NEWTON_HALVINGS,
     NEWTON_STEPS,
+    STRETCH_MAX,
     DeadZone,
     Prediction,
     base_residuals,
@@ -198,7 +199,7 @@ def _meta(asset: HairAsset, prof: Profile, step: float | None, diag: float) -> d
         "quant": {"lossless": True} if step is None else {
             "lossless": False, "step": step, "card_step": step * CARD_STEP_FRACTION,
             "normal_bits": _normal_bits(asset, prof), "base_stride": prof.base_stride,
-            "newton_halvings": NEWTON_HALVINGS,
+            "newton_halvings": NEWTON_HALVINGS, "stretch_max": STRETCH_MAX,
             # the writer's choices (_Choices) replace these three in _quantize_geometry
             "base_order": None, "newton_steps": None, "level_taps": None,
             "opacity_scale": prof.opacity_scale, "logit_levels": prof.logit_levels, "logit_floor": prof.logit_floor,
@@ -257,10 +258,11 @@ def _parse_meta(raw: bytes) -> dict:
     quant = meta.get("quant")
     if not isinstance(quant, dict):
         raise InvalidContentError("META quant must be an object", chunk="META")
-    if ("logit_step" in quant and "logit_levels" not in quant) or (quant.get("lossless") is False
-                                                                    and "newton_halvings" not in quant):
-        raise InvalidContentError("written by a pre-release draft of .cgh 1.0 (before the rANS strand coder, or "
-                                  "before searched Newton steps), which this reader cannot decode: write "
+    if ("logit_step" in quant and "logit_levels" not in quant) or (
+            quant.get("lossless") is False and ("newton_halvings" not in quant or "stretch_max" not in quant)):
+        raise InvalidContentError("written by a pre-release draft of .cgh 1.0 (before the rANS strand coder, "
+                                  "searched Newton steps or stretched residual steps), which this reader cannot "
+                                  "decode: write "
                                   "the asset again from its source (cgh encode, or cgh train --resume CHECKPOINT)",
                                   chunk="META")
     if not need("lossless", bool, src=quant):
@@ -272,6 +274,7 @@ def _parse_meta(raw: bytes) -> dict:
         need("base_stride", int, 1, 256, src=quant)
         need("newton_steps", int, 0, 8, src=quant)
         need("newton_halvings", int, 0, 8, src=quant)
+        need("stretch_max", (int, float), 1, 16, src=quant)
         orders = quant.get("base_order")
         if (not isinstance(orders, list) or len(orders) != 3
                 or not all(isinstance(k, int) and not isinstance(k, bool) and k in (1, 2) for k in orders)):
@@ -334,7 +337,8 @@ def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag
     zone = DeadZone(points, DEAD_ZONE * prof.position_tolerance * diag)
     if choices is None:
         base_order = _choose_base_order(asset.strand_card, y, q["base_stride"])
-        plan = Prediction(q["base_stride"], base_order, NEWTON_STEPS, newton_halvings=q["newton_halvings"])
+        plan = Prediction(q["base_stride"], base_order, NEWTON_STEPS, newton_halvings=q["newton_halvings"],
+                          stretch_max=q["stretch_max"])
         plan = replace(plan, newton_steps=_choose_newton_steps(cmap, asset.strand_card, y, scale, plan))
         neighbour_zone = _choose_neighbour_zone(cmap, asset.strand_card, y, scale, plan, zone)
         zone = zone._replace(neighbour=neighbour_zone)
@@ -482,7 +486,7 @@ def _estimate(residuals: np.ndarray) -> float:
 
 def _prediction(q: dict) -> Prediction:
     return Prediction(q["base_stride"], tuple(q["base_order"]), q["newton_steps"], tuple(q["level_taps"]),
-                      q["newton_halvings"])
+                      q["newton_halvings"], float(q["stretch_max"]))
 
 
 def _choose_base_order(strand_card: np.ndarray, y: np.ndarray, base_stride: int) -> tuple[int, int, int]:

@@ -4,7 +4,8 @@ Card coordinates ``(u, v, delta)`` of a smooth strand are not smooth: the strip 
 they kink wherever the strand crosses a triangle edge. World positions are smooth. Each refinement
 sample is therefore predicted in world space (Lagrange interpolation of the decoded neighbours'
 world positions), carried back to card coordinates by Newton steps on the card mapping started from
-the card-space interpolation, and only the residual in card coordinates is stored.
+the card-space interpolation, and only the residual in card coordinates is stored, its step on u and
+v stretched where the card is locally shorter or narrower than its card-wide scale.
 
 Strands of one card run side by side, so their residuals are alike too: with neighbour prediction
 (spec 4.3) a strand's residuals are stored as differences from those of the strand before it on
@@ -33,6 +34,12 @@ NEWTON_STEPS = 4
 # triangle can land where another bends away): 4 keeps harolongo's finest levels from residuals of
 # thousands of steps, 0.4 % of samples, and takes 2.9 % off its paper-scale file; 8 saves 0.1 % more.
 NEWTON_HALVINGS = 4
+# A refinement residual's step on u and v follows the card's local scale, up to this many times the
+# card-wide one (spec 4.3): the card-wide scale is the longest rail segment and the widest point, so
+# elsewhere a step moves a point less than the tolerance allows. 1.5 takes 2.0 % off harolongo's
+# paper-scale file (straight.hair: +0.1 %); 2 or more leaves a few points beyond the bound, and the
+# writer's smaller step then costs more than the stretch saves.
+STRETCH_MAX = 1.5
 
 
 class DeadZone(NamedTuple):
@@ -50,14 +57,16 @@ class DeadZone(NamedTuple):
 class Prediction:
     """How strand points are predicted (META quant): the base stride, the base samples' predictor
     order per channel u, v, delta (1: the previous base sample, 2: linear extrapolation), the Newton
-    steps per refinement sample, the interpolation neighbours of each level (None: 4 each) and how
-    many times a Newton step that lands farther from its goal is halved before the search stops."""
+    steps per refinement sample, the interpolation neighbours of each level (None: 4 each), how
+    many times a Newton step that lands farther from its goal is halved before the search stops, and
+    how far a refinement residual's step may stretch with the card's local scale (1: not at all)."""
 
     base_stride: int
     base_order: tuple[int, int, int]
     newton_steps: int
     level_taps: tuple[int, ...] | None = None
     newton_halvings: int = NEWTON_HALVINGS
+    stretch_max: float = STRETCH_MAX
 
 
 def base_residuals(y: np.ndarray, base: np.ndarray, orders: tuple[int, int, int]) -> np.ndarray:
@@ -99,8 +108,8 @@ def _run_strands(cmap: CardMap, strand_card: np.ndarray, scale: np.ndarray, resi
             given["rec"], given["world"] = np.empty((1, n, 3)), np.empty((1, n, 3))
         rec, world = given.pop("rec"), given.pop("world")
         return _native.run_strands(by_card[b], cmap.frames, cmap.segments, card, scale, base, orders, level_start,
-                                   taps, idx, nb, wt, plan.newton_steps, plan.newton_halvings, rec, world, residuals,
-                                   **given)
+                                   taps, idx, nb, wt, plan.newton_steps, plan.newton_halvings, plan.stretch_max,
+                                   rec, world, residuals, **given)
 
     return sum(map_blocks(block, len(card)))
 

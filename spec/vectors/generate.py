@@ -68,15 +68,16 @@ def main() -> None:
     assert json.loads(container.unpack(data, {"META"} | set(cgh.codec.REQUIRED_CHUNKS) | set(
         cgh.codec.OPTIONAL_CHUNKS))[2]["META"])["quant"]["newton_steps"] > 0
     _expected("synth_cards_compact", data)
-    # curly hair on the same few cards, where the decoder halves some Newton steps (spec 4.3): decoding it
-    # with fewer halvings gives other points (the assertion below keeps it so)
+    # curly hair on the same few cards, where the decoder halves some Newton steps and stretches residual
+    # steps (spec 4.3): decoding it with fewer halvings, or unstretched, gives other points (the
+    # assertion below keeps it so)
     curly = build_cards(synthesize("curly", 48, 24, seed=2), n_cards=6, n_groups=2, segments=8, points=24,
                         seed=0, progress=False, sh_degree=1).asset
     data = cgh.encode(curly, "compact")[0]
     points = cgh.decode_points(cgh.decode(data))
-    for fewer in (0, 3):
-        other = _rechunk(data, lambda c, h=fewer: _meta_edit(c, lambda m: m["quant"].update(newton_halvings=h)))
-        assert not np.allclose(cgh.decode_points(cgh.decode(other)), points, rtol=0, atol=1e-3)
+    for change in ({"newton_halvings": 0}, {"newton_halvings": 3}, {"stretch_max": 1}):
+        other = _rechunk(data, lambda c, ch=change: _meta_edit(c, lambda m: m["quant"].update(ch)))
+        assert not np.allclose(cgh.decode_points(cgh.decode(other)), points, rtol=0, atol=1e-3), change
     _expected("synth_curly_compact", data)
 
     reject = {}
