@@ -501,18 +501,24 @@ cdef inline int token_bits(int tok) noexcept nogil:
 
 def decode_residuals(const uint8_t[::1] flat_slot, const uint32_t[::1] flat_freq, const uint32_t[::1] flat_start,
                      const uint32_t[::1] states, const uint16_t[::1] words, const uint8_t[::1] extra,
-                     const i64[::1] column_array, const uint8_t[::1] first, int lanes, uint8_t[:, :, ::1] sym,
-                     i64[:, :, ::1] out):
+                     const i64[::1] column_array, const uint8_t[::1] first, int lanes,
+                     const uint8_t[::1] after_neighbour, int classes, uint8_t[:, :, ::1] sym, i64[:, :, ::1] out):
     """Decode the STRD token stream and extra bits into residuals ``out [S, N, 3]`` (``sym``: scratch
-    of the same shape). Returns 0, or the first fault found: a key of ``FAULTS``."""
+    of the same shape). ``classes`` > 1: a strand marked in ``after_neighbour [S]`` takes the bit class
+    of the previous lane's token (its card neighbour's, just decoded) as context too. Returns 0, or the
+    first fault found: a key of ``FAULTS``."""
     cdef Py_ssize_t strands = out.shape[0], n = out.shape[1], nwords = words.shape[0]
     cdef Py_ssize_t b, col, lane, s, act, pos = 0, blocks = (strands + lanes - 1) // lanes
-    cdef int ch, tok, p, o, nb, t
+    cdef int ch, tok, p, o, nb, t, c
     cdef uint32_t x, slot, f
     cdef uint64_t z, total_bits = 0, bitpos = 0, i
     cdef uint32_t* xs = <uint32_t*> calloc(lanes, sizeof(uint32_t))
     cdef int* prev = <int*> calloc(3 * lanes, sizeof(int))
     cdef int fault = 0
+    if after_neighbour.shape[0] != strands or classes < 1:
+        free(xs)
+        free(prev)
+        raise ValueError("decode_residuals: mismatched neighbour marks or classes")
     if xs == NULL or prev == NULL:
         free(xs)
         free(prev)
@@ -535,7 +541,10 @@ def decode_residuals(const uint8_t[::1] flat_slot, const uint32_t[::1] flat_freq
                             o = prev[lane]
                         if ch == 2 and prev[lanes + lane] > o:
                             o = prev[lanes + lane]
-                        t = ((column_array[col] * 3 + ch) * CONTEXTS + min(p, 7) * 4 + min(o, 3))
+                        c = 0
+                        if classes > 1 and after_neighbour[s]:  # lane - 1's token of this step, decoded
+                            c = min(prev[ch * lanes + lane - 1], classes - 1)
+                        t = ((column_array[col] * 3 + ch) * CONTEXTS + min(p, 7) * 4 + min(o, 3)) * classes + c
                         x = xs[lane]
                         slot = x & ((1 << PROB_BITS) - 1)
                         tok = flat_slot[t * (1 << PROB_BITS) + slot]

@@ -34,7 +34,7 @@ from .quantize import (
     softmax_levels_encode,
     zigzag,
 )
-from .residual_coder import read_residuals, write_residuals
+from .residual_coder import MAX_NEIGHBOUR_CLASSES, NEIGHBOUR_CLASSES, read_residuals, write_residuals
 from .strand_coder import (
     NEWTON_HALVINGS,
     NEWTON_STEPS,
@@ -259,10 +259,11 @@ def _parse_meta(raw: bytes) -> dict:
     if not isinstance(quant, dict):
         raise InvalidContentError("META quant must be an object", chunk="META")
     if ("logit_step" in quant and "logit_levels" not in quant) or (
-            quant.get("lossless") is False and ("newton_halvings" not in quant or "stretch_max" not in quant)):
+            quant.get("lossless") is False and any(key not in quant for key in ("newton_halvings", "stretch_max",
+                                                                             "neighbour_classes"))):
         raise InvalidContentError("written by a pre-release draft of .cgh 1.0 (before the rANS strand coder, "
-                                  "searched Newton steps or stretched residual steps), which this reader cannot "
-                                  "decode: write "
+                                  "searched Newton steps, stretched residual steps or neighbour token "
+                                  "contexts), which this reader cannot decode: write "
                                   "the asset again from its source (cgh encode, or cgh train --resume CHECKPOINT)",
                                   chunk="META")
     if not need("lossless", bool, src=quant):
@@ -275,6 +276,7 @@ def _parse_meta(raw: bytes) -> dict:
         need("newton_steps", int, 0, 8, src=quant)
         need("newton_halvings", int, 0, 8, src=quant)
         need("stretch_max", (int, float), 1, 16, src=quant)
+        need("neighbour_classes", int, 1, MAX_NEIGHBOUR_CLASSES, src=quant)
         orders = quant.get("base_order")
         if (not isinstance(orders, list) or len(orders) != 3
                 or not all(isinstance(k, int) and not isinstance(k, bool) and k in (1, 2) for k in orders)):
@@ -404,7 +406,8 @@ def _geometry_chunks(asset: HairAsset, geometry: _Geometry) -> list[container.Ch
         strd_w.array(asset.uvd.astype(np.float32), shuffle=True)
     else:
         stored, meta["quant"]["neighbour"] = _with_neighbour_prediction(asset.strand_card, residuals)
-        write_residuals(strd_w, stored)
+        meta["quant"]["neighbour_classes"] = write_residuals(strd_w, stored, asset.strand_card,
+                                                             (NEIGHBOUR_CLASSES, 1))
     groups = asset.cards.group.astype(np.uint16 if asset.appearance.n_groups <= 65536 else np.uint32)
     cards_w.array(groups, shuffle=True)
     return [container.Chunk("META", json.dumps(meta, separators=(",", ":")).encode("utf-8")),
@@ -673,7 +676,7 @@ def _decode_chunks(meta: dict, payloads: dict[str, bytes]) -> HairAsset:
         cards = _decode_cards(rd["CARD"], c, m + 1, q)
         su, sv = card_scales(cards, step)
         columns = level_widths(p, stride)
-        residuals = read_residuals(rd["STRD"], s, columns)
+        residuals = read_residuals(rd["STRD"], strand_card, columns, q["neighbour_classes"])
         _undo_neighbour_prediction(strand_card, residuals, columns, q["neighbour"])
         scale = _uvd_scale(su, sv, strand_card, step)
         uvd = decode_uvd(CardMap(cards), strand_card, residuals, p, scale, _prediction(q))

@@ -41,6 +41,11 @@ def _meta_edit(chunks, change):
     return chunks
 
 
+def _quant(data: bytes) -> dict:
+    payloads = container.unpack(data, set(cgh.codec.REQUIRED_CHUNKS) | set(cgh.codec.OPTIONAL_CHUNKS))[2]
+    return json.loads(payloads["META"])["quant"]
+
+
 def main() -> None:
     minimal = example_asset(1, strands=3, points=2, cards=1, segments=1, groups=1, k=1, latent_dim=1, hidden=1,
                             sh_degree=0, weight_mode="hard")
@@ -65,9 +70,24 @@ def main() -> None:
     built = build_cards(synthesize("straight", 48, 24, seed=1), n_cards=6, n_groups=2, segments=8, points=24,
                         seed=0, progress=False, sh_degree=1).asset
     data = cgh.encode(built, "compact")[0]
-    assert json.loads(container.unpack(data, {"META"} | set(cgh.codec.REQUIRED_CHUNKS) | set(
-        cgh.codec.OPTIONAL_CHUNKS))[2]["META"])["quant"]["newton_steps"] > 0
+    assert _quant(data)["newton_steps"] > 0
     _expected("synth_cards_compact", data)
+    # the same with the card neighbour's tokens as context (spec 4.3.2, neighbour_classes 3), which the
+    # writer takes only where it codes smaller, as at the paper's scale: forced here
+    real = cgh.codec.write_residuals
+    cgh.codec.write_residuals = lambda w, arrays, card=None, classes=(1,): real(w, arrays, card, classes
+                                                                               if card is None else (3,))
+    try:
+        data = cgh.encode(built, "compact")[0]
+    finally:
+        cgh.codec.write_residuals = real
+    assert _quant(data)["neighbour_classes"] == 3
+    try:  # read without that context, the token stream is refused or decodes to other points
+        other = _rechunk(data, lambda c: _meta_edit(c, lambda m: m["quant"].update(neighbour_classes=1)))
+        assert not np.array_equal(cgh.decode_points(cgh.decode(other)), cgh.decode_points(cgh.decode(data)))
+    except cgh.CghFormatError:
+        pass
+    _expected("synth_cards_neighbour_classes", data)
     # curly hair on the same few cards, where the decoder halves some Newton steps and stretches residual
     # steps (spec 4.3): decoding it with fewer halvings, or unstretched, gives other points (the
     # assertion below keeps it so)

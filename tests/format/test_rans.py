@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+import zstandard
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -40,45 +41,68 @@ def test_token_layout_matches_the_spec():
     assert rans.TOKEN_BITS[[0, 1, 2, 3, 8, 15, 16, 75]].tolist() == [0, 1, 2, 2, 4, 4, 5, 64]
 
 
-def _round_trip(arrays):
+def _round_trip(arrays, strand_card=None, classes=(1,)):
+    strand_card = np.zeros(len(arrays[0]), np.int64) if strand_card is None else strand_card
     w = StreamWriter()
-    residual_coder.write_residuals(w, arrays)
+    chosen = residual_coder.write_residuals(w, arrays, strand_card, classes)
     r = StreamReader(w.getvalue(), "STRD")
     widths = [a.shape[1] for a in arrays]
-    out = residual_coder.read_residuals(r, arrays[0].shape[0], widths)
+    out = residual_coder.read_residuals(r, strand_card, widths, chosen)
     r.finish()
-    return np.split(out, np.cumsum(widths)[:-1], axis=1), w.getvalue()
+    return np.split(out, np.cumsum(widths)[:-1], axis=1), w.getvalue(), chosen
 
 
 @settings(max_examples=40, deadline=None)
 @given(strands=st.integers(1, 40), widths=st.lists(st.integers(1, 9), min_size=1, max_size=4),
        lanes=st.sampled_from([1, 3, 4096]), spread=st.sampled_from([1, 40, 2**20, 2**40]),
-       seed=st.integers(0, 10**6))
-def test_residual_coder_round_trips(strands, widths, lanes, spread, seed):
+       cards=st.integers(1, 6), classes=st.sampled_from([1, 3, 8]), seed=st.integers(0, 10**6))
+def test_residual_coder_round_trips(strands, widths, lanes, spread, cards, classes, seed):
     rng = np.random.default_rng(seed)
     arrays = [np.rint(rng.laplace(0, 1, (strands, n, 3)) * rng.integers(1, spread + 1)).astype(np.int64)
               for n in widths]
+    strand_card = np.sort(rng.integers(0, cards, strands))
     original = residual_coder.LANES
     residual_coder.LANES = lanes  # several blocks and a partial last block
     try:
-        out, _ = _round_trip(arrays)
+        out, _, chosen = _round_trip(arrays, strand_card, (classes,))
     finally:
         residual_coder.LANES = original
+    assert chosen == classes
     for a, b in zip(arrays, out, strict=True):
         assert np.array_equal(a, b)
+
+
+def test_the_card_neighbours_tokens_give_context_where_they_pay():
+    """Spec 4.3.2: with neighbour classes, a token's table also depends on the bit class of the token one
+    lane before, where that strand is on the same card. Where a card's strands have residuals alike in
+    size sample by sample (which the strand's own previous sample does not tell) they code smaller so;
+    where nothing links neighbours the larger tables cost more than they save, and the writer keeps one
+    class."""
+    rng = np.random.default_rng(3)
+    strand_card = np.repeat(np.arange(200), 40)
+    size = rng.choice([0, 6], (200, 12, 3))[strand_card]  # per card, sample and channel: zero or not
+    alike = [np.rint(rng.laplace(0, 1, (8000, 12, 3)) * size).astype(np.int64)]
+    sizes = {}
+    for classes in ((1,), (3,), (3, 1)):
+        out, data, chosen = _round_trip(alike, strand_card, classes)
+        assert np.array_equal(out[0], alike[0])
+        sizes[classes] = len(zstandard.compress(data, 19)), chosen  # as in a file: the tables are zstd-packed
+    assert sizes[(3,)][0] < 0.95 * sizes[(1,)][0] and sizes[(3, 1)] == sizes[(3,)]
+    unrelated = [np.rint(rng.laplace(0, 1, (300, 12, 3)) * 3).astype(np.int64)]
+    assert _round_trip(unrelated, np.zeros(300, np.int64), (3, 1))[2] == 1
 
 
 def test_residuals_beyond_float64_integers_are_refused():
     w = StreamWriter()
     residual_coder.write_residuals(w, [np.array([[[0, -2**52 - 1, 0]]], np.int64)])  # z = 2^53 + 1
     with pytest.raises(InvalidContentError, match="float64"):
-        residual_coder.read_residuals(StreamReader(w.getvalue(), "STRD"), 1, [1])
+        residual_coder.read_residuals(StreamReader(w.getvalue(), "STRD"), np.zeros(1), [1], 1)
 
 
 def test_skewed_residuals_cost_less_than_a_bit_each():
     rng = np.random.default_rng(0)
     arrays = [(rng.random((3000, 30, 3)) < 0.05).astype(np.int64) * rng.choice([-1, 1], (3000, 30, 3))]
-    _, data = _round_trip(arrays)
+    _, data, _ = _round_trip(arrays)
     r = StreamReader(data, "STRD")
     r.array((96, rans.ALPHABET), "tables")
     r.array((None,), "states")
@@ -132,7 +156,8 @@ def test_damaged_streams_are_refused(damage, error):
     else:
         tables[np.flatnonzero(tables.sum(axis=1))[0], 0] += 1
     with pytest.raises(error) as info:
-        residual_coder.read_residuals(StreamReader(_rebuild(tables, states, words, extra), "STRD"), 50, [4, 7])
+        residual_coder.read_residuals(StreamReader(_rebuild(tables, states, words, extra), "STRD"), np.zeros(50),
+                                      [4, 7], 1)
     assert isinstance(info.value, CghFormatError) and "STRD" in str(info.value)
 
 
@@ -147,7 +172,7 @@ def test_a_stream_claiming_more_symbols_than_it_can_hold_is_refused_at_once():
             <= rans.MAX_FREQ).all()
     start = time.perf_counter()
     with pytest.raises(InvalidContentError, match="cannot fit"):
-        residual_coder.read_residuals(StreamReader(w.getvalue(), "STRD"), 8 * 4096, [4000])
+        residual_coder.read_residuals(StreamReader(w.getvalue(), "STRD"), np.zeros(8 * 4096), [4000], 1)
     assert time.perf_counter() - start < 1
 
 
