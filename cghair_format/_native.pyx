@@ -287,15 +287,21 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                 const i64[::1] base, const i64[::1] base_order, const i64[::1] level_start,
                 const i64[::1] level_taps, const i64[::1] idx,
                 const i64[:, ::1] nb, const double[:, ::1] wt, int newton_steps, int newton_halvings,
-                double stretch_max, double[:, :, ::1] rec, double[:, :, ::1] world, i64[:, :, ::1] res,
+                double stretch_max, bint base_guide, double[:, :, ::1] rec, double[:, :, ::1] world,
+                i64[:, :, ::1] res,
                 const double[:, :, ::1] y=None, const double[:, :, ::1] dz_points=None, double dz_dist=-1.0,
                 bint neighbour_zone=False, float[:, :, ::1] uvd=None):
     """The recurrence of spec 4.3 for the strands ``strands_to_code`` (indices into ``[S]``; best
     grouped by card, whose triangles then stay in cache) of ``n`` points, into ``rec`` (scaled card
     coordinates ``[S, n, 3]``) and ``world`` (their world points). Decoding into ``uvd`` (float32
-    ``[S, n, 3]``, given): ``rec`` and ``world`` are one strand's scratch (``[1, n, 3]``), and each
-    strand's card coordinates ``rec / scale`` go to ``uvd``; returns how many of them float32 cannot
-    hold (inf or NaN there: a corrupt file). Otherwise returns 0.
+    ``[S, n, 3]``, given): ``rec`` and ``world`` are two strands' scratch (``[2, n, 3]``: a strand's and
+    its neighbour's), and each strand's card coordinates ``rec / scale`` go to ``uvd``; returns how
+    many of them float32 cannot hold (inf or NaN there: a corrupt file). Otherwise returns 0.
+
+    With ``base_guide`` a strand whose card neighbour came before it in ``strands_to_code`` predicts
+    its base samples from the neighbour's: its root from the neighbour's root, each later one by
+    the neighbour's step in world space, carried onto the card by the searched Newton steps (spec
+    4.3). ``strands_to_code`` must then list every card's strands in file order, whole.
 
     Levels: ``level_start [L + 1]`` delimits rows of ``idx [R]`` (the new indices), ``nb [R, W]`` and
     ``wt [R, W]`` (their interpolation neighbours and weights, summed left to right over the first
@@ -324,6 +330,8 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
     cdef const double* sc
     cdef double* R
     cdef double* W
+    cdef double* RN
+    cdef double* WN
     cdef const double* Y = NULL
     cdef const double* Z = NULL
     cdef i64* BR
@@ -341,7 +349,7 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
         return 0
     check_cards(strand_card, frames.shape[0], segments)
     shape = (strand_card.shape[0], rec.shape[1], 3)
-    own = (1,) + shape[1:] if scratch else shape  # the shape of rec and world
+    own = (2,) + shape[1:] if scratch else shape  # the shape of rec and world
     if (frames.shape[1] != 18 or tuple(scale.shape)[:2] != shape[::2] or tuple(rec.shape)[:3] != own
             or tuple(world.shape)[:3] != own or tuple(res.shape)[:3] != (shape[0], nbase + idx.shape[0], 3)
             or (scratch and (encode or tuple(uvd.shape)[:3] != shape))
@@ -366,8 +374,12 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
             sc = &scale[s, 0]
             for ch in range(3):
                 inv_sc[ch] = 1.0 / sc[ch]
-            R = &rec[0 if scratch else s, 0, 0]
-            W = &world[0 if scratch else s, 0, 0]
+            R = &rec[(t & 1) if scratch else s, 0, 0]
+            W = &world[(t & 1) if scratch else s, 0, 0]
+            RN = NULL  # with base_guide, the neighbour's reconstruction (spec 4.3)
+            if base_guide and t > 0 and strand_card[strands_to_code[t - 1]] == card:
+                RN = &rec[((t - 1) & 1) if scratch else strands_to_code[t - 1], 0, 0]
+                WN = &world[((t - 1) & 1) if scratch else strands_to_code[t - 1], 0, 0]
             BR = &res[s, 0, 0]
             LR = BR + 3 * nbase
             NB = NULL  # encoding: the residuals of this strand's neighbour (spec 4.3), when coded already
@@ -379,8 +391,17 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                         NB = &res[strands_to_code[t - 1], 0, 0]
             for j in range(nbase):
                 c = base[j]
+                if RN != NULL and j > 0:  # the neighbour's step, in world space, onto the card
+                    b = base[j - 1]
+                    for ch in range(3):
+                        pred[ch] = R[3 * b + ch] + (RN[3 * c + ch] - RN[3 * b + ch])
+                        goal[ch] = W[3 * b + ch] + (WN[3 * c + ch] - WN[3 * b + ch])
+                    newton(fr, segments, card, sc, inv_sc, goal, newton_steps, newton_halvings, pred, jac)
                 for ch in range(3):
-                    if j == 0:
+                    if RN != NULL:
+                        if j == 0:
+                            pred[ch] = RN[3 * c + ch]
+                    elif j == 0:
                         pred[ch] = 0.0
                     elif j == 1 or base_order[ch] == 1:
                         pred[ch] = R[3 * base[j - 1] + ch]

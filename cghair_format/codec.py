@@ -200,8 +200,8 @@ def _meta(asset: HairAsset, prof: Profile, step: float | None, diag: float) -> d
             "lossless": False, "step": step, "card_step": step * CARD_STEP_FRACTION,
             "normal_bits": _normal_bits(asset, prof), "base_stride": prof.base_stride,
             "newton_halvings": NEWTON_HALVINGS, "stretch_max": STRETCH_MAX,
-            # the writer's choices (_Choices) replace these three in _quantize_geometry
-            "base_order": None, "newton_steps": None, "level_taps": None,
+            # the writer's choices (_Choices) replace these four in _quantize_geometry
+            "base_order": None, "base_guide": None, "newton_steps": None, "level_taps": None,
             "opacity_scale": prof.opacity_scale, "logit_levels": prof.logit_levels, "logit_floor": prof.logit_floor,
             "half_bias": prof.half_bias},
     }
@@ -260,10 +260,10 @@ def _parse_meta(raw: bytes) -> dict:
         raise InvalidContentError("META quant must be an object", chunk="META")
     if ("logit_step" in quant and "logit_levels" not in quant) or (
             quant.get("lossless") is False and any(key not in quant for key in ("newton_halvings", "stretch_max",
-                                                                             "neighbour_classes"))):
+                                                                             "neighbour_classes", "base_guide"))):
         raise InvalidContentError("written by a pre-release draft of .cgh 1.0 (before the rANS strand coder, "
-                                  "searched Newton steps, stretched residual steps or neighbour token "
-                                  "contexts), which this reader cannot decode: write "
+                                  "searched Newton steps, stretched residual steps, neighbour token contexts "
+                                  "or guided base samples), which this reader cannot decode: write "
                                   "the asset again from its source (cgh encode, or cgh train --resume CHECKPOINT)",
                                   chunk="META")
     if not need("lossless", bool, src=quant):
@@ -277,6 +277,7 @@ def _parse_meta(raw: bytes) -> dict:
         need("newton_halvings", int, 0, 8, src=quant)
         need("stretch_max", (int, float), 1, 16, src=quant)
         need("neighbour_classes", int, 1, MAX_NEIGHBOUR_CLASSES, src=quant)
+        need("base_guide", bool, src=quant)
         orders = quant.get("base_order")
         if (not isinstance(orders, list) or len(orders) != 3
                 or not all(isinstance(k, int) and not isinstance(k, bool) and k in (1, 2) for k in orders)):
@@ -307,6 +308,7 @@ class _Choices(NamedTuple):
     newton_steps: int
     neighbour_zone: bool
     level_taps: tuple[int, ...]
+    base_guide: bool
 
 
 class _Geometry(NamedTuple):
@@ -344,10 +346,11 @@ def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag
         plan = replace(plan, newton_steps=_choose_newton_steps(cmap, asset.strand_card, y, scale, plan))
         neighbour_zone = _choose_neighbour_zone(cmap, asset.strand_card, y, scale, plan, zone)
         zone = zone._replace(neighbour=neighbour_zone)
-        choices = _Choices(base_order, plan.newton_steps, neighbour_zone,
-                           _choose_level_taps(cmap, asset.strand_card, y, scale, plan, zone))
+        plan = replace(plan, level_taps=_choose_level_taps(cmap, asset.strand_card, y, scale, plan, zone))
+        choices = _Choices(base_order, plan.newton_steps, neighbour_zone, plan.level_taps,
+                           _choose_base_guide(cmap, asset.strand_card, y, scale, plan, zone))
     q["base_order"], q["newton_steps"] = list(choices.base_order), choices.newton_steps
-    q["level_taps"] = list(choices.level_taps)
+    q["level_taps"], q["base_guide"] = list(choices.level_taps), choices.base_guide
     base, levels, decoded_points = encode_uvd(cmap, asset.strand_card, y, scale, _prediction(q),
                                               dead_zone=zone._replace(neighbour=choices.neighbour_zone))
     return _Geometry(meta, cards_w, [base] + levels, decoded_points, choices)
@@ -489,7 +492,7 @@ def _estimate(residuals: np.ndarray) -> float:
 
 def _prediction(q: dict) -> Prediction:
     return Prediction(q["base_stride"], tuple(q["base_order"]), q["newton_steps"], tuple(q["level_taps"]),
-                      q["newton_halvings"], float(q["stretch_max"]))
+                      q["newton_halvings"], float(q["stretch_max"]), q["base_guide"])
 
 
 def _choose_base_order(strand_card: np.ndarray, y: np.ndarray, base_stride: int) -> tuple[int, int, int]:
@@ -554,6 +557,16 @@ def _choose_level_taps(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, sc
         return chosen
     mixed = _sample_residuals(cmap, strand_card, y, scale, replace(plan, level_taps=chosen), zone)
     return chosen if _coded_bytes(mixed) < _coded_bytes(trial[4]) else (4,) * levels
+
+
+def _choose_base_guide(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray,
+                       plan: Prediction, zone: DeadZone) -> bool:
+    """Whether base samples are predicted from the card neighbour's steps in world space (spec 4.3):
+    whichever codes the strands of a sample of cards smaller."""
+    sizes = {guide: _coded_bytes(_sample_residuals(cmap, strand_card, y, scale, replace(plan, base_guide=guide),
+                                                   zone))
+             for guide in (True, False)}
+    return min(sizes, key=sizes.get)
 
 
 def _sample_residuals(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray, plan: Prediction,

@@ -24,7 +24,7 @@ from . import _native
 from .asset import Cards
 from .errors import InvalidContentError
 from .geometry import CardMap, card_scales
-from .parallel import map_blocks
+from .parallel import BLOCK_ROWS, map_threads
 from .quantize import base_prediction, level_plan
 
 # At most this many Newton steps per refinement sample; most samples stop after one, within a
@@ -59,7 +59,8 @@ class Prediction:
     order per channel u, v, delta (1: the previous base sample, 2: linear extrapolation), the Newton
     steps per refinement sample, the interpolation neighbours of each level (None: 4 each), how
     many times a Newton step that lands farther from its goal is halved before the search stops, and
-    how far a refinement residual's step may stretch with the card's local scale (1: not at all)."""
+    how far a refinement residual's step may stretch with the card's local scale (1: not at all), and
+    whether a strand's base samples are predicted from its card neighbour's world steps."""
 
     base_stride: int
     base_order: tuple[int, int, int]
@@ -67,6 +68,7 @@ class Prediction:
     level_taps: tuple[int, ...] | None = None
     newton_halvings: int = NEWTON_HALVINGS
     stretch_max: float = STRETCH_MAX
+    base_guide: bool = False
 
 
 def base_residuals(y: np.ndarray, base: np.ndarray, orders: tuple[int, int, int]) -> np.ndarray:
@@ -86,10 +88,11 @@ def base_residuals(y: np.ndarray, base: np.ndarray, orders: tuple[int, int, int]
 
 def _run_strands(cmap: CardMap, strand_card: np.ndarray, scale: np.ndarray, residuals: np.ndarray, n: int,
                  plan: Prediction, **arrays) -> int:
-    """The compiled recurrence :func:`._native.run_strands` over blocks of strands in parallel, card by
-    card, each strand after its neighbour (which the dead zone may copy; a card's triangles stay in
-    cache while its strands are coded). ``arrays``: encoding, ``rec``, ``world``, ``y`` and the dead
-    zone's arguments; decoding, ``uvd`` (each block then gets its own one-strand scratch)."""
+    """The compiled recurrence :func:`._native.run_strands` over blocks of whole cards in parallel, card
+    by card, each strand after its neighbour (which the base samples' guide reads and the dead zone may
+    copy; a card's triangles stay in cache while its strands are coded). ``arrays``: encoding, ``rec``,
+    ``world``, ``y`` and the dead zone's arguments; decoding, ``uvd`` (each block then gets its own
+    two-strand scratch)."""
     base, levels = level_plan(n, plan.base_stride, plan.level_taps)
     level_start = np.cumsum([0] + [len(idx) for idx, _, _ in levels], dtype=np.int64)
     idx = np.concatenate([np.zeros(0, np.int64)] + [lv[0] for lv in levels]).astype(np.int64)
@@ -97,21 +100,32 @@ def _run_strands(cmap: CardMap, strand_card: np.ndarray, scale: np.ndarray, resi
     nb = np.concatenate([np.zeros((0, width), np.int64)] + [lv[1] for lv in levels]).astype(np.int64)
     wt = np.concatenate([np.zeros((0, width))] + [lv[2] for lv in levels])
     card = np.ascontiguousarray(strand_card, np.int64)
-    by_card, _ = neighbour_order(card)
+    by_card, starts = neighbour_order(card)
     scale = np.ascontiguousarray(scale, np.float64)
     base, orders = base.astype(np.int64), np.asarray(plan.base_order, np.int64)
     taps = np.asarray(plan.level_taps or (4,) * len(levels), np.int64)  # the columns of nb, wt each level uses
 
     def block(b: slice) -> int:
         given = dict(arrays)
-        if "uvd" in given:  # decoding: one strand's scratch per block
-            given["rec"], given["world"] = np.empty((1, n, 3)), np.empty((1, n, 3))
+        if "uvd" in given:  # decoding: the scratch of a strand and its neighbour per block
+            given["rec"], given["world"] = np.empty((2, n, 3)), np.empty((2, n, 3))
         rec, world = given.pop("rec"), given.pop("world")
         return _native.run_strands(by_card[b], cmap.frames, cmap.segments, card, scale, base, orders, level_start,
                                    taps, idx, nb, wt, plan.newton_steps, plan.newton_halvings, plan.stretch_max,
-                                   rec, world, residuals, **given)
+                                   plan.base_guide, rec, world, residuals, **given)
 
-    return sum(map_blocks(block, len(card)))
+    return sum(map_threads(block, card_blocks(starts)))
+
+
+def card_blocks(starts: np.ndarray, rows: int = BLOCK_ROWS) -> list[slice]:
+    """Slices of about ``rows`` strands of the card-ordered strands (``starts``: where each card's
+    begin), each starting where a card does, so no card is split between blocks."""
+    first = np.flatnonzero(starts)
+    if len(first) == 0:
+        return []
+    at = np.minimum(np.searchsorted(first, np.arange(0, len(starts), rows)), len(first) - 1)
+    bounds = np.r_[np.unique(first[at]), len(starts)]
+    return [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
 
 
 def encode_uvd(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray, plan: Prediction,

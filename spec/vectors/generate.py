@@ -46,6 +46,17 @@ def _quant(data: bytes) -> dict:
     return json.loads(payloads["META"])["quant"]
 
 
+def _differs(data: bytes, change: dict) -> None:
+    """Assert that ``data`` with its META quant changed so is refused or decodes to points more than
+    1e-3 away: a decoder that ignores the field fails the vector."""
+    other = _rechunk(data, lambda c: _meta_edit(c, lambda m: m["quant"].update(change)))
+    try:
+        points = cgh.decode_points(cgh.decode(other))
+    except cgh.CghFormatError:
+        return
+    assert not np.allclose(points, cgh.decode_points(cgh.decode(data)), rtol=0, atol=1e-3), change
+
+
 def main() -> None:
     minimal = example_asset(1, strands=3, points=2, cards=1, segments=1, groups=1, k=1, latent_dim=1, hidden=1,
                             sh_degree=0, weight_mode="hard")
@@ -54,7 +65,17 @@ def main() -> None:
     _expected("minimal_compact", cgh.encode(minimal, "compact")[0])
     compact = cgh.encode(small, "compact")[0]
     _expected("small_compact", compact)
-    _expected("small_high_hard", cgh.encode(example_asset(2, sh_degree=3, weight_mode="hard"), "high")[0])
+    # base samples unguided (spec 4.3), which the writer takes only where that codes smaller: forced here,
+    # and decoding the file as guided gives other points (the assertion below keeps it so)
+    choose = cgh.codec._choose_base_guide
+    cgh.codec._choose_base_guide = lambda *_: False
+    try:
+        data = cgh.encode(example_asset(2, sh_degree=3, weight_mode="hard"), "high")[0]
+    finally:
+        cgh.codec._choose_base_guide = choose
+    assert _quant(data)["base_guide"] is False
+    _differs(data, {"base_guide": True})
+    _expected("small_high_hard", data)
     extras = example_asset(3, strands=6, points=4)
     extras.strand_ids = np.arange(6, dtype=np.uint32) * 7
     extras.source_color = np.linspace(0, 1, 6 * 4 * 3, dtype=np.float32).reshape(6, 4, 3)
@@ -82,22 +103,16 @@ def main() -> None:
     finally:
         cgh.codec.write_residuals = real
     assert _quant(data)["neighbour_classes"] == 3
-    try:  # read without that context, the token stream is refused or decodes to other points
-        other = _rechunk(data, lambda c: _meta_edit(c, lambda m: m["quant"].update(neighbour_classes=1)))
-        assert not np.array_equal(cgh.decode_points(cgh.decode(other)), cgh.decode_points(cgh.decode(data)))
-    except cgh.CghFormatError:
-        pass
+    _differs(data, {"neighbour_classes": 1})
     _expected("synth_cards_neighbour_classes", data)
-    # curly hair on the same few cards, where the decoder halves some Newton steps and stretches residual
-    # steps (spec 4.3): decoding it with fewer halvings, or unstretched, gives other points (the
-    # assertion below keeps it so)
+    # curly hair on the same few cards, where the decoder halves some Newton steps, stretches residual
+    # steps and guides base samples by their neighbours' (spec 4.3): decoding it with fewer halvings,
+    # unstretched or unguided gives other points (the assertion below keeps it so)
     curly = build_cards(synthesize("curly", 48, 24, seed=2), n_cards=6, n_groups=2, segments=8, points=24,
                         seed=0, progress=False, sh_degree=1).asset
     data = cgh.encode(curly, "compact")[0]
-    points = cgh.decode_points(cgh.decode(data))
-    for change in ({"newton_halvings": 0}, {"newton_halvings": 3}, {"stretch_max": 1}):
-        other = _rechunk(data, lambda c, ch=change: _meta_edit(c, lambda m: m["quant"].update(ch)))
-        assert not np.allclose(cgh.decode_points(cgh.decode(other)), points, rtol=0, atol=1e-3), change
+    for change in ({"newton_halvings": 0}, {"newton_halvings": 3}, {"stretch_max": 1}, {"base_guide": False}):
+        _differs(data, change)
     _expected("synth_curly_compact", data)
 
     reject = {}
