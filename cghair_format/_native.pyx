@@ -306,7 +306,8 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
     Levels: ``level_start [L + 1]`` delimits rows of ``idx [R]`` (the new indices), ``nb [R, W]`` and
     ``wt [R, W]`` (their interpolation neighbours and weights, summed left to right over the first
     ``level_taps[l]`` columns of level ``l``; the rest are padding). A refinement residual's steps on
-    u and v stretch with the card's local scale up to ``stretch_max`` times (:func:`residual_steps`). Decoding (``y`` None) reads the
+    u and v stretch with the card's local scale up to ``stretch_max`` times (:func:`residual_steps`), and
+    so do a guided base sample's. Decoding (``y`` None) reads the
     residuals ``res [S, len(base) + R, 3]`` (base samples, then the levels' rows); encoding writes
     them from ``y`` (``[S, n, 3]``), leaving a refinement residual at zero where the prediction alone maps within
     ``dz_dist`` of ``dz_points`` (``dz_dist < 0``: no dead zone). With ``neighbour_zone`` a sample
@@ -325,6 +326,7 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
     cdef double unit[3]
     cdef double f[3]
     cdef double jac[9]
+    cdef double bf[3]
     cdef double w, ratio, dist2 = dz_dist * dz_dist
     cdef const double* fr
     cdef const double* sc
@@ -391,12 +393,16 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                         NB = &res[strands_to_code[t - 1], 0, 0]
             for j in range(nbase):
                 c = base[j]
+                bf[0] = 1.0
+                bf[1] = 1.0
+                bf[2] = 1.0
                 if RN != NULL and j > 0:  # the neighbour's step, in world space, onto the card
                     b = base[j - 1]
                     for ch in range(3):
                         pred[ch] = R[3 * b + ch] + (RN[3 * c + ch] - RN[3 * b + ch])
                         goal[ch] = W[3 * b + ch] + (WN[3 * c + ch] - WN[3 * b + ch])
                     newton(fr, segments, card, sc, inv_sc, goal, newton_steps, newton_halvings, pred, jac)
+                    residual_steps(jac, sc, stretch_max, bf)
                 for ch in range(3):
                     if RN != NULL:
                         if j == 0:
@@ -411,14 +417,14 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                         ratio = <double> (c - b) / <double> (b - a)
                         pred[ch] = R[3 * b + ch] + (R[3 * b + ch] - R[3 * a + ch]) * ratio
                     if encode:
-                        BR[3 * j + ch] = <i64> rint(Y[3 * c + ch] - pred[ch])
+                        BR[3 * j + ch] = <i64> rint((Y[3 * c + ch] - pred[ch]) / bf[ch])
                 if dead_zone:
-                    nearest(fr, segments, card, pred, unit, inv_sc, Z + 3 * c, dist2, BR + 3 * j)
-                if NB != NULL and fits(fr, segments, card, pred, NB + 3 * j, unit, inv_sc, Z + 3 * c, dist2):
+                    nearest(fr, segments, card, pred, bf, inv_sc, Z + 3 * c, dist2, BR + 3 * j)
+                if NB != NULL and fits(fr, segments, card, pred, NB + 3 * j, bf, inv_sc, Z + 3 * c, dist2):
                     for ch in range(3):  # the neighbour's residual will do: its difference is zero
                         BR[3 * j + ch] = NB[3 * j + ch]
                 for ch in range(3):
-                    R[3 * c + ch] = pred[ch] + BR[3 * j + ch]
+                    R[3 * c + ch] = pred[ch] + BR[3 * j + ch] * bf[ch]
                 to_world(fr, segments, card, R + 3 * c, inv_sc, W + 3 * c)
             for li in range(levels):
                 for row in range(level_start[li], level_start[li + 1]):

@@ -46,6 +46,24 @@ def _quant(data: bytes) -> dict:
     return json.loads(payloads["META"])["quant"]
 
 
+def _encode(asset, profile: str, guide: bool, classes: int | None = None) -> bytes:
+    """``cgh.encode`` with the writer's choice of ``base_guide`` (spec 4.3) and, if given, of
+    ``neighbour_classes`` (4.3.2) forced: the small vectors then cover each way a decoder must go,
+    whichever the writer would pick for them."""
+    codec = cgh.codec
+    choose, write = codec._choose_base_guide, codec.write_residuals
+    codec._choose_base_guide = lambda *_: guide
+    if classes is not None:  # the file's STRD only, not the writer's trial codings (no strand_card)
+        codec.write_residuals = lambda w, arrays, card=None, tried=(1,): write(w, arrays, card,
+                                                                                tried if card is None else (classes,))
+    try:
+        data = cgh.encode(asset, profile)[0]
+    finally:
+        codec._choose_base_guide, codec.write_residuals = choose, write
+    assert _quant(data)["base_guide"] is guide and (classes is None or _quant(data)["neighbour_classes"] == classes)
+    return data
+
+
 def _differs(data: bytes, change: dict) -> None:
     """Assert that ``data`` with its META quant changed so is refused or decodes to points more than
     1e-3 away: a decoder that ignores the field fails the vector."""
@@ -65,15 +83,8 @@ def main() -> None:
     _expected("minimal_compact", cgh.encode(minimal, "compact")[0])
     compact = cgh.encode(small, "compact")[0]
     _expected("small_compact", compact)
-    # base samples unguided (spec 4.3), which the writer takes only where that codes smaller: forced here,
-    # and decoding the file as guided gives other points (the assertion below keeps it so)
-    choose = cgh.codec._choose_base_guide
-    cgh.codec._choose_base_guide = lambda *_: False
-    try:
-        data = cgh.encode(example_asset(2, sh_degree=3, weight_mode="hard"), "high")[0]
-    finally:
-        cgh.codec._choose_base_guide = choose
-    assert _quant(data)["base_guide"] is False
+    # base samples unguided (spec 4.3): decoding the file as guided gives other points
+    data = _encode(example_asset(2, sh_degree=3, weight_mode="hard"), "high", guide=False)
     _differs(data, {"base_guide": True})
     _expected("small_high_hard", data)
     extras = example_asset(3, strands=6, points=4)
@@ -84,34 +95,27 @@ def main() -> None:
                                           lambda c: c + [container.Chunk("ZEXT", b"future data", required=False)]))
     _expected("newer_minor", container.rewrite_header(compact, minor=9))
     # real-looking hair: grown strands on built cards, for which the writer picks the world-guided
-    # (Newton) prediction of spec section 4.3 (the assertion below keeps it so)
+    # (Newton) prediction of spec section 4.3 (the assertion below keeps it so), with guided base samples
     from cghair_format.cards import build_cards
     from cghair_format.synth import synthesize
 
     built = build_cards(synthesize("straight", 48, 24, seed=1), n_cards=6, n_groups=2, segments=8, points=24,
                         seed=0, progress=False, sh_degree=1).asset
-    data = cgh.encode(built, "compact")[0]
+    data = _encode(built, "compact", guide=True)
     assert _quant(data)["newton_steps"] > 0
+    _differs(data, {"base_guide": False})
     _expected("synth_cards_compact", data)
-    # the same with the card neighbour's tokens as context (spec 4.3.2, neighbour_classes 3), which the
-    # writer takes only where it codes smaller, as at the paper's scale: forced here
-    real = cgh.codec.write_residuals
-    cgh.codec.write_residuals = lambda w, arrays, card=None, classes=(1,): real(w, arrays, card, classes
-                                                                               if card is None else (3,))
-    try:
-        data = cgh.encode(built, "compact")[0]
-    finally:
-        cgh.codec.write_residuals = real
-    assert _quant(data)["neighbour_classes"] == 3
+    # the same with the card neighbour's tokens as context (spec 4.3.2, neighbour_classes 3)
+    data = _encode(built, "compact", guide=True, classes=3)
     _differs(data, {"neighbour_classes": 1})
     _expected("synth_cards_neighbour_classes", data)
-    # curly hair on the same few cards, where the decoder halves some Newton steps, stretches residual
-    # steps and guides base samples by their neighbours' (spec 4.3): decoding it with fewer halvings,
-    # unstretched or unguided gives other points (the assertion below keeps it so)
+    # curly hair on the same few cards, where the decoder halves some Newton steps and stretches residual
+    # steps (spec 4.3): decoding it with fewer halvings or unstretched gives other points (the assertion
+    # below keeps it so)
     curly = build_cards(synthesize("curly", 48, 24, seed=2), n_cards=6, n_groups=2, segments=8, points=24,
                         seed=0, progress=False, sh_degree=1).asset
-    data = cgh.encode(curly, "compact")[0]
-    for change in ({"newton_halvings": 0}, {"newton_halvings": 3}, {"stretch_max": 1}, {"base_guide": False}):
+    data = _encode(curly, "compact", guide=True)
+    for change in ({"newton_halvings": 0}, {"newton_halvings": 3}, {"stretch_max": 1}):
         _differs(data, change)
     _expected("synth_curly_compact", data)
 
