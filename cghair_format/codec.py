@@ -34,7 +34,13 @@ from .quantize import (
     softmax_levels_encode,
     zigzag,
 )
-from .residual_coder import MAX_NEIGHBOUR_CLASSES, NEIGHBOUR_CLASSES, read_residuals, write_residuals
+from .residual_coder import (
+    MAX_NEIGHBOUR_CLASSES,
+    NEIGHBOUR_CLASSES,
+    coded_bytes,
+    read_residuals,
+    write_residuals,
+)
 from .strand_coder import (
     NEWTON_HALVINGS,
     NEWTON_STEPS,
@@ -556,14 +562,14 @@ def _choose_level_taps(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, sc
     if chosen == (4,) * levels:
         return chosen
     mixed = _sample_residuals(cmap, strand_card, y, scale, replace(plan, level_taps=chosen), zone)
-    return chosen if _coded_bytes(mixed) < _coded_bytes(trial[4]) else (4,) * levels
+    return chosen if coded_bytes(mixed) < coded_bytes(trial[4]) else (4,) * levels
 
 
 def _choose_base_guide(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray,
                        plan: Prediction, zone: DeadZone) -> bool:
     """Whether base samples are predicted from the card neighbour's steps in world space (spec 4.3):
     whichever codes the strands of a sample of cards smaller."""
-    sizes = {guide: _coded_bytes(_sample_residuals(cmap, strand_card, y, scale, replace(plan, base_guide=guide),
+    sizes = {guide: coded_bytes(_sample_residuals(cmap, strand_card, y, scale, replace(plan, base_guide=guide),
                                                    zone))
              for guide in (True, False)}
     return min(sizes, key=sizes.get)
@@ -581,16 +587,6 @@ def _sample_residuals(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, sca
     base, levels, _ = encode_uvd(cmap, strand_card[pick], y[pick], scale[pick], plan,
                                  dead_zone=zone._replace(points=zone.points[pick]))
     return _with_neighbour_prediction(strand_card[pick], [base] + levels)[0]
-
-
-def _coded_bytes(stored: list[np.ndarray]) -> int:
-    """About the bytes a file spends on these residual arrays: coded, then packed as a chunk (zstd shrinks
-    the frequency tables, a large share of a small file's STRD). Level 9 comes within 0.2 % of the
-    file's level 19 in 2 ms instead of 90 (harolongo's 200-card sample); level 3 misranks
-    small_compact.cgh's widths."""
-    w = StreamWriter()
-    write_residuals(w, stored)
-    return len(container.pack([container.Chunk("STRD", w.getvalue())], level=9))
 
 
 def _optional_chunks(asset: HairAsset) -> list[container.Chunk]:

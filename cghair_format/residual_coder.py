@@ -11,6 +11,8 @@ per lane; within a block, column by column, channel u, v, delta.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 import zstandard
 
@@ -62,15 +64,23 @@ def _to_steps(a: np.ndarray, lanes: int, blocks: int) -> np.ndarray:
     return pad.reshape(blocks, lanes, n, 3).transpose(0, 2, 3, 1)
 
 
-def write_residuals(w: StreamWriter, arrays: list[np.ndarray], strand_card: np.ndarray | None = None,
-                    classes: tuple[int, ...] = (1,)) -> int:
-    """Append the coded residual arrays to ``w``: tables, lane states, words, extra bits. Of the
-    neighbour class counts ``classes`` (more than 1: the card neighbour's tokens give context, with
-    ``strand_card`` in file order) the one whose tokens and zstd-packed tables cost the fewest bytes
-    is used, and returned."""
+class _Coding(NamedTuple):
+    """The residual arrays as the coder sees them, with the neighbour class count it chose."""
+
+    sym: np.ndarray  # [S, N, 3] tokens
+    extra: np.ndarray  # [S, N, 3] their extra bits
+    table: np.ndarray  # [S, N, 3] each token's table
+    freq: np.ndarray  # [T, ALPHABET] the tables
+    classes: int
+    cost: float  # bytes: tokens, zstd-packed tables and extra bits
+
+
+def _coding(arrays: list[np.ndarray], strand_card: np.ndarray | None, classes: tuple[int, ...]) -> _Coding:
+    """Tokens, contexts and tables of the residual arrays, with the neighbour class count of
+    ``classes`` that costs the fewest bytes."""
     s = arrays[0].shape[0]
     widths = [a.shape[1] for a in arrays]
-    column_array, first, lanes, active = _plan(widths, s)
+    column_array, first, lanes, _ = _plan(widths, s)
     sym, extra = rans.tokens(zigzag(np.concatenate(arrays, axis=1)))
     bits = rans.TOKEN_BITS[sym]
     prev = np.zeros_like(bits)
@@ -83,28 +93,48 @@ def write_residuals(w: StreamWriter, arrays: list[np.ndarray], strand_card: np.n
     if max(classes) > 1:
         after = after_neighbour(strand_card, lanes)
         neighbour[after] = bits[np.flatnonzero(after) - 1]
-    trials = {}
+    extra_bytes = float(rans.token_widths(sym).sum(dtype=np.int64)) / 8
+    best = None
     for c in classes:
         table = _table(column_array[None, :, None].astype(np.int32), np.arange(3, dtype=np.int32)[None, None, :],
                        prev, other, neighbour, c)
         n_tables = len(widths) * 3 * CONTEXTS * c
         counts = np.bincount((table * rans.ALPHABET + sym).ravel(), minlength=n_tables * rans.ALPHABET)  # int32
         freq = rans.normalize(counts.reshape(n_tables, rans.ALPHABET))
-        trials[c] = table, freq, _cost(counts, freq)
-    chosen = min(trials, key=lambda c: trials[c][2])
-    table, freq, _ = trials[chosen]
-    tables = rans.Tables(freq, "STRD")
+        trial = _Coding(sym, extra, table, freq, c, _cost(counts, freq) + extra_bytes)
+        if best is None or trial.cost < best.cost:
+            best = trial
+    return best
+
+
+def coded_bytes(arrays: list[np.ndarray]) -> float:
+    """About the bytes :func:`write_residuals` spends on these arrays, with one neighbour class, without
+    coding them: the tokens at their tables' code lengths (rANS comes within a few bytes), the tables
+    zstd-packed and the extra bits. The writer's yardstick for its per-file choices."""
+    return _coding(arrays, None, (1,)).cost
+
+
+def write_residuals(w: StreamWriter, arrays: list[np.ndarray], strand_card: np.ndarray | None = None,
+                    classes: tuple[int, ...] = (1,)) -> int:
+    """Append the coded residual arrays to ``w``: tables, lane states, words, extra bits. Of the
+    neighbour class counts ``classes`` (more than 1: the card neighbour's tokens give context, with
+    ``strand_card`` in file order) the one whose tokens and zstd-packed tables cost the fewest bytes
+    is used, and returned."""
+    coding = _coding(arrays, strand_card, classes)
+    widths = [a.shape[1] for a in arrays]
+    _, _, lanes, active = _plan(widths, arrays[0].shape[0])
+    tables = rans.Tables(coding.freq, "STRD")
     blocks = len(active)
-    step_sym = _to_steps(sym, lanes, blocks).reshape(-1, lanes)
-    step_table = _to_steps(table, lanes, blocks).reshape(-1, lanes)
+    step_sym = _to_steps(coding.sym, lanes, blocks).reshape(-1, lanes)
+    step_table = _to_steps(coding.table, lanes, blocks).reshape(-1, lanes)
     step_active = np.repeat(active, step_sym.shape[0] // blocks)
     states, words = rans.encode(step_sym, step_table, step_active, tables)
     w.array(tables.freq.astype(np.uint16), shuffle=True)
     w.array(states)
     w.array(words)
     # in step order; the padding lanes of the last block have width 0 and add no bits
-    w.array(rans.pack_bits(rans.token_widths(step_sym), _to_steps(extra, lanes, blocks)))
-    return chosen
+    w.array(rans.pack_bits(rans.token_widths(step_sym), _to_steps(coding.extra, lanes, blocks)))
+    return coding.classes
 
 
 def _cost(counts: np.ndarray, freq: np.ndarray) -> float:

@@ -242,7 +242,7 @@ def test_a_mix_of_widths_the_estimate_prefers_is_kept_only_where_it_codes_smalle
     from cghair_format.examples import example_asset
 
     coded, tried = [], []
-    real_bytes, real_sample = codec._coded_bytes, codec._sample_residuals
+    real_bytes, real_sample = codec.coded_bytes, codec._sample_residuals
 
     def bytes_spy(stored):
         coded.append(real_bytes(stored))
@@ -252,7 +252,7 @@ def test_a_mix_of_widths_the_estimate_prefers_is_kept_only_where_it_codes_smalle
         tried.append(plan.level_taps)
         return real_sample(cmap, strand_card, y, scale, plan, zone, *more)
 
-    monkeypatch.setattr(codec, "_coded_bytes", bytes_spy)
+    monkeypatch.setattr(codec, "coded_bytes", bytes_spy)
     monkeypatch.setattr(codec, "_sample_residuals", sample_spy)
     data, _ = cgh.encode(example_asset(seed), "compact")
     mixed, fours = coded[:2]  # the first step's choice, made once
