@@ -71,6 +71,7 @@ STEP_START = 1.0  # first step, as a fraction of the position tolerance
 TIGHTEN_TARGET = 0.97  # a retry aims the measured error at this fraction of the tolerance ...
 GROW_BELOW = 0.9  # ... and a first step whose error is below this fraction is retried larger, once
 DEAD_ZONE = 0.97  # a refinement residual stays zero where the prediction is this close to the input (x tol)
+BASE_SAMPLE_CARDS = 100  # the base stride and guide are chosen on this many cards
 
 
 @dataclass
@@ -149,7 +150,6 @@ def encode(asset: HairAsset, profile: str | Profile = "compact", keep_order: boo
     # measured, the largest point error is about 1.0 step (half a step on each of u, v, delta): start
     # where it usually meets the bound at once, then tighten or grow
     step = None if prof.lossless else STEP_START * tol
-    appearance_chunks = _appearance_chunks(asset, prof)
     passed = None  # (step, error, quantized geometry) of the largest step that met the bound so far
     choices = None
     for attempt in range(MAX_TIGHTENINGS):
@@ -170,8 +170,8 @@ def encode(asset: HairAsset, profile: str | Profile = "compact", keep_order: boo
     if passed is None:
         raise AssetError(f"could not meet the position tolerance {tol:g} (error {err:g})")
     step, err, geometry = passed
-    chunks = _geometry_chunks(asset, geometry)
-    data = container.pack(chunks + appearance_chunks, level=prof.zstd_level)
+    chunks = _geometry_chunks(asset, geometry) + _appearance_chunks(asset, prof, geometry.meta["quant"])
+    data = container.pack(chunks, level=prof.zstd_level)
     _, infos = container.read_table(data)
     return data, EncodeReport(prof.name, step, err, diag, {i.type: i.stored for i in infos}, order)
 
@@ -204,7 +204,7 @@ def _meta(asset: HairAsset, prof: Profile, step: float | None, diag: float) -> d
         "bbox_diagonal": diag, "profile": prof.name,
         "quant": {"lossless": True} if step is None else {
             "lossless": False, "step": step, "card_step": step * CARD_STEP_FRACTION,
-            "normal_bits": _normal_bits(asset, prof), "base_stride": prof.base_stride,
+            "normal_bits": _normal_bits(asset, prof), "base_stride": prof.base_strides[0],
             "newton_halvings": NEWTON_HALVINGS, "stretch_max": STRETCH_MAX,
             # the writer's choices (_Choices) replace these four in _quantize_geometry
             "base_order": None, "base_guide": None, "newton_steps": None, "level_taps": None,
@@ -310,6 +310,7 @@ class _Choices(NamedTuple):
     """The writer's per-file choices for the strand points, made on the first step it tries and kept
     for the others (they hardly depend on the step)."""
 
+    base_stride: int
     base_order: tuple[int, int, int]
     newton_steps: int
     neighbour_zone: bool
@@ -340,21 +341,27 @@ def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag
         for a in (asset.cards.spine, asset.cards.normal, asset.cards.half_width):
             cards_w.array(a.astype(np.float32), shuffle=True)
         return _Geometry(meta, cards_w, None, None, None)
-    cards_w, cards, cmap, uvd = _quantized_cards(asset, q, points, tol)
-    su, sv = card_scales(cards, q["step"])
-    scale = _uvd_scale(su, sv, asset.strand_card, q["step"])
-    y = uvd * scale[:, None, :]
+
+    def on_cards():  # the cards at this base stride (their coding takes it too), the points on them
+        cards_w, cards, cmap, uvd = _quantized_cards(asset, q, points, tol)
+        su, sv = card_scales(cards, q["step"])
+        scale = _uvd_scale(su, sv, asset.strand_card, q["step"])
+        return cards_w, cmap, scale, uvd * scale[:, None, :]
+
     zone = DeadZone(points, DEAD_ZONE * prof.position_tolerance * diag)
+    stride, guide = ((choices.base_stride, choices.base_guide) if choices is not None
+                     else _choose_base_samples(asset, q, zone, prof.base_strides))
+    q["base_stride"] = stride
+    cards_w, cmap, scale, y = on_cards()
     if choices is None:
-        base_order = _choose_base_order(asset.strand_card, y, q["base_stride"])
-        plan = Prediction(q["base_stride"], base_order, NEWTON_STEPS, newton_halvings=q["newton_halvings"],
-                          stretch_max=q["stretch_max"])
+        base_order = _choose_base_order(asset.strand_card, y, stride)
+        plan = Prediction(stride, base_order, NEWTON_STEPS, newton_halvings=q["newton_halvings"],
+                          stretch_max=q["stretch_max"], base_guide=guide)
         plan = replace(plan, newton_steps=_choose_newton_steps(cmap, asset.strand_card, y, scale, plan))
         neighbour_zone = _choose_neighbour_zone(cmap, asset.strand_card, y, scale, plan, zone)
         zone = zone._replace(neighbour=neighbour_zone)
-        plan = replace(plan, level_taps=_choose_level_taps(cmap, asset.strand_card, y, scale, plan, zone))
-        choices = _Choices(base_order, plan.newton_steps, neighbour_zone, plan.level_taps,
-                           _choose_base_guide(cmap, asset.strand_card, y, scale, plan, zone))
+        choices = _Choices(stride, base_order, plan.newton_steps, neighbour_zone,
+                           _choose_level_taps(cmap, asset.strand_card, y, scale, plan, zone), guide)
     q["base_order"], q["newton_steps"] = list(choices.base_order), choices.newton_steps
     q["level_taps"], q["base_guide"] = list(choices.level_taps), choices.base_guide
     base, levels, decoded_points = encode_uvd(cmap, asset.strand_card, y, scale, _prediction(q),
@@ -423,8 +430,9 @@ def _geometry_chunks(asset: HairAsset, geometry: _Geometry) -> list[container.Ch
             container.Chunk("CARD", cards_w.getvalue()), container.Chunk("STRD", strd_w.getvalue())]
 
 
-def _appearance_chunks(asset: HairAsset, prof: Profile) -> list[container.Chunk]:
-    """OPAC, LOGT, CBKS and MLPW, then the optional chunks: none depends on the point step."""
+def _appearance_chunks(asset: HairAsset, prof: Profile, quant: dict) -> list[container.Chunk]:
+    """OPAC, LOGT, CBKS and MLPW, then the optional chunks: none depends on the point step (the
+    opacities take the file's base stride, ``quant``)."""
     opac_w, logt_w, cbks_w, mlp_w = (StreamWriter() for _ in range(4))
     app = asset.appearance
     if prof.lossless:
@@ -435,7 +443,7 @@ def _appearance_chunks(asset: HairAsset, prof: Profile) -> list[container.Chunk]
             mlp_w.array(layer.weight.astype(np.float32), shuffle=True)
             mlp_w.array(layer.bias.astype(np.float32), shuffle=True)
     else:
-        _put_hier(opac_w, asset.opacity * prof.opacity_scale, prof.base_stride)
+        _put_hier(opac_w, asset.opacity * prof.opacity_scale, quant["base_stride"])
         if app.weight_mode == "hard":
             logt_w.ints(np.argmax(app.logits, axis=1))
         else:
@@ -501,6 +509,28 @@ def _prediction(q: dict) -> Prediction:
                       q["newton_halvings"], float(q["stretch_max"]), q["base_guide"])
 
 
+def _choose_base_samples(asset: HairAsset, q: dict, zone: DeadZone, strides: tuple[int, ...]) -> tuple[int, bool]:
+    """The base stride (spec 4.1, 4.3) of ``strides`` (the profile's: 16 or 8) and whether base samples
+    are guided by the card neighbour's: of guided base samples at each stride and unguided ones at the
+    first, whichever codes the strands of a sample of cards smallest (4-point interpolation, the dead
+    zone trying the neighbour's residual; on the input's cards, before they are quantized at the
+    stride chosen). Wavy strands want base samples closer together (harolongo at the paper's scale: 8,
+    1.8 % off the whole file), straighter ones fewer (straight.hair: 16; 8 would cost 2.3 %). Without
+    the neighbour's residual in the dead zone the sample misranks straight.hair's strides (by 0.2 %,
+    for a file 2.3 % larger); with it the margins are 2-3 % either way."""
+    cmap = CardMap(asset.cards)
+    scale = _uvd_scale(*card_scales(asset.cards, q["step"]), asset.strand_card, q["step"])
+    y = asset.uvd * scale[:, None, :]
+    orders = {stride: _choose_base_order(asset.strand_card, y, stride) for stride in strides}
+    sizes = {}
+    for stride, guide in [(stride, True) for stride in strides] + [(strides[0], False)]:
+        plan = Prediction(stride, orders[stride], NEWTON_STEPS, newton_halvings=q["newton_halvings"],
+                          stretch_max=q["stretch_max"], base_guide=guide)
+        sizes[stride, guide] = coded_bytes(_sample_residuals(cmap, asset.strand_card, y, scale, plan,
+                                                             zone._replace(neighbour=True), BASE_SAMPLE_CARDS))
+    return min(sizes, key=sizes.get)
+
+
 def _choose_base_order(strand_card: np.ndarray, y: np.ndarray, base_stride: int) -> tuple[int, int, int]:
     """Per channel (u, v, delta), the base samples' predictor, linear extrapolation (2) or the previous
     sample (1), whichever the coder's estimate finds smaller once neighbour prediction has had its
@@ -563,16 +593,6 @@ def _choose_level_taps(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, sc
         return chosen
     mixed = _sample_residuals(cmap, strand_card, y, scale, replace(plan, level_taps=chosen), zone)
     return chosen if coded_bytes(mixed) < coded_bytes(trial[4]) else (4,) * levels
-
-
-def _choose_base_guide(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray,
-                       plan: Prediction, zone: DeadZone) -> bool:
-    """Whether base samples are predicted from the card neighbour's steps in world space (spec 4.3):
-    whichever codes the strands of a sample of cards smaller."""
-    sizes = {guide: coded_bytes(_sample_residuals(cmap, strand_card, y, scale, replace(plan, base_guide=guide),
-                                                   zone))
-             for guide in (True, False)}
-    return min(sizes, key=sizes.get)
 
 
 def _sample_residuals(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray, plan: Prediction,

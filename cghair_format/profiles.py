@@ -20,7 +20,9 @@ class Profile:
     weight_bits: int = 5  # codebook and MLP weights: this many bits of symmetric levels per row (in int8)
     half_bias: bool = True  # MLP biases as float16 (else float32)
     normal_bits: int = 8  # card normals: octahedral bits per coordinate (8..24), about 2 / 2^(bits-1) rad
-    base_stride: int = 16  # hierarchical predictor: coarse samples every this many points
+    # hierarchical predictor: coarse samples every this many points, the one of these that codes the
+    # strand points of a sample of cards smaller (the first codes the cards while the writer chooses)
+    base_strides: tuple[int, ...] = (16, 8)
     zstd_level: int = 19
     description: str = ""
 

@@ -51,15 +51,15 @@ def _encode(asset, profile: str, guide: bool, classes: int | None = None) -> byt
     ``neighbour_classes`` (4.3.2) forced: the small vectors then cover each way a decoder must go,
     whichever the writer would pick for them."""
     codec = cgh.codec
-    choose, write = codec._choose_base_guide, codec.write_residuals
-    codec._choose_base_guide = lambda *_: guide
+    choose, write = codec._choose_base_samples, codec.write_residuals
+    codec._choose_base_samples = lambda *args: (choose(*args)[0], guide)
     if classes is not None:  # the file's STRD only, not the writer's trial codings (no strand_card)
         codec.write_residuals = lambda w, arrays, card=None, tried=(1,): write(w, arrays, card,
                                                                                 tried if card is None else (classes,))
     try:
         data = cgh.encode(asset, profile)[0]
     finally:
-        codec._choose_base_guide, codec.write_residuals = choose, write
+        codec._choose_base_samples, codec.write_residuals = choose, write
     assert _quant(data)["base_guide"] is guide and (classes is None or _quant(data)["neighbour_classes"] == classes)
     return data
 
