@@ -176,8 +176,9 @@ cdef inline void newton(const double* frames, int m, i64 card, const double* sc,
 
 
 cdef inline void residual_steps(const double* j, const double* sc, double stretch_max, double* f) noexcept nogil:
-    """The steps ``f`` of a refinement residual in scaled card coordinates (spec 4.3), from the Jacobian
-    columns ``j [9]`` at its prediction: on u and v, the card's scale over the local one
+    """The steps ``f`` in scaled card coordinates of a residual whose prediction a Newton search made (a
+    refinement sample's, a guided base sample's; spec 4.3), from the Jacobian columns ``j [9]`` at that
+    prediction: on u and v, the card's scale over the local one
     (``g / (|J| g_d)``: one step then moves the point by about ``q``), within [1, ``stretch_max``];
     1 on delta."""
     cdef double v
@@ -306,10 +307,10 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
     Levels: ``level_start [L + 1]`` delimits rows of ``idx [R]`` (the new indices), ``nb [R, W]`` and
     ``wt [R, W]`` (their interpolation neighbours and weights, summed left to right over the first
     ``level_taps[l]`` columns of level ``l``; the rest are padding). A refinement residual's steps on
-    u and v stretch with the card's local scale up to ``stretch_max`` times (:func:`residual_steps`), and
-    so do a guided base sample's. Decoding (``y`` None) reads the
-    residuals ``res [S, len(base) + R, 3]`` (base samples, then the levels' rows); encoding writes
-    them from ``y`` (``[S, n, 3]``), leaving a refinement residual at zero where the prediction alone maps within
+    u and v stretch with the card's local scale up to ``stretch_max`` times (:func:`residual_steps`),
+    and so do a guided base sample's. Decoding (``y`` None) reads the residuals
+    ``res [S, len(base) + R, 3]`` (base samples, then the levels' rows); encoding writes them from ``y``
+    (``[S, n, 3]``), leaving a refinement residual at zero where the prediction alone maps within
     ``dz_dist`` of ``dz_points`` (``dz_dist < 0``: no dead zone). With ``neighbour_zone`` a sample
     first takes the residual of its card neighbour (the strand coded before it, same card: its
     stored difference is then zero) where that too maps within ``dz_dist``: ``strands_to_code`` must

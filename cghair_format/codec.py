@@ -341,18 +341,13 @@ def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag
         for a in (asset.cards.spine, asset.cards.normal, asset.cards.half_width):
             cards_w.array(a.astype(np.float32), shuffle=True)
         return _Geometry(meta, cards_w, None, None, None)
-
-    def on_cards():  # the cards at this base stride (their coding takes it too), the points on them
-        cards_w, cards, cmap, uvd = _quantized_cards(asset, q, points, tol)
-        su, sv = card_scales(cards, q["step"])
-        scale = _uvd_scale(su, sv, asset.strand_card, q["step"])
-        return cards_w, cmap, scale, uvd * scale[:, None, :]
-
     zone = DeadZone(points, DEAD_ZONE * prof.position_tolerance * diag)
     stride, guide = ((choices.base_stride, choices.base_guide) if choices is not None
                      else _choose_base_samples(asset, q, zone, prof.base_strides))
-    q["base_stride"] = stride
-    cards_w, cmap, scale, y = on_cards()
+    q["base_stride"] = stride  # before the cards, whose coding takes it too
+    cards_w, cards, cmap, uvd = _quantized_cards(asset, q, points, tol)
+    scale = _uvd_scale(*card_scales(cards, q["step"]), asset.strand_card, q["step"])
+    y = uvd * scale[:, None, :]
     if choices is None:
         base_order = _choose_base_order(asset.strand_card, y, stride)
         plan = Prediction(stride, base_order, NEWTON_STEPS, newton_halvings=q["newton_halvings"],
