@@ -783,7 +783,7 @@ def read_info(source) -> dict:
         "weight_mode": meta["weight_mode"], "mlp": [layer["out"] for layer in meta["mlp"]],
         "thickness": meta["thickness"], "meters_per_unit": meta["meters_per_unit"], "up_axis": meta["up_axis"],
         "generator": meta["generator"], "attribution": meta["attribution"],
-        "bits_per_gaussian": 8 * len(data) / gaussians,
+        "bits_per_gaussian": 8 * len(data) / gaussians, "quant": meta["quant"],
         "chunks": [{"type": i.type, "required": i.required, "codec": ["raw", "zstd"][i.codec],
                     "stored_bytes": i.stored, "raw_bytes": i.raw} for i in infos],
     }

@@ -1,4 +1,5 @@
-"""``cgh info FILE [--json]``: counts, per-chunk sizes, bits per Gaussian and profile."""
+"""``cgh info FILE [--json]``: counts, per-chunk sizes, bits per Gaussian, profile and the strand coder's
+settings."""
 
 from __future__ import annotations
 
@@ -33,6 +34,7 @@ def format_info(name: str, info: dict) -> str:
         f"SH degree {info['sh_degree']}",
         f"  scene       thickness {info['thickness']:.3g}, {info['meters_per_unit']:g} m per unit, "
         f"up axis {info['up_axis']}",
+        f"  points      {_coding(info['quant'])}",
         f"  generator   {info['generator']}" + (f"; attribution: {info['attribution']}" if info["attribution"] else ""),
         "  chunk  required  codec      stored        raw   share",
     ]
@@ -40,3 +42,14 @@ def format_info(name: str, info: dict) -> str:
         lines.append(f"  {c['type']:<6} {'yes' if c['required'] else 'no':<9} {c['codec']:<5} {c['stored_bytes']:>11,} "
                      f"{c['raw_bytes']:>10,} {100 * c['stored_bytes'] / info['file_bytes']:6.1f}%")
     return "\n".join(lines)
+
+
+def _coding(quant: dict) -> str:
+    """The strand coder's settings (META quant, spec 4.3) in a line."""
+    if quant["lossless"]:
+        return "float32 card coordinates (lossless)"
+    return (f"step {quant['step']:.3g}, base samples every {quant['base_stride']} points"
+            f"{', guided by the card neighbour' if quant['base_guide'] else ''}, "
+            f"levels interpolating {'/'.join(map(str, quant['level_taps'])) or '-'} points, "
+            f"steps stretched up to {quant['stretch_max']:g}x, {quant['neighbour_classes']} neighbour token "
+            f"class{'es' if quant['neighbour_classes'] > 1 else ''}")

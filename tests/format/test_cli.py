@@ -23,9 +23,20 @@ def test_info_text_and_json(asset_file, capsys):
     assert main(["info", str(asset_file)]) == 0
     out = capsys.readouterr().out
     assert "bits per Gaussian" in out and "STRD" in out and "profile compact" in out
+    assert "base samples every 16 points" in out and "steps stretched up to 1.5x" in out
     assert main(["info", str(asset_file), "--json"]) == 0
     info = json.loads(capsys.readouterr().out)
-    assert info["strands"] == 64 and info["profile"] == "compact"
+    assert info["strands"] == 64 and info["profile"] == "compact" and info["quant"]["base_stride"] == 16
+
+
+def test_info_names_the_writers_strand_coding_choices(capsys):
+    """The vectors cover each choice a decoder follows; `cgh info` says which a file took."""
+    vectors = cgh.codec.Path(__file__).parents[2] / "spec" / "vectors"
+    assert main(["info", str(vectors / "synth_cards_neighbour_classes.cgh")]) == 0
+    out = capsys.readouterr().out
+    assert "every 8 points, guided by the card neighbour" in out and "3 neighbour token classes" in out
+    assert main(["info", str(vectors / "minimal_lossless.cgh")]) == 0
+    assert "float32 card coordinates (lossless)" in capsys.readouterr().out
 
 
 def test_validate_exit_codes(asset_file, tmp_path, capsys):
