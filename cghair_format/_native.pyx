@@ -175,6 +175,25 @@ cdef inline void newton(const double* frames, int m, i64 card, const double* sc,
     card_map(frames, m, card, c, x, j, j + 3, j + 6)
 
 
+cdef inline double step_ratio(const double* a, const double* b, const double* na, const double* nb) noexcept nogil:
+    """How much longer the step ``a -> b`` is than the step ``na -> nb`` (world points), within
+    [0.5, 2]; 1 where the second has no length (spec 4.3, ``base_guide`` 2)."""
+    cdef double d[3]
+    cdef double e[3]
+    cdef double r = 1.0
+    cdef int i
+    for i in range(3):
+        d[i] = b[i] - a[i]
+        e[i] = nb[i] - na[i]
+    if dot3(e, e) > 0:
+        r = sqrt(dot3(d, d) / dot3(e, e))
+    if not (r >= 0.5):  # also NaN
+        r = 0.5
+    if r > 2.0:
+        r = 2.0
+    return r
+
+
 cdef inline void residual_steps(const double* j, const double* sc, double stretch_max, double* f) noexcept nogil:
     """The steps ``f`` in scaled card coordinates of a residual whose prediction a Newton search made (a
     refinement sample's, a guided base sample's; spec 4.3), from the Jacobian columns ``j [9]`` at that
@@ -288,7 +307,7 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                 const i64[::1] base, const i64[::1] base_order, const i64[::1] level_start,
                 const i64[::1] level_taps, const i64[::1] idx,
                 const i64[:, ::1] nb, const double[:, ::1] wt, int newton_steps, int newton_halvings,
-                double stretch_max, bint base_guide, double[:, :, ::1] rec, double[:, :, ::1] world,
+                double stretch_max, int base_guide, double[:, :, ::1] rec, double[:, :, ::1] world,
                 i64[:, :, ::1] res,
                 const double[:, :, ::1] y=None, const double[:, :, ::1] dz_points=None, double dz_dist=-1.0,
                 bint neighbour_zone=False, float[:, :, ::1] uvd=None):
@@ -299,10 +318,11 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
     its neighbour's), and each strand's card coordinates ``rec / scale`` go to ``uvd``; returns how
     many of them float32 cannot hold (inf or NaN there: a corrupt file). Otherwise returns 0.
 
-    With ``base_guide`` a strand whose card neighbour came before it in ``strands_to_code`` predicts
-    its base samples from the neighbour's: its root from the neighbour's root, each later one by
-    the neighbour's step in world space, carried onto the card by the searched Newton steps (spec
-    4.3). ``strands_to_code`` must then list every card's strands in file order, whole.
+    With ``base_guide`` (1 or 2) a strand whose card neighbour came before it in ``strands_to_code``
+    predicts its base samples from the neighbour's: its root from the neighbour's root, each later one
+    by the neighbour's step in world space (with 2, times the ratio of the two strands' previous
+    steps), carried onto the card by the searched Newton steps (spec 4.3). ``strands_to_code`` must
+    then list every card's strands in file order, whole.
 
     Levels: ``level_start [L + 1]`` delimits rows of ``idx [R]`` (the new indices), ``nb [R, W]`` and
     ``wt [R, W]`` (their interpolation neighbours and weights, summed left to right over the first
@@ -328,7 +348,7 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
     cdef double f[3]
     cdef double jac[9]
     cdef double bf[3]
-    cdef double w, ratio, dist2 = dz_dist * dz_dist
+    cdef double w, ratio, rho, dist2 = dz_dist * dz_dist
     cdef const double* fr
     cdef const double* sc
     cdef double* R
@@ -380,7 +400,7 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
             R = &rec[(t & 1) if scratch else s, 0, 0]
             W = &world[(t & 1) if scratch else s, 0, 0]
             RN = NULL  # with base_guide, the neighbour's reconstruction (spec 4.3)
-            if base_guide and t > 0 and strand_card[strands_to_code[t - 1]] == card:
+            if base_guide > 0 and t > 0 and strand_card[strands_to_code[t - 1]] == card:
                 RN = &rec[((t - 1) & 1) if scratch else strands_to_code[t - 1], 0, 0]
                 WN = &world[((t - 1) & 1) if scratch else strands_to_code[t - 1], 0, 0]
             BR = &res[s, 0, 0]
@@ -399,9 +419,13 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                 bf[2] = 1.0
                 if RN != NULL and j > 0:  # the neighbour's step, in world space, onto the card
                     b = base[j - 1]
+                    rho = 1.0
+                    if base_guide == 2 and j > 1:  # scaled as the previous steps compare
+                        a = base[j - 2]
+                        rho = step_ratio(W + 3 * a, W + 3 * b, WN + 3 * a, WN + 3 * b)
                     for ch in range(3):
-                        pred[ch] = R[3 * b + ch] + (RN[3 * c + ch] - RN[3 * b + ch])
-                        goal[ch] = W[3 * b + ch] + (WN[3 * c + ch] - WN[3 * b + ch])
+                        pred[ch] = R[3 * b + ch] + rho * (RN[3 * c + ch] - RN[3 * b + ch])
+                        goal[ch] = W[3 * b + ch] + rho * (WN[3 * c + ch] - WN[3 * b + ch])
                     newton(fr, segments, card, sc, inv_sc, goal, newton_steps, newton_halvings, pred, jac)
                     residual_steps(jac, sc, stretch_max, bf)
                 for ch in range(3):

@@ -283,7 +283,7 @@ def _parse_meta(raw: bytes) -> dict:
         need("newton_halvings", int, 0, 8, src=quant)
         need("stretch_max", (int, float), 1, 16, src=quant)
         need("neighbour_classes", int, 1, MAX_NEIGHBOUR_CLASSES, src=quant)
-        need("base_guide", bool, src=quant)
+        need("base_guide", int, 0, 2, src=quant)
         orders = quant.get("base_order")
         if (not isinstance(orders, list) or len(orders) != 3
                 or not all(isinstance(k, int) and not isinstance(k, bool) and k in (1, 2) for k in orders)):
@@ -315,7 +315,7 @@ class _Choices(NamedTuple):
     newton_steps: int
     neighbour_zone: bool
     level_taps: tuple[int, ...]
-    base_guide: bool
+    base_guide: int
 
 
 class _Geometry(NamedTuple):
@@ -504,21 +504,23 @@ def _prediction(q: dict) -> Prediction:
                       q["newton_halvings"], float(q["stretch_max"]), q["base_guide"])
 
 
-def _choose_base_samples(asset: HairAsset, q: dict, zone: DeadZone, strides: tuple[int, ...]) -> tuple[int, bool]:
-    """The base stride (spec 4.1, 4.3) of ``strides`` (the profile's: 16 or 8) and whether base samples
-    are guided by the card neighbour's: of guided base samples at each stride and unguided ones at the
-    first, whichever codes the strands of a sample of cards smallest (4-point interpolation, the dead
-    zone trying the neighbour's residual; on the input's cards, before they are quantized at the
-    stride chosen). Wavy strands want base samples closer together (harolongo at the paper's scale: 8,
-    1.8 % off the whole file), straighter ones fewer (straight.hair: 16; 8 would cost 2.3 %). Without
-    the neighbour's residual in the dead zone the sample misranks straight.hair's strides (by 0.2 %,
-    for a file 2.3 % larger); with it the margins are 2-3 % either way."""
+def _choose_base_samples(asset: HairAsset, q: dict, zone: DeadZone, strides: tuple[int, ...]) -> tuple[int, int]:
+    """The base stride (spec 4.1, 4.3) of ``strides`` (the profile's: 16 or 8) and the base samples'
+    guide (0: none, 1: the card neighbour's steps, 2: those scaled as the strands' previous steps
+    compare): of both guides at each stride and none at the first, whichever codes the strands of a
+    sample of cards smallest (4-point interpolation, the dead zone trying the neighbour's residual; on
+    the input's cards, before they are quantized at the stride chosen). Wavy strands want base samples
+    closer together (harolongo at the paper's scale: 8, 1.8 % off the whole file), straighter ones
+    fewer (straight.hair: 16; 8 would cost 2.3 %), and straight strands of unequal lengths the scaled
+    guide (straight.hair: 1.6 % off; harolongo, whose waves set its steps' lengths, 1). Without the
+    neighbour's residual in the dead zone the sample misranks straight.hair's strides (by 0.2 %, for a
+    file 2.3 % larger); with it the margins are 2-3 % either way."""
     cmap = CardMap(asset.cards)
     scale = _uvd_scale(*card_scales(asset.cards, q["step"]), asset.strand_card, q["step"])
     y = asset.uvd * scale[:, None, :]
     orders = {stride: _choose_base_order(asset.strand_card, y, stride) for stride in strides}
     sizes = {}
-    for stride, guide in [(stride, True) for stride in strides] + [(strides[0], False)]:
+    for stride, guide in [(stride, guide) for stride in strides for guide in (1, 2)] + [(strides[0], 0)]:
         plan = Prediction(stride, orders[stride], NEWTON_STEPS, newton_halvings=q["newton_halvings"],
                           stretch_max=q["stretch_max"], base_guide=guide)
         sizes[stride, guide] = coded_bytes(_sample_residuals(cmap, asset.strand_card, y, scale, plan,

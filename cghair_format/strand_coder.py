@@ -60,7 +60,8 @@ class Prediction:
     steps per refinement sample, the interpolation neighbours of each level (None: 4 each), how
     many times a Newton step that lands farther from its goal is halved before the search stops, and
     how far a refinement residual's step may stretch with the card's local scale (1: not at all), and
-    whether a strand's base samples are predicted from its card neighbour's world steps."""
+    whether a strand's base samples are predicted from its card neighbour's world steps (0: no, 1: yes,
+    2: scaled by how the two strands' previous steps compare)."""
 
     base_stride: int
     base_order: tuple[int, int, int]
@@ -68,7 +69,7 @@ class Prediction:
     level_taps: tuple[int, ...] | None = None
     newton_halvings: int = NEWTON_HALVINGS
     stretch_max: float = STRETCH_MAX
-    base_guide: bool = False
+    base_guide: int = 0
 
 
 def base_residuals(y: np.ndarray, base: np.ndarray, orders: tuple[int, int, int]) -> np.ndarray:

@@ -44,12 +44,15 @@ def format_info(name: str, info: dict) -> str:
     return "\n".join(lines)
 
 
+GUIDES = ("", ", guided by the card neighbour's steps", ", guided by the card neighbour's steps, scaled")
+
+
 def _coding(quant: dict) -> str:
     """The strand coder's settings (META quant, spec 4.3) in a line."""
     if quant["lossless"]:
         return "float32 card coordinates (lossless)"
     return (f"step {quant['step']:.3g}, base samples every {quant['base_stride']} points"
-            f"{', guided by the card neighbour' if quant['base_guide'] else ''}, "
+            f"{GUIDES[quant['base_guide']]}, "
             f"levels interpolating {'/'.join(map(str, quant['level_taps'])) or '-'} points, "
             f"steps stretched up to {quant['stretch_max']:g}x, {quant['neighbour_classes']} neighbour token "
             f"class{'es' if quant['neighbour_classes'] > 1 else ''}")

@@ -46,7 +46,7 @@ def _quant(data: bytes) -> dict:
     return json.loads(payloads["META"])["quant"]
 
 
-def _encode(asset, profile: str, guide: bool, classes: int | None = None) -> bytes:
+def _encode(asset, profile: str, guide: int, classes: int | None = None) -> bytes:
     """``cgh.encode`` with the writer's choice of ``base_guide`` (spec 4.3) and, if given, of
     ``neighbour_classes`` (4.3.2) forced: the small vectors then cover each way a decoder must go,
     whichever the writer would pick for them."""
@@ -60,7 +60,7 @@ def _encode(asset, profile: str, guide: bool, classes: int | None = None) -> byt
         data = cgh.encode(asset, profile)[0]
     finally:
         codec._choose_base_samples, codec.write_residuals = choose, write
-    assert _quant(data)["base_guide"] is guide and (classes is None or _quant(data)["neighbour_classes"] == classes)
+    assert _quant(data)["base_guide"] == guide and (classes is None or _quant(data)["neighbour_classes"] == classes)
     return data
 
 
@@ -84,8 +84,8 @@ def main() -> None:
     compact = cgh.encode(small, "compact")[0]
     _expected("small_compact", compact)
     # base samples unguided (spec 4.3): decoding the file as guided gives other points
-    data = _encode(example_asset(2, sh_degree=3, weight_mode="hard"), "high", guide=False)
-    _differs(data, {"base_guide": True})
+    data = _encode(example_asset(2, sh_degree=3, weight_mode="hard"), "high", guide=0)
+    _differs(data, {"base_guide": 1})
     _expected("small_high_hard", data)
     extras = example_asset(3, strands=6, points=4)
     extras.strand_ids = np.arange(6, dtype=np.uint32) * 7
@@ -101,12 +101,15 @@ def main() -> None:
 
     built = build_cards(synthesize("straight", 48, 24, seed=1), n_cards=6, n_groups=2, segments=8, points=24,
                         seed=0, progress=False, sh_degree=1).asset
-    data = _encode(built, "compact", guide=True)
+    data = _encode(built, "compact", guide=1)
     assert _quant(data)["newton_steps"] > 0
-    _differs(data, {"base_guide": False})
+    _differs(data, {"base_guide": 0})
+    _differs(data, {"base_guide": 2})
     _expected("synth_cards_compact", data)
-    # the same with the card neighbour's tokens as context (spec 4.3.2, neighbour_classes 3)
-    data = _encode(built, "compact", guide=True, classes=3)
+    # the same with the card neighbour's tokens as context (spec 4.3.2, neighbour_classes 3) and base
+    # samples guided by the neighbour's steps scaled (base_guide 2)
+    data = _encode(built, "compact", guide=2, classes=3)
+    _differs(data, {"base_guide": 1})
     _differs(data, {"neighbour_classes": 1})
     _expected("synth_cards_neighbour_classes", data)
     # curly hair on the same few cards, where the decoder halves some Newton steps and stretches residual
@@ -114,7 +117,7 @@ def main() -> None:
     # below keeps it so)
     curly = build_cards(synthesize("curly", 48, 24, seed=2), n_cards=6, n_groups=2, segments=8, points=24,
                         seed=0, progress=False, sh_degree=1).asset
-    data = _encode(curly, "compact", guide=True)
+    data = _encode(curly, "compact", guide=1)
     for change in ({"newton_halvings": 0}, {"newton_halvings": 3}, {"stretch_max": 1}):
         _differs(data, change)
     _expected("synth_curly_compact", data)
