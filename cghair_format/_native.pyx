@@ -344,7 +344,6 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
     cdef double pred[3]
     cdef double goal[3]
     cdef double inv_sc[3]
-    cdef double unit[3]
     cdef double f[3]
     cdef double jac[9]
     cdef double bf[3]
@@ -365,9 +364,6 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
     zero[0] = 0
     zero[1] = 0
     zero[2] = 0
-    unit[0] = 1.0
-    unit[1] = 1.0
-    unit[2] = 1.0
     if strands == 0:
         return 0
     check_cards(strand_card, frames.shape[0], segments)
@@ -417,7 +413,10 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                 bf[0] = 1.0
                 bf[1] = 1.0
                 bf[2] = 1.0
-                if RN != NULL and j > 0:  # the neighbour's step, in world space, onto the card
+                if RN != NULL and j == 0:  # the neighbour's root
+                    for ch in range(3):
+                        pred[ch] = RN[3 * c + ch]
+                elif RN != NULL:  # the neighbour's step, in world space, onto the card
                     b = base[j - 1]
                     rho = 1.0
                     if base_guide == 2 and j > 1:  # scaled as the previous steps compare
@@ -428,20 +427,19 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                         goal[ch] = W[3 * b + ch] + rho * (WN[3 * c + ch] - WN[3 * b + ch])
                     newton(fr, segments, card, sc, inv_sc, goal, newton_steps, newton_halvings, pred, jac)
                     residual_steps(jac, sc, stretch_max, bf)
-                for ch in range(3):
-                    if RN != NULL:
+                else:  # the strand's own base samples, per channel (spec 4.1)
+                    for ch in range(3):
                         if j == 0:
-                            pred[ch] = RN[3 * c + ch]
-                    elif j == 0:
-                        pred[ch] = 0.0
-                    elif j == 1 or base_order[ch] == 1:
-                        pred[ch] = R[3 * base[j - 1] + ch]
-                    else:
-                        a = base[j - 2]
-                        b = base[j - 1]
-                        ratio = <double> (c - b) / <double> (b - a)
-                        pred[ch] = R[3 * b + ch] + (R[3 * b + ch] - R[3 * a + ch]) * ratio
-                    if encode:
+                            pred[ch] = 0.0
+                        elif j == 1 or base_order[ch] == 1:
+                            pred[ch] = R[3 * base[j - 1] + ch]
+                        else:
+                            a = base[j - 2]
+                            b = base[j - 1]
+                            ratio = <double> (c - b) / <double> (b - a)
+                            pred[ch] = R[3 * b + ch] + (R[3 * b + ch] - R[3 * a + ch]) * ratio
+                if encode:
+                    for ch in range(3):
                         BR[3 * j + ch] = <i64> rint((Y[3 * c + ch] - pred[ch]) / bf[ch])
                 if dead_zone:
                     nearest(fr, segments, card, pred, bf, inv_sc, Z + 3 * c, dist2, BR + 3 * j)

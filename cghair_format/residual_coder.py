@@ -129,7 +129,7 @@ def write_residuals(w: StreamWriter, arrays: list[np.ndarray], strand_card: np.n
     step_table = _to_steps(coding.table, lanes, blocks).reshape(-1, lanes)
     step_active = np.repeat(active, step_sym.shape[0] // blocks)
     states, words = rans.encode(step_sym, step_table, step_active, tables)
-    w.array(tables.freq.astype(np.uint16), shuffle=True)
+    _put_tables(w, tables.freq)
     w.array(states)
     w.array(words)
     # in step order; the padding lanes of the last block have width 0 and add no bits
@@ -143,8 +143,13 @@ def _cost(counts: np.ndarray, freq: np.ndarray) -> float:
     used = counts.reshape(freq.shape) > 0
     code_bits = float((counts.reshape(freq.shape)[used] * np.log2(rans.TOTAL / freq[used])).sum())
     packed = StreamWriter()
-    packed.array(freq.astype(np.uint16), shuffle=True)
+    _put_tables(packed, freq)
     return code_bits / 8 + len(zstandard.ZstdCompressor(level=9).compress(packed.getvalue()))
+
+
+def _put_tables(w: StreamWriter, freq: np.ndarray) -> None:
+    """The frequency tables' record (spec 4.3.2: ``u2[T, 76]``, byte-shuffled)."""
+    w.array(freq.astype(np.uint16), shuffle=True)
 
 
 def read_residuals(r: StreamReader, strand_card: np.ndarray, widths: list[int], classes: int) -> np.ndarray:

@@ -58,10 +58,10 @@ class Prediction:
     """How strand points are predicted (META quant): the base stride, the base samples' predictor
     order per channel u, v, delta (1: the previous base sample, 2: linear extrapolation), the Newton
     steps per refinement sample, the interpolation neighbours of each level (None: 4 each), how
-    many times a Newton step that lands farther from its goal is halved before the search stops, and
-    how far a refinement residual's step may stretch with the card's local scale (1: not at all), and
-    whether a strand's base samples are predicted from its card neighbour's world steps (0: no, 1: yes,
-    2: scaled by how the two strands' previous steps compare)."""
+    many times a Newton step that lands farther from its goal is halved before the search stops, how
+    far a residual's step may stretch with the card's local scale (1: not at all), and whether a
+    strand's base samples are predicted from its card neighbour's world steps (0: no, 1: yes, 2: scaled
+    by how the two strands' previous steps compare)."""
 
     base_stride: int
     base_order: tuple[int, int, int]

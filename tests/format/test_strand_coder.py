@@ -96,9 +96,7 @@ def test_real_hair_stores_neighbour_differences_and_decodes_the_same_points():
     data, report = cgh.encode(asset, "compact")
     quant = quant_of(data)
     assert any(quant["neighbour"]), quant["neighbour"]
-    decoded = cgh.decode_points(cgh.decode(data))
-    expected = cgh.decode_points(report.in_file_order(asset))
-    assert np.linalg.norm(decoded - expected, axis=-1).max() <= 2e-4 * report.bbox_diagonal
+    decoded = decoded_within_bound(data, report, asset)
 
     # the same residuals stored without the transform (every mask 0) reconstruct the same points, and
     # their STRD is larger
@@ -198,9 +196,7 @@ def test_searched_newton_steps_code_wavy_hair_smaller_within_the_bound(wavy_hair
     assert quant_of(unsearched)["newton_halvings"] == 0
     assert len(data) < 0.9 * len(unsearched)
     for blob, rep in ((data, report), (unsearched, plain_report)):
-        decoded = cgh.decode_points(cgh.decode(blob))
-        expected = cgh.decode_points(rep.in_file_order(asset))
-        assert np.linalg.norm(decoded - expected, axis=-1).max() <= 2e-4 * rep.bbox_diagonal
+        decoded_within_bound(blob, rep, asset)
 
 
 def test_stretched_residual_steps_code_wavy_hair_smaller_within_the_bound(wavy_hair, monkeypatch):
@@ -214,9 +210,7 @@ def test_stretched_residual_steps_code_wavy_hair_smaller_within_the_bound(wavy_h
     assert quant_of(plain)["stretch_max"] == 1.0
     assert len(data) < 0.98 * len(plain)
     for blob, rep in ((data, report), (plain, plain_report)):
-        decoded = cgh.decode_points(cgh.decode(blob))
-        expected = cgh.decode_points(rep.in_file_order(asset))
-        assert np.linalg.norm(decoded - expected, axis=-1).max() <= 2e-4 * rep.bbox_diagonal
+        decoded_within_bound(blob, rep, asset)
 
 
 def test_base_samples_guided_by_the_neighbours_steps_code_wavy_hair_smaller_within_the_bound(wavy_hair,
@@ -231,9 +225,7 @@ def test_base_samples_guided_by_the_neighbours_steps_code_wavy_hair_smaller_with
     assert quant_of(plain)["base_guide"] == 0
     assert len(data) < 0.97 * len(plain)
     for blob, rep in ((data, report), (plain, plain_report)):
-        decoded = cgh.decode_points(cgh.decode(blob))
-        expected = cgh.decode_points(rep.in_file_order(asset))
-        assert np.linalg.norm(decoded - expected, axis=-1).max() <= 2e-4 * rep.bbox_diagonal
+        decoded_within_bound(blob, rep, asset)
 
 
 def test_straight_strands_of_unequal_lengths_take_the_scaled_guide(monkeypatch):
@@ -252,9 +244,7 @@ def test_straight_strands_of_unequal_lengths_take_the_scaled_guide(monkeypatch):
     unscaled, unscaled_report = cgh.encode(asset, "compact")
     assert quant_of(unscaled)["base_guide"] == 1 and len(data) < 0.98 * len(unscaled)
     for blob, rep in ((data, report), (unscaled, unscaled_report)):
-        decoded = cgh.decode_points(cgh.decode(blob))
-        expected = cgh.decode_points(rep.in_file_order(asset))
-        assert np.linalg.norm(decoded - expected, axis=-1).max() <= 2e-4 * rep.bbox_diagonal
+        decoded_within_bound(blob, rep, asset)
 
 
 def test_card_blocks_never_split_a_card():
@@ -307,6 +297,15 @@ def test_a_step_that_decodes_beyond_float32_is_refused():
         cgh.decode(_vector_with_quant(lambda quant: quant.update(step=1e40)))
 
 
+def decoded_within_bound(data: bytes, report, asset) -> np.ndarray:
+    """The points the compact file ``data`` decodes to, asserted within 2e-4 of the bounding-box diagonal
+    of ``asset``'s (``report``: what the writer measured, and its strand order)."""
+    decoded = cgh.decode_points(cgh.decode(data))
+    expected = cgh.decode_points(report.in_file_order(asset))
+    assert np.linalg.norm(decoded - expected, axis=-1).max() <= 2e-4 * report.bbox_diagonal
+    return decoded
+
+
 def unguided(monkeypatch) -> None:
     """Make the writer keep its base stride but leave base samples unguided (spec 4.3)."""
     choose = codec._choose_base_samples
@@ -352,9 +351,7 @@ def test_every_predictor_choice_decodes_within_the_bound(chooser, key, choice, m
     asset = example_asset(5)
     data, report = cgh.encode(asset, "compact")
     assert quant_of(data)[key] == list(choice)
-    decoded = cgh.decode_points(cgh.decode(data))
-    expected = cgh.decode_points(report.in_file_order(asset))
-    assert np.linalg.norm(decoded - expected, axis=-1).max() <= 2e-4 * report.bbox_diagonal
+    decoded_within_bound(data, report, asset)
 
 
 def test_parallel_strands_choose_the_previous_sample_as_base_predictor():
@@ -413,9 +410,7 @@ def test_the_dead_zone_stores_more_zeros_and_keeps_the_bound(neighbour, monkeypa
     else:
         assert abs(base_zeros - plain_base_zeros) <= 0.01 * plain_base_zeros
     assert np.linalg.norm(world - points, axis=-1).max() <= 2e-4 * report.bbox_diagonal
-    decoded = cgh.decode_points(cgh.decode(data))
-    expected = cgh.decode_points(report.in_file_order(asset))
-    assert np.linalg.norm(decoded - expected, axis=-1).max() <= 2e-4 * report.bbox_diagonal
+    decoded_within_bound(data, report, asset)
 
 
 def test_the_dead_zone_moves_a_sample_that_rounding_leaves_beyond_the_tolerance(monkeypatch):
