@@ -15,9 +15,9 @@ class Profile:
     lossless: bool = False
     position_tolerance: float = 2e-4  # max point error / bounding-box diagonal
     opacity_scale: float = 127.5  # opacity = round(o * scale) / scale: max error 0.5 / scale
-    logit_levels: int = 255  # soft logits stored as round(levels * exp((logit - max) / temperature)) ...
+    logit_levels: int = 63  # soft logits stored as round(levels * exp((logit - max) / temperature)) ...
     logit_floor: float = -16.0  # ... and a stored 0 decodes to this logit
-    weight_bits: int = 5  # codebook and MLP weights: this many bits of symmetric levels per row (in int8)
+    weight_bits: int = 4  # codebook and MLP weights: this many bits of symmetric levels per row (in int8)
     half_bias: bool = True  # MLP biases as float16 (else float32)
     normal_bits: int = 8  # card normals: octahedral bits per coordinate (8..24), about 2 / 2^(bits-1) rad
     # hierarchical predictor: coarse samples every this many points, the one of these that codes the
@@ -38,7 +38,7 @@ PROFILES: dict[str, Profile] = {
                     logit_floor=-24.0, weight_bits=8, half_bias=False, normal_bits=12,
                     description="points within 2e-5 of the bbox diagonal, opacity within 1/2047"),
     "compact": Profile("compact", description="the default: points within 2e-4 of the bbox diagonal, "
-                                              "opacity within 1/255, 5-bit weights"),
+                                              "opacity within 1/255, 4-bit weights"),
 }
 DEFAULT_PROFILE = "compact"
 
