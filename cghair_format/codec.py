@@ -28,10 +28,11 @@ from .quantize import (
     level_plan,
     oct_decode,
     oct_encode,
-    rows_int8_decode,
-    rows_int8_encode,
     softmax_levels_decode,
     softmax_levels_encode,
+    weight_steps,
+    weights_decode,
+    weights_encode,
     zigzag,
 )
 from .residual_coder import (
@@ -209,7 +210,7 @@ def _meta(asset: HairAsset, prof: Profile, step: float | None, diag: float) -> d
             # the writer's choices (_Choices) replace these four in _quantize_geometry
             "base_order": None, "base_guide": None, "newton_steps": None, "level_taps": None,
             "opacity_scale": prof.opacity_scale, "logit_levels": prof.logit_levels, "logit_floor": prof.logit_floor,
-            "half_bias": prof.half_bias},
+            "weight_steps": weight_steps(app.codebooks, [(x.weight, x.bias) for x in app.mlp], prof.weight_step)},
     }
 
 
@@ -265,11 +266,11 @@ def _parse_meta(raw: bytes) -> dict:
     if not isinstance(quant, dict):
         raise InvalidContentError("META quant must be an object", chunk="META")
     if ("logit_step" in quant and "logit_levels" not in quant) or (
-            quant.get("lossless") is False and any(key not in quant for key in ("newton_halvings", "stretch_max",
-                                                                             "neighbour_classes", "base_guide"))):
+            quant.get("lossless") is False and any(key not in quant for key in (
+                "newton_halvings", "stretch_max", "neighbour_classes", "base_guide", "weight_steps"))):
         raise InvalidContentError("written by a pre-release draft of .cgh 1.0 (before the rANS strand coder, "
-                                  "searched Newton steps, stretched residual steps, neighbour token contexts "
-                                  "or guided base samples), which this reader cannot decode: write "
+                                  "searched Newton steps, stretched residual steps, neighbour token contexts, "
+                                  "guided base samples or weights on steps), which this reader cannot decode: write "
                                   "the asset again from its source (cgh encode, or cgh train --resume CHECKPOINT)",
                                   chunk="META")
     if not need("lossless", bool, src=quant):
@@ -289,7 +290,12 @@ def _parse_meta(raw: bytes) -> dict:
                 or not all(isinstance(k, int) and not isinstance(k, bool) and k in (1, 2) for k in orders)):
             raise InvalidContentError(f"META quant.base_order must list 3 orders (u, v, delta), each 1 or 2, got "
                                       f"{orders!r}", chunk="META")
-        need("half_bias", bool, src=quant)
+        steps = quant.get("weight_steps")
+        if (not isinstance(steps, list) or len(steps) != len(layers) + 1
+                or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) and x > 0
+                           for x in steps)):
+            raise InvalidContentError(f"META quant.weight_steps must list {len(layers) + 1} positive steps (the "
+                                      f"codebooks', then each MLP layer's), got {steps!r}", chunk="META")
         arrays = 1 + len(level_plan(meta["points"], quant["base_stride"])[1])
         taps = quant.get("level_taps")
         if (not isinstance(taps, list) or len(taps) != arrays - 1
@@ -447,14 +453,11 @@ def _appearance_chunks(asset: HairAsset, prof: Profile, quant: dict) -> list[con
             others = levels[np.arange(app.k)[None, :] != top[:, None]].reshape(len(levels), app.k - 1)
             logt_w.array(top.astype(_narrowest(app.k - 1)))
             logt_w.array(others.astype(_narrowest(prof.logit_levels)))
-        qc, sc = rows_int8_encode(app.codebooks.reshape(-1, app.latent_dim), prof.weight_bits)
-        cbks_w.array(qc)
-        cbks_w.array(sc)
-        for layer in app.mlp:
-            qw, sw = rows_int8_encode(layer.weight, prof.weight_bits)
-            mlp_w.array(qw)
-            mlp_w.array(sw)
-            mlp_w.array(layer.bias.astype(np.float16 if prof.half_bias else np.float32))
+        qc, layers = weights_encode(quant["weight_steps"], app.codebooks, [(x.weight, x.bias) for x in app.mlp])
+        cbks_w.ints(qc)
+        for qw, qb in layers:
+            mlp_w.ints(qw)
+            mlp_w.ints(qb)
     chunks = [container.Chunk(t, w.getvalue()) for t, w in
               (("OPAC", opac_w), ("LOGT", logt_w), ("CBKS", cbks_w), ("MLPW", mlp_w))]
     return chunks + _optional_chunks(asset)
@@ -723,14 +726,11 @@ def _decode_chunks(meta: dict, payloads: dict[str, bytes]) -> HairAsset:
             levels = np.full((s, k), q["logit_levels"], np.int64)
             levels[np.arange(k)[None, :] != top[:, None]] = others.ravel()
             logits = softmax_levels_decode(levels, meta["temperature"], q["logit_levels"], q["logit_floor"])
-        cq = rd["CBKS"].array((nt * k, d), "codebooks", ("|i1",))
-        codebooks = rows_int8_decode(cq, rd["CBKS"].array((nt * k,), "codebook scales", ("<u2",))).reshape(nt, k, d)
-        mlp = []
-        for j, (i, o, layer) in enumerate(zip(widths[:-1], widths[1:], meta["mlp"], strict=True)):
-            qw = rd["MLPW"].array((o, i), f"mlp[{j}].weight", ("|i1",))
-            sw = rd["MLPW"].array((o,), f"mlp[{j}].scale", ("<u2",))
-            bias = rd["MLPW"].array((o,), f"mlp[{j}].bias", ("<f2", "<f4"))
-            mlp.append(MlpLayer(rows_int8_decode(qw, sw), bias.astype(np.float32), layer["activation"]))
+        qc = rd["CBKS"].ints((nt, k, d), "codebooks")
+        coded = [(rd["MLPW"].ints((o, i), f"mlp[{j}].weight"), rd["MLPW"].ints((o,), f"mlp[{j}].bias"))
+                 for j, (i, o) in enumerate(zip(widths[:-1], widths[1:], strict=True))]
+        codebooks, layers = weights_decode(q["weight_steps"], qc, coded)
+        mlp = [MlpLayer(w, b, layer["activation"]) for (w, b), layer in zip(layers, meta["mlp"], strict=True)]
     cards.group = rd["CARD"].array((c,), "group", ("<u2", "<u4")).astype(np.int32)
     for reader in rd.values():
         reader.finish()

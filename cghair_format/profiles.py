@@ -17,8 +17,9 @@ class Profile:
     opacity_scale: float = 127.5  # opacity = round(o * scale) / scale: max error 0.5 / scale
     logit_levels: int = 63  # soft logits stored as round(levels * exp((logit - max) / temperature)) ...
     logit_floor: float = -16.0  # ... and a stored 0 decodes to this logit
-    weight_bits: int = 4  # codebook and MLP weights: this many bits of symmetric levels per row (in int8)
-    half_bias: bool = True  # MLP biases as float16 (else float32)
+    # codebook and MLP weights (and biases): integers times a step of this fraction of each array's RMS
+    # (0.35: the error of the 4-bit levels per row it replaced)
+    weight_step: float = 0.35
     normal_bits: int = 8  # card normals: octahedral bits per coordinate (8..24), about 2 / 2^(bits-1) rad
     # hierarchical predictor: coarse samples every this many points, the one of these that codes the
     # strand points of a sample of cards smaller (the first codes the cards while the writer chooses)
@@ -35,10 +36,10 @@ PROFILES: dict[str, Profile] = {
     "lossless": Profile("lossless", lossless=True, zstd_level=9,
                         description="every float32 value stored exactly (byte-shuffled + zstd)"),
     "high": Profile("high", position_tolerance=2e-5, opacity_scale=1023.5, logit_levels=8191,
-                    logit_floor=-24.0, weight_bits=8, half_bias=False, normal_bits=12,
+                    logit_floor=-24.0, weight_step=0.02, normal_bits=12,
                     description="points within 2e-5 of the bbox diagonal, opacity within 1/2047"),
     "compact": Profile("compact", description="the default: points within 2e-4 of the bbox diagonal, "
-                                              "opacity within 1/255, 4-bit weights"),
+                                              "opacity within 1/255, weights on steps of 0.35 RMS"),
 }
 DEFAULT_PROFILE = "compact"
 

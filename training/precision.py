@@ -1,13 +1,13 @@
 """How much each quantization costs in the picture: render PSNR against the unquantized asset.
 
-    python -m training.precision MODEL.cgh DATASET_DIR [--split test] [--bits 8,7,6,5,4]
-                                 [--logit-levels 1023,255]
+    python -m training.precision MODEL.cgh DATASET_DIR [--split test] [--weight-steps 0.02,0.35,0.5]
+                                 [--logit-levels 1023,63]
 
 ``MODEL.cgh`` is the reference (write it with ``--profile lossless`` to measure every profile);
 the cameras come from the dataset's split. For each profile the file is encoded, decoded and
-rendered; for each bit depth only the codebook and MLP weights are quantized (per row, as the
-writer does), and for each logit level count only the soft logits (as the writer stores them),
-which isolates each one's share of the error.
+rendered; for each weight step (a fraction of each array's RMS, as the profiles give it) only the
+codebooks and MLP weights are quantized, and for each logit level count only the soft logits, each
+as the writer stores them, which isolates each one's share of the error.
 """
 
 from __future__ import annotations
@@ -21,7 +21,13 @@ import torch
 
 from cghair_format import decode, decode_gaussians, encode, read
 from cghair_format.asset import HairAsset
-from cghair_format.quantize import rows_int8_decode, rows_int8_encode, softmax_levels_decode, softmax_levels_encode
+from cghair_format.quantize import (
+    softmax_levels_decode,
+    softmax_levels_encode,
+    weight_steps,
+    weights_decode,
+    weights_encode,
+)
 
 from .dataset import View, read_dataset
 from .losses import psnr
@@ -33,14 +39,16 @@ def render_views(asset: HairAsset, views: list[View]) -> torch.Tensor:
     return torch.as_tensor(np.stack([render_gaussians(g, v.camera)["rgb"] for v in views]), dtype=torch.float64)
 
 
-def with_weight_bits(asset: HairAsset, bits: int) -> HairAsset:
-    """A copy with codebooks and MLP weights on ``bits``-bit levels per row, everything else exact."""
+def with_weight_step(asset: HairAsset, fraction: float) -> HairAsset:
+    """A copy with codebooks and MLP weights and biases on steps of ``fraction`` of each array's RMS, as
+    the writer stores them, everything else exact."""
     out = copy.deepcopy(asset)
     app = out.appearance
-    app.codebooks = rows_int8_decode(*rows_int8_encode(app.codebooks.reshape(-1, app.latent_dim), bits)
-                                     ).reshape(app.codebooks.shape)
-    for layer in app.mlp:
-        layer.weight = rows_int8_decode(*rows_int8_encode(layer.weight, bits))
+    layers = [(layer.weight, layer.bias) for layer in app.mlp]
+    steps = weight_steps(app.codebooks, layers, fraction)
+    app.codebooks, decoded = weights_decode(steps, *weights_encode(steps, app.codebooks, layers))
+    for layer, (w, b) in zip(app.mlp, decoded, strict=True):
+        layer.weight, layer.bias = w, b
     return out
 
 
@@ -54,17 +62,17 @@ def with_logit_levels(asset: HairAsset, levels: int, floor: float = -16.0) -> Ha
     return out
 
 
-def measure(asset: HairAsset, views: list[View], profiles=("high", "compact"), bits=(8, 7, 6, 5, 4),
-            logit_levels=(1023, 255)) -> list[dict]:
+def measure(asset: HairAsset, views: list[View], profiles=("high", "compact"), steps=(0.02, 0.35, 0.5),
+            logit_levels=(1023, 63)) -> list[dict]:
     reference = render_views(asset, views)
     rows = []
     for profile in profiles:
         data, _ = encode(asset, profile)
         rows.append({"what": f"{profile} file", "bytes": len(data),
                      "psnr": psnr(render_views(decode(data), views), reference)})
-    for b in bits:
-        rows.append({"what": f"{b}-bit weights only", "bytes": None,
-                     "psnr": psnr(render_views(with_weight_bits(asset, b), views), reference)})
+    for f in steps:
+        rows.append({"what": f"weight step {f:g} only", "bytes": None,
+                     "psnr": psnr(render_views(with_weight_step(asset, f), views), reference)})
     for n in logit_levels if asset.appearance.weight_mode == "soft" else ():
         rows.append({"what": f"{n} logit levels only", "bytes": None,
                      "psnr": psnr(render_views(with_logit_levels(asset, n), views), reference)})
@@ -76,16 +84,18 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("cgh", help="the reference asset (.cgh, ideally lossless)")
     p.add_argument("dataset", help="a NeRF-synthetic dataset folder, for its cameras")
     p.add_argument("--split", default="test", choices=("train", "test"))
-    p.add_argument("--bits", default="8,7,6,5,4", help="weight bit depths to try (2..8)")
-    p.add_argument("--logit-levels", default="1023,255", help="soft-logit level counts to try (1..65535)")
+    p.add_argument("--weight-steps", default="0.02,0.35,0.5",
+                   help="weight steps to try, as fractions of each array's RMS (0 < step <= 4)")
+    p.add_argument("--logit-levels", default="1023,63", help="soft-logit level counts to try (1..65535)")
     args = p.parse_args(argv)
     try:
-        bits = tuple(int(b) for b in args.bits.split(","))
+        steps = tuple(float(f) for f in args.weight_steps.split(","))
         levels = tuple(int(n) for n in args.logit_levels.split(","))
     except ValueError:
-        p.error(f"--bits and --logit-levels take comma-separated integers, got {args.bits!r}, {args.logit_levels!r}")
-    if not all(2 <= b <= 8 for b in bits):
-        p.error("--bits must lie in 2..8")
+        p.error(f"--weight-steps takes comma-separated numbers and --logit-levels integers, got "
+                f"{args.weight_steps!r}, {args.logit_levels!r}")
+    if not all(0 < f <= 4 for f in steps):
+        p.error("--weight-steps must lie in (0, 4]")
     if not all(1 <= n <= 65535 for n in levels):
         p.error("--logit-levels must lie in 1..65535")
     from cghair_format.errors import CghError
@@ -96,7 +106,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"python -m training.precision: error: {exc}", file=sys.stderr)
         return 1
     print(f"render PSNR against {args.cgh} on {len(views)} {args.split} views")
-    for row in measure(asset, views, bits=bits, logit_levels=levels):
+    for row in measure(asset, views, steps=steps, logit_levels=levels):
         size = f"{row['bytes']:>10,} B" if row["bytes"] is not None else " " * 12
         print(f"{row['what']:<22} {size}  {row['psnr']:7.2f} dB")
     return 0

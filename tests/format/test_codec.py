@@ -16,6 +16,7 @@ from cghair_format import memory
 from cghair_format.errors import AssetError
 from cghair_format.examples import example_asset
 from cghair_format.gaussians import run_mlp, strand_latents, strand_weights
+from cghair_format.quantize import weight_steps
 
 
 def _diag(points):
@@ -36,15 +37,14 @@ def _check_bounds(a, b, profile):
     assert np.linalg.norm(pa - pb, axis=-1).max() <= prof.position_tolerance * _diag(pa)
     assert np.abs(a.opacity - b.opacity).max() <= prof.opacity_tolerance + 1e-7
     assert np.array_equal(a.strand_card, b.strand_card) and np.array_equal(a.cards.group, b.cards.group)
-    # codebooks and MLP: within half a step of each row's absmax / (2^(bits-1) - 1), a step that the
-    # bfloat16 scale rounds up by less than 2^-7
-    top = (1 << (prof.weight_bits - 1)) - 1
-    cb = a.appearance.codebooks.reshape(-1, a.appearance.latent_dim)
-    step = np.abs(cb).max(axis=1, keepdims=True) / top * (1 + 2**-7)
-    assert (np.abs(b.appearance.codebooks.reshape(cb.shape) - cb) <= step / 2 + 1e-6).all()
-    for la, lb in zip(a.appearance.mlp, b.appearance.mlp, strict=True):
-        step = np.abs(la.weight).max(axis=1, keepdims=True) / top * (1 + 2**-7)
-        assert (np.abs(lb.weight - la.weight) <= step / 2 + 1e-6).all()
+    # codebooks and MLP: within half a step of a fraction of each array's RMS; the last layer's, stored in
+    # the colour basis, within 0.85 of its step (biases a sixteenth of that)
+    steps = weight_steps(a.appearance.codebooks, [(x.weight, x.bias) for x in a.appearance.mlp], prof.weight_step)
+    assert np.abs(b.appearance.codebooks - a.appearance.codebooks).max() <= steps[0] / 2 * (1 + 1e-6)
+    for j, (la, lb, step) in enumerate(zip(a.appearance.mlp, b.appearance.mlp, steps[1:], strict=True)):
+        reach = 0.85 if j == len(steps) - 2 else 0.5
+        assert np.abs(lb.weight - la.weight).max() <= reach * step * (1 + 1e-6) + 1e-6
+        assert np.abs(lb.bias - la.bias).max() <= reach * step / 16 * (1 + 1e-6) + 1e-6
     # soft weights: stored as exp((logit - max) / tau) in 1/levels; each weight within K / (2 levels),
     # plus what the floor gives an entry stored as 0
     wa, wb = strand_weights(a.appearance), strand_weights(b.appearance)

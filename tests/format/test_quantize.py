@@ -6,15 +6,19 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from cghair_format.quantize import (
-    bfloat16_decode,
+    BIAS_STEP_DIVISOR,
+    COLOUR_BASIS,
+    from_colour_basis,
     hier_decode,
     hier_encode,
     level_plan,
     oct_decode,
     oct_encode,
-    rows_int8_decode,
-    rows_int8_encode,
+    to_colour_basis,
     unzigzag,
+    weight_steps,
+    weights_decode,
+    weights_encode,
     zigzag,
 )
 
@@ -87,15 +91,33 @@ def test_octahedral_normals_within_bound(seed):
     assert np.allclose(np.linalg.norm(back, axis=1), 1.0)
 
 
-@pytest.mark.parametrize("bits", [8, 6, 4])
-def test_int8_rows_error_is_half_a_step_per_row(bits):
-    w = np.random.default_rng(0).normal(size=(40, 30))
-    q, scale_bits = rows_int8_encode(w, bits)
-    top = (1 << (bits - 1)) - 1
-    scale = bfloat16_decode(scale_bits)
-    assert q.dtype == np.int8 and scale_bits.dtype == np.uint16 and scale.shape == (40,)
-    # the bfloat16 scale is the exact one rounded up by less than 2^-7, so no value leaves the levels
-    exact = np.abs(w).max(axis=1) / top
-    assert (scale >= exact).all() and (scale <= exact * (1 + 2**-7)).all() and np.abs(q).max() <= top
-    err = np.abs(rows_int8_decode(q, scale_bits) - w)
-    assert (err <= scale[:, None] / 2 + 1e-6).all()
+def test_colour_basis_is_orthonormal_and_exact_inverse():
+    assert np.allclose(COLOUR_BASIS @ COLOUR_BASIS.T, np.eye(3), atol=1e-15)
+    rows = np.random.default_rng(0).normal(size=(12, 5))
+    assert np.allclose(from_colour_basis(to_colour_basis(rows)), rows, atol=1e-13)
+    # grey triples (R = G = B) have only the first basis row
+    grey = np.repeat(np.random.default_rng(1).normal(size=(4, 1, 5)), 3, axis=1).reshape(12, 5)
+    assert np.abs(to_colour_basis(grey).reshape(4, 3, 5)[:, 1:]).max() < 1e-12
+
+
+@pytest.mark.parametrize("fraction", [0.02, 0.35, 1.0])
+def test_weights_within_their_steps(fraction):
+    rng = np.random.default_rng(0)
+    codebooks = rng.normal(size=(3, 4, 8))
+    layers = [(rng.normal(size=(8, 8)), rng.normal(size=8)), (rng.normal(size=(12, 8)) * 0.1, rng.normal(size=12))]
+    steps = weight_steps(codebooks, layers, fraction)
+    # a fraction of each array's RMS (the last layer's in the colour basis, whose RMS is the same)
+    for step, w in zip(steps, [codebooks] + [w for w, _ in layers], strict=True):
+        assert np.isclose(step, fraction * np.sqrt(np.mean(w**2)), rtol=1e-6)
+    qc, coded = weights_encode(steps, codebooks, layers)
+    cb, decoded = weights_decode(steps, qc, coded)
+    assert cb.dtype == np.float32 and np.abs(cb - codebooks).max() <= steps[0] / 2 * (1 + 1e-6)
+    (w0, b0), (w1, b1) = decoded
+    assert np.abs(w0 - layers[0][0]).max() <= steps[1] / 2 * (1 + 1e-6)
+    assert np.abs(b0 - layers[0][1]).max() <= steps[1] / BIAS_STEP_DIVISOR / 2 * (1 + 1e-6)
+    # the last layer's errors, half a step in the basis, reach RGB through its columns
+    reach = np.abs(COLOUR_BASIS).sum(axis=0).max() / 2
+    assert np.abs(w1 - layers[1][0]).max() <= reach * steps[2] * (1 + 1e-6)
+    assert np.abs(b1 - layers[1][1]).max() <= reach * steps[2] / BIAS_STEP_DIVISOR * (1 + 1e-6)
+    # and the error of a row triple, as a vector, is the basis's: at most half a step per row
+    assert np.linalg.norm((w1 - layers[1][0]).reshape(4, 3, 8), axis=1).max() <= np.sqrt(3) / 2 * steps[2] * (1 + 1e-6)

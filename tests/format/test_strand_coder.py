@@ -329,12 +329,20 @@ def _vector_with_quant(edit) -> bytes:
     lambda quant: quant.pop("newton_halvings"),  # before searched Newton steps
     lambda quant: quant.pop("stretch_max"),  # before stretched residual steps
     lambda quant: quant.pop("neighbour_classes"),  # before neighbour token contexts
-    lambda quant: quant.pop("base_guide")])  # before guided base samples
+    lambda quant: quant.pop("base_guide"),  # before guided base samples
+    lambda quant: quant.update(half_bias=True) or quant.pop("weight_steps")])  # weights in 4..8-bit rows
 def test_a_pre_release_draft_file_gets_a_clear_error(edit):
     """Drafts of 1.0 stored ``logit_step``, or no ``level_taps``, ``newton_halvings``, ``stretch_max``,
-    ``neighbour_classes`` or ``base_guide``; say so, and what to do."""
+    ``neighbour_classes``, ``base_guide`` or ``weight_steps``; say so, and what to do."""
     with pytest.raises(InvalidContentError, match="pre-release draft.*write the asset again"):
         cgh.decode(_vector_with_quant(edit))
+
+
+@pytest.mark.parametrize("steps", [[], [0.1, 0.1], [0.1, 0.1, 0.0], [0.1, -0.1, 0.1], [0.1, 0.1, "0.1"],
+                                   [0.1, 0.1, True], [0.1, 0.1, 0.1, 0.1], [0.1, 0.1, float("nan")]])
+def test_weight_steps_out_of_range_are_refused(steps):
+    with pytest.raises(InvalidContentError, match="weight_steps must list 3 positive steps"):
+        cgh.decode(_vector_with_quant(lambda quant: quant.update(weight_steps=steps)))
 
 
 @pytest.mark.parametrize(("chooser", "key", "choice"), [

@@ -1,4 +1,4 @@
-"""``python -m training.precision``: render PSNR of each profile and weight depth against lossless."""
+"""``python -m training.precision``: render PSNR of each profile and weight step against lossless."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from training_helpers import hair_cap
 import cghair_format as cgh
 from cghair_format.cards import build_cards
 from training.dataset import render_dataset
-from training.precision import main, measure, with_weight_bits
+from training.precision import main, measure, with_weight_step
 
 
 def test_coarser_weights_and_profiles_cost_picture_quality(tmp_path, capsys):
@@ -17,18 +17,18 @@ def test_coarser_weights_and_profiles_cost_picture_quality(tmp_path, capsys):
     from training.dataset import read_dataset
 
     views = read_dataset(tmp_path / "ds").split("test")
-    rows = {r["what"]: r for r in measure(asset, views, bits=(8, 4))}
+    rows = {r["what"]: r for r in measure(asset, views, steps=(0.02, 0.5))}
     assert rows["high file"]["psnr"] > rows["compact file"]["psnr"] > 30
-    assert rows["8-bit weights only"]["psnr"] > rows["4-bit weights only"]["psnr"]
+    assert rows["weight step 0.02 only"]["psnr"] > rows["weight step 0.5 only"]["psnr"]
     assert rows["compact file"]["bytes"] < rows["high file"]["bytes"]
     # only the weights change
-    coarse = with_weight_bits(asset, 4)
+    coarse = with_weight_step(asset, 0.5)
     assert (coarse.uvd == asset.uvd).all() and (coarse.opacity == asset.opacity).all()
     assert not (coarse.appearance.mlp[-1].weight == asset.appearance.mlp[-1].weight).all()
 
     cgh.write(asset, tmp_path / "ref.cgh", "lossless")
-    assert main([str(tmp_path / "ref.cgh"), str(tmp_path / "ds"), "--bits", "6"]) == 0
+    assert main([str(tmp_path / "ref.cgh"), str(tmp_path / "ds"), "--weight-steps", "0.2"]) == 0
     out = capsys.readouterr().out
-    assert "compact file" in out and "6-bit weights only" in out
+    assert "compact file" in out and "weight step 0.2 only" in out
     assert main([str(tmp_path / "missing.cgh"), str(tmp_path / "ds")]) == 1
     assert "error" in capsys.readouterr().err
