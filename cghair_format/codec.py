@@ -18,7 +18,7 @@ import numpy as np
 from . import container, rans
 from .asset import ACTIVATIONS, UP_AXES, WEIGHT_MODES, Appearance, Cards, HairAsset, MlpLayer
 from .errors import AssetError, InvalidContentError, LimitError
-from .geometry import CardMap, card_scales, strand_points
+from .geometry import CardMap, angle_normals, card_scales, normal_angles, strand_points
 from .parallel import map_blocks
 from .profiles import Profile, get_profile
 from .quantize import (
@@ -26,8 +26,6 @@ from .quantize import (
     hier_decode,
     hier_encode,
     level_plan,
-    oct_decode,
-    oct_encode,
     softmax_levels_decode,
     softmax_levels_encode,
     weight_steps,
@@ -215,10 +213,10 @@ def _meta(asset: HairAsset, prof: Profile, step: float | None, diag: float) -> d
 
 
 def _normal_bits(asset: HairAsset, prof: Profile) -> int:
-    """The profile's octahedral bits for the card normals, or more where points lie so far off their
-    card that the normals' error (about 2 / 2^(bits-1) rad, times the distance) would reach a quarter
-    of the shortest card segment: a step in ``u`` would then move such a point far more than the strip
-    does, and no step would meet the tolerance."""
+    """The profile's bits for the card normals' angles, or more where points lie so far off their card
+    that the normals' error (at most pi / 2^bits rad, bounded here by 4 / 2^bits, times the distance)
+    would reach a quarter of the shortest card segment: a step in ``u`` would then move such a point
+    far more than the strip does, and no step would meet the tolerance."""
     seg = np.linalg.norm(np.diff(asset.cards.spine.astype(np.float64), axis=1), axis=-1).min(axis=1)
     far = np.zeros(asset.cards.count)
     np.maximum.at(far, asset.strand_card, np.abs(asset.uvd[..., 2]).max(axis=1))
@@ -270,9 +268,9 @@ def _parse_meta(raw: bytes) -> dict:
                 "newton_halvings", "stretch_max", "neighbour_classes", "base_guide", "weight_steps"))):
         raise InvalidContentError("written by a pre-release draft of .cgh 1.0 (before the rANS strand coder, "
                                   "searched Newton steps, stretched residual steps, neighbour token contexts, "
-                                  "guided base samples or weights on steps), which this reader cannot decode: write "
-                                  "the asset again from its source (cgh encode, or cgh train --resume CHECKPOINT)",
-                                  chunk="META")
+                                  "guided base samples, weights on steps or card normals as angles), which this "
+                                  "reader cannot decode: write the asset again from its source (cgh encode, or "
+                                  "cgh train --resume CHECKPOINT)", chunk="META")
     if not need("lossless", bool, src=quant):
         for key in ("step", "card_step", "opacity_scale"):
             need(key, (int, float), 1e-30, src=quant)
@@ -628,11 +626,13 @@ def _optional_chunks(asset: HairAsset) -> list[container.Chunk]:
     return out
 
 
-def _put_hier(w: StreamWriter, y: np.ndarray, base_stride: int) -> None:
+def _put_hier(w: StreamWriter, y: np.ndarray, base_stride: int) -> np.ndarray:
+    """Write ``y [rows, n]`` (step units) hierarchically; return it as a decoder will read it."""
     base, levels = hier_encode(y, base_stride)
     w.ints(base)
     for r in levels:
         w.ints(r)
+    return hier_decode(base, levels, y.shape[1], base_stride)
 
 
 def _get_hier(r: StreamReader, rows: int, n: int, base_stride: int, name: str) -> np.ndarray:
@@ -646,10 +646,9 @@ def _encode_cards(cards: Cards, q: dict, w: StreamWriter) -> Cards:
     """Write the card streams; return the cards as the decoder will see them."""
     c, m1 = cards.half_width.shape
     cq, s = q["card_step"], q["base_stride"]
-    _put_hier(w, cards.spine.transpose(0, 2, 1).reshape(-1, m1) / cq, s)
-    scale = (1 << (q["normal_bits"] - 1)) - 1
-    octf = oct_encode(cards.normal, 24) / ((1 << 23) - 1) * scale  # unrounded octahedral coordinates
-    _put_hier(w, octf.transpose(0, 2, 1).reshape(-1, m1), s)
+    spine = _put_hier(w, cards.spine.transpose(0, 2, 1).reshape(-1, m1) / cq, s)
+    # the normals' angles about the spine as the decoder will have it
+    _put_hier(w, normal_angles(cards.normal, spine.reshape(c, 3, m1).transpose(0, 2, 1) * cq, q["normal_bits"]), s)
     _put_hier(w, cards.half_width / cq, s)
     return _decode_cards(StreamReader(w.getvalue(), "CARD"), c, m1, q, np.zeros(c, np.int32))
 
@@ -657,8 +656,7 @@ def _encode_cards(cards: Cards, q: dict, w: StreamWriter) -> Cards:
 def _decode_cards(r: StreamReader, c: int, m1: int, q: dict, group: np.ndarray | None = None) -> Cards:
     cq, s = q["card_step"], q["base_stride"]
     spine = _get_hier(r, c * 3, m1, s, "spine").reshape(c, 3, m1).transpose(0, 2, 1) * cq
-    octv = _get_hier(r, c * 2, m1, s, "normal").reshape(c, 2, m1).transpose(0, 2, 1)
-    normal = oct_decode(octv, q["normal_bits"])
+    normal = angle_normals(_get_hier(r, c, m1, s, "normal angle"), spine, q["normal_bits"])
     half_width = np.maximum(_get_hier(r, c, m1, s, "half_width") * cq, 0.0)
     return Cards(_float32(spine, "card spines", "CARD"), normal.astype(np.float32),
                  _float32(half_width, "card half-widths", "CARD"),

@@ -32,6 +32,45 @@ def spine_tangents(spine: np.ndarray) -> np.ndarray:
     return _normalize(d)
 
 
+def _reference_axis(t: np.ndarray) -> np.ndarray:
+    """``normalize(e x t)`` for the unit axis ``e`` (x, y or z, the first on ties) least aligned
+    with each ``t [..., 3]``."""
+    e = np.eye(3)[np.argmin(np.abs(t), axis=-1)]
+    return _normalize(np.cross(e, t))
+
+
+def spine_frames(spine: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per spine point, the unit tangent ``t_k`` and a reference ``r_k`` across it, carried along the
+    spine (spec 5): ``r_0`` from the axis least aligned with ``t_0``; ``r_k`` is ``r_(k-1)`` made
+    perpendicular to ``t_k`` (the axis rule again where that leaves less than 1e-6). Float64."""
+    t = spine_tangents(np.asarray(spine, np.float64))
+    r = np.empty_like(t)
+    r[:, 0] = _reference_axis(t[:, 0])
+    for k in range(1, t.shape[1]):
+        v = r[:, k - 1] - np.sum(r[:, k - 1] * t[:, k], axis=-1, keepdims=True) * t[:, k]
+        short = np.linalg.norm(v, axis=-1) < 1e-6
+        r[:, k] = np.where(short[:, None], _reference_axis(t[:, k]), _normalize(v))
+    return t, r
+
+
+def normal_angles(normal: np.ndarray, spine: np.ndarray, bits: int) -> np.ndarray:
+    """Card normals ``[C, M+1, 3]`` as angles about the spine (:func:`spine_frames`), in units of
+    ``2 pi / 2^bits``, unwrapped along each card so that neighbouring angles differ by less than half
+    a turn (the normals' component along the spine is dropped: the card builder's have none)."""
+    t, r = spine_frames(spine)
+    n = np.asarray(normal, np.float64)
+    theta = np.arctan2(np.sum(n * np.cross(t, r), axis=-1), np.sum(n * r, axis=-1))
+    return np.unwrap(theta, axis=1) * (2**bits / (2 * np.pi))
+
+
+def angle_normals(angle: np.ndarray, spine: np.ndarray, bits: int) -> np.ndarray:
+    """Inverse of :func:`normal_angles`: ``normalize(cos a r_k + sin a (t_k x r_k))``, ``a = 2 pi angle /
+    2^bits``, float64."""
+    t, r = spine_frames(spine)
+    a = np.asarray(angle, np.float64)[..., None] * (2 * np.pi / 2**bits)
+    return _normalize(np.cos(a) * r + np.sin(a) * np.cross(t, r))
+
+
 def card_bitangents(cards: Cards) -> np.ndarray:
     """Unit bitangents ``b_k = normalize(n_k x t_k)``, ``[C, M+1, 3]``."""
     return _normalize(np.cross(cards.normal, spine_tangents(cards.spine)))

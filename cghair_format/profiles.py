@@ -20,7 +20,7 @@ class Profile:
     # codebook and MLP weights (and biases): integers times a step of this fraction of each array's RMS
     # (0.35: the error of the 4-bit levels per row it replaced)
     weight_step: float = 0.35
-    normal_bits: int = 8  # card normals: octahedral bits per coordinate (8..24), about 2 / 2^(bits-1) rad
+    normal_bits: int = 8  # card normals: angles about the spine in 2^bits steps a turn (8..24), error pi / 2^bits rad
     # hierarchical predictor: coarse samples every this many points, the one of these that codes the
     # strand points of a sample of cards smaller (the first codes the cards while the writer chooses)
     base_strides: tuple[int, ...] = (16, 8)

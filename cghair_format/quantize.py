@@ -133,30 +133,6 @@ def _interp(rec: np.ndarray, nb: np.ndarray, wt: np.ndarray) -> np.ndarray:
     return out
 
 
-# --- unit vectors ------------------------------------------------------------------------------
-
-def oct_encode(n: np.ndarray, bits: int = 16) -> np.ndarray:
-    """Octahedral map of unit vectors ``[..., 3]`` to signed integers ``[..., 2]`` of ``bits`` bits."""
-    n = n / np.abs(n).sum(axis=-1, keepdims=True)
-    x, y, z = n[..., 0], n[..., 1], n[..., 2]
-    ox = np.where(z >= 0, x, (1 - np.abs(y)) * np.where(x >= 0, 1.0, -1.0))
-    oy = np.where(z >= 0, y, (1 - np.abs(x)) * np.where(y >= 0, 1.0, -1.0))
-    scale = (1 << (bits - 1)) - 1
-    return np.rint(np.stack([ox, oy], axis=-1) * scale).astype(np.int64)
-
-
-def oct_decode(q: np.ndarray, bits: int = 16) -> np.ndarray:
-    """Inverse of :func:`oct_encode`: unit vectors ``[..., 3]`` (float64)."""
-    scale = (1 << (bits - 1)) - 1
-    ox, oy = q[..., 0] / scale, q[..., 1] / scale
-    z = 1 - np.abs(ox) - np.abs(oy)
-    t = np.maximum(-z, 0)
-    x = ox - np.where(ox >= 0, t, -t)
-    y = oy - np.where(oy >= 0, t, -t)
-    v = np.stack([x, y, z], axis=-1)
-    return v / np.linalg.norm(v, axis=-1, keepdims=True)
-
-
 # --- soft logits -------------------------------------------------------------------------------
 
 def softmax_levels_encode(logits: np.ndarray, temperature: float, levels: int) -> np.ndarray:

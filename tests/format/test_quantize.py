@@ -5,6 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from cghair_format.geometry import angle_normals, normal_angles, spine_frames
 from cghair_format.quantize import (
     BIAS_STEP_DIVISOR,
     COLOUR_BASIS,
@@ -12,8 +13,6 @@ from cghair_format.quantize import (
     hier_decode,
     hier_encode,
     level_plan,
-    oct_decode,
-    oct_encode,
     to_colour_basis,
     unzigzag,
     weight_steps,
@@ -81,14 +80,40 @@ def test_hierarchical_coder_zeroes_smooth_curves():
 
 
 @settings(max_examples=30, deadline=None)
-@given(seed=st.integers(0, 10**6))
-def test_octahedral_normals_within_bound(seed):
-    n = np.random.default_rng(seed).normal(size=(500, 3))
-    n /= np.linalg.norm(n, axis=1, keepdims=True)
-    back = oct_decode(oct_encode(n, 16), 16)
-    # octahedral quantization at b bits: angular error below ~2 / (2^(b-1) - 1) radians
-    assert np.abs(back - n).max() < 2.0 / (2**15 - 1)
-    assert np.allclose(np.linalg.norm(back, axis=1), 1.0)
+def _twisting_cards(seed: int, cards: int = 5, points: int = 33):
+    """Spines that wander and turn, with unit normals across them that twist along each card."""
+    rng = np.random.default_rng(seed)
+    spine = np.cumsum(rng.normal(size=(cards, points, 3)) * 0.2 + [0.0, 0.0, 1.0], axis=1)
+    t, r = spine_frames(spine)
+    twist = np.cumsum(rng.normal(size=(cards, points)) * 0.5, axis=1)[..., None]
+    return spine, np.cos(twist) * r + np.sin(twist) * np.cross(t, r)
+
+
+@given(seed=st.integers(0, 10**6), bits=st.integers(8, 24))
+def test_normal_angles_within_bound(seed, bits):
+    spine, normal = _twisting_cards(seed)
+    t, r = spine_frames(spine)
+    # the frames: unit tangents, unit references across them
+    assert np.allclose(np.linalg.norm(r, axis=-1), 1) and np.abs(np.sum(r * t, axis=-1)).max() < 1e-9
+    angle = normal_angles(normal, spine, bits)
+    # unwrapped: neighbouring angles less than half a turn apart, so interpolating them is meaningful
+    assert np.abs(np.diff(angle, axis=1)).max() < 2 ** (bits - 1)
+    back = angle_normals(np.rint(angle), spine, bits)
+    # rounding to 2^bits steps a turn: at most half a step, pi / 2^bits rad
+    err = np.arccos(np.clip(np.sum(back * normal, axis=-1), -1, 1))
+    assert err.max() <= np.pi / 2**bits * (1 + 1e-6) + 1e-7
+    assert np.allclose(np.linalg.norm(back, axis=-1), 1) and np.abs(np.sum(back * t, axis=-1)).max() < 1e-9
+
+
+def test_normal_angles_survive_a_tangent_along_the_carried_reference():
+    # t_0 = z gives r_0 = normalize(x cross z) = -y; the spine then doubles back so that t_1 = -y, along
+    # r_0: nothing of r_0 is left across t_1, and the axis rule gives r_1 = normalize(x cross -y) = -z
+    spine = np.array([[[0, 0, 0], [0, 0, 1], [0, -1, 0]]], np.float64)
+    t, r = spine_frames(spine)
+    assert np.allclose(t[0, 1], [0, -1, 0]) and np.allclose(r[0, :2], [[0, -1, 0], [0, 0, -1]])
+    assert np.abs(np.sum(r * t, axis=-1)).max() < 1e-9
+    normal = np.cross(t, r)
+    assert np.allclose(angle_normals(np.rint(normal_angles(normal, spine, 8)), spine, 8), normal, atol=1e-12)
 
 
 def test_colour_basis_is_orthonormal_and_exact_inverse():
