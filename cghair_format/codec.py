@@ -31,7 +31,6 @@ from .quantize import (
     weight_steps,
     weights_decode,
     weights_encode,
-    zigzag,
 )
 from .residual_coder import (
     MAX_NEIGHBOUR_CLASSES,
@@ -497,7 +496,7 @@ def _narrowest(top: int) -> type:
 
 def _estimate(residuals: np.ndarray) -> float:
     """Bytes that STRD's entropy coder needs for these residuals, roughly: the writer's yardstick."""
-    return rans.estimate_bytes(zigzag(residuals))
+    return rans.estimate_bytes(residuals)
 
 
 def _prediction(q: dict) -> Prediction:

@@ -16,6 +16,7 @@ import numpy as np
 
 from . import _native
 from .errors import InvalidContentError
+from .quantize import zigzag
 
 DIRECT = 16
 ALPHABET = DIRECT + 60  # bit lengths 5 .. 64
@@ -95,11 +96,19 @@ def normalize(counts: np.ndarray) -> np.ndarray:
     return freq
 
 
-def estimate_bytes(u: np.ndarray) -> float:
-    """Order-0 size estimate of unsigned integers under this coder: token entropy plus extra bits."""
-    sym, _ = tokens(u)
-    counts = np.bincount(sym.ravel(), minlength=ALPHABET)
-    p = counts[counts > 0] / sym.size
+def estimate_bytes(r: np.ndarray) -> float:
+    """Order-0 size estimate of signed residuals ``r`` under this coder, which zigzag-codes them: token
+    entropy plus extra bits. Counted without forming the tokens: the writer calls it often."""
+    r = np.asarray(r, np.int64).ravel()
+    half = DIRECT // 2  # residuals -half .. half - 1 are the direct tokens 2r (r >= 0) and -2r - 1 (r < 0)
+    near = np.bincount(np.clip(r, -half - 1, half) + half + 1, minlength=DIRECT + 2)  # 0 and DIRECT + 1: beyond
+    counts = np.zeros(ALPHABET, np.int64)
+    counts[0:DIRECT:2] = near[half + 1:DIRECT + 1]
+    counts[1:DIRECT:2] = near[half:0:-1]
+    if near[0] or near[-1]:
+        far = zigzag(r[(r < -half) | (r >= half)])
+        counts[DIRECT:] = np.bincount(bit_length(far) - 5, minlength=ALPHABET - DIRECT)
+    p = counts[counts > 0] / r.size
     extra_bits = int(counts @ TOKEN_WIDTHS.astype(np.int64))
     return float(-(counts[counts > 0] * np.log2(p)).sum() + extra_bits) / 8
 

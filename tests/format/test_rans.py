@@ -8,6 +8,7 @@ from hypothesis import strategies as st
 
 from cghair_format import rans, residual_coder
 from cghair_format.errors import CghFormatError, InvalidContentError, TruncatedError
+from cghair_format.quantize import zigzag
 from cghair_format.streams import StreamReader, StreamWriter
 
 
@@ -182,3 +183,18 @@ def test_tables_with_a_free_symbol_are_refused():
     with pytest.raises(InvalidContentError, match="above"):
         rans.Tables(freq, "STRD")
     assert rans.normalize(np.eye(1, rans.ALPHABET, 0, dtype=np.int64) * 1000).max() == rans.MAX_FREQ
+
+
+def test_the_estimate_counts_what_the_tokens_cost():
+    """The writer's yardstick, counted without forming tokens, equals the order-0 cost of the tokens
+    the coder would form from the zigzag-coded residuals."""
+    rng = np.random.default_rng(0)
+    r = np.concatenate([rng.laplace(0, 3, 5000), rng.laplace(0, 400, 500), [-9, -8, 7, 8, 2**40, -2**40]])
+    r = np.rint(r).astype(np.int64)
+    sym, _ = rans.tokens(zigzag(r))
+    counts = np.bincount(sym, minlength=rans.ALPHABET)
+    used = counts > 0
+    extra = counts @ rans.TOKEN_WIDTHS.astype(np.int64)
+    expected = (-(counts[used] * np.log2(counts[used] / r.size)).sum() + extra) / 8
+    assert rans.estimate_bytes(r) == pytest.approx(expected, rel=1e-12)
+    assert rans.estimate_bytes(np.zeros(10, np.int64)) == 0
