@@ -68,6 +68,9 @@ MAX_TIGHTENINGS = 8
 STEP_START = 1.0  # first step, as a fraction of the position tolerance
 TIGHTEN_TARGET = 0.97  # a retry aims the measured error at this fraction of the tolerance ...
 GROW_BELOW = 0.9  # ... and a first step whose error is below this fraction is retried larger, once
+NUDGE, NUDGE_RARE = 0.99, 100_000  # where one point, or one in NUDGE_RARE, misses the tolerance, the step is
+# first made 1 % smaller instead: the lattices align anew, and isolated misses seldom recur (harolongo with
+# base order 2 for u: one point of 2.5 M at 1.08 tol; 0.99 q passes, 0.90 q costs 1.1 % of the file)
 DEAD_ZONE = 0.97  # a refinement residual stays zero where the prediction is this close to the input (x tol)
 BASE_SAMPLE_CARDS = 100  # the base stride and guide are chosen on this many cards
 
@@ -149,12 +152,13 @@ def encode(asset: HairAsset, profile: str | Profile = "compact", keep_order: boo
     # where it usually meets the bound at once, then tighten or grow
     step = None if prof.lossless else STEP_START * tol
     passed = None  # (step, error, quantized geometry) of the largest step that met the bound so far
-    choices = None
+    choices, nudged = None, False
     for attempt in range(MAX_TIGHTENINGS):
         geometry = _quantize_geometry(asset, prof, step, diag, points, tol, choices)
         choices = geometry.choices
         decoded = geometry.decoded_points
-        err = 0.0 if decoded is None else float(np.linalg.norm(decoded - points, axis=-1).max())
+        dist = np.zeros(1) if decoded is None else np.linalg.norm(decoded - points, axis=-1)
+        err = float(dist.max())
         if step is None:
             passed = (step, err, geometry)
             break
@@ -164,7 +168,10 @@ def encode(asset: HairAsset, profile: str | Profile = "compact", keep_order: boo
                 break  # only a first step well inside the bound is retried larger
         elif passed is not None:
             break
-        step *= TIGHTEN_TARGET * tol / err if err > 0 else 1 / GROW_BELOW
+        if err > tol and not nudged and np.count_nonzero(dist > tol) <= max(1, dist.size // NUDGE_RARE):
+            step, nudged = step * NUDGE, True
+        else:
+            step *= TIGHTEN_TARGET * tol / err if err > 0 else 1 / GROW_BELOW
     if passed is None:
         raise AssetError(f"could not meet the position tolerance {tol:g} (error {err:g})")
     step, err, geometry = passed

@@ -212,3 +212,27 @@ def test_an_mlp_that_could_overflow_float32_is_refused():
     big.appearance.mlp[-1].weight[:] = 1e36
     with pytest.raises(AssetError, match="safe range"):
         cgh.encode(big, "lossless")
+
+
+@pytest.mark.parametrize(("missing", "nudged"), [(1, True), (100, False)])
+def test_an_isolated_miss_nudges_the_step_and_many_tighten_it(missing, nudged, monkeypatch):
+    """A point or two beyond the bound is a matter of where the lattice falls: the writer first tries a
+    step 1 % smaller. Many points beyond it mean the step is too coarse: it shrinks with the error."""
+    real, steps = cgh.codec._quantize_geometry, []
+
+    def first_attempt_misses(asset, prof, step, diag, points, tol, choices):
+        geometry = real(asset, prof, step, diag, points, tol, choices)
+        steps.append(step)
+        if len(steps) == 1:  # move ``missing`` points 1.2 tolerances off their input
+            decoded = geometry.decoded_points.copy()
+            decoded.reshape(-1, 3)[:missing] = points.reshape(-1, 3)[:missing] + [1.2 * tol, 0, 0]
+            geometry = geometry._replace(decoded_points=decoded)
+        return geometry
+
+    monkeypatch.setattr(cgh.codec, "_quantize_geometry", first_attempt_misses)
+    data, report = cgh.encode(example_asset(0), "compact")
+    assert len(steps) == 2 and report.step == steps[1]
+    if nudged:
+        assert steps[1] == pytest.approx(cgh.codec.NUDGE * steps[0])
+    else:
+        assert steps[1] == pytest.approx(cgh.codec.TIGHTEN_TARGET / 1.2 * steps[0])
