@@ -266,6 +266,10 @@ def _parse_meta(raw: bytes) -> dict:
         if not isinstance(layer, dict) or layer.get("activation") not in ACTIVATIONS:
             raise InvalidContentError("META mlp layer needs an activation of relu or none", chunk="META")
         need("out", int, 1, LIMITS["mlp_width"], src=layer)
+    sh_values = (meta["points"] - 1) * (meta["sh_degree"] + 1) ** 2 * 3
+    if layers[-1]["out"] != sh_values:  # the quantized last layer's rows are colour triples (spec 4.4)
+        raise InvalidContentError(f"META mlp's last layer must output (points - 1) x (sh_degree + 1)^2 x 3 = "
+                                  f"{sh_values} values, got {layers[-1]['out']}", chunk="META")
     quant = meta.get("quant")
     if not isinstance(quant, dict):
         raise InvalidContentError("META quant must be an object", chunk="META")

@@ -41,7 +41,7 @@ def _reference_axis(t: np.ndarray) -> np.ndarray:
 
 def spine_frames(spine: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per spine point, the unit tangent ``t_k`` and a reference ``r_k`` across it, carried along the
-    spine (spec 5): ``r_0`` from the axis least aligned with ``t_0``; ``r_k`` is ``r_(k-1)`` made
+    spine (spec 4.2): ``r_0`` from the axis least aligned with ``t_0``; ``r_k`` is ``r_(k-1)`` made
     perpendicular to ``t_k`` (the axis rule again where that leaves less than 1e-6). Float64."""
     t = spine_tangents(np.asarray(spine, np.float64))
     r = np.empty_like(t)

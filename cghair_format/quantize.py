@@ -193,7 +193,7 @@ def steps_decode(q: np.ndarray, step: float) -> np.ndarray:
 
 def weight_steps(codebooks: np.ndarray, layers: list[tuple[np.ndarray, np.ndarray]], fraction: float) -> list[float]:
     """One step per array: the codebooks', then each MLP layer's (:func:`weight_step` of its weights,
-    the last layer's in :data:`COLOUR_BASIS`), which its bias shares."""
+    the last layer's in :data:`COLOUR_BASIS`); a layer's biases take a sixteenth of its step."""
     return [weight_step(codebooks, fraction)] + [
         weight_step(to_colour_basis(w) if j == len(layers) - 1 else w, fraction) for j, (w, _) in enumerate(layers)]
 

@@ -314,11 +314,16 @@ def unguided(monkeypatch) -> None:
 
 def _vector_with_quant(edit) -> bytes:
     """spec/vectors/small_compact.cgh with its META quant changed by ``edit`` (checksums redone)."""
+    return _vector_with_meta(lambda meta: edit(meta["quant"]))
+
+
+def _vector_with_meta(edit) -> bytes:
+    """spec/vectors/small_compact.cgh with its META changed by ``edit`` (checksums redone)."""
     data = (codec.Path(__file__).parents[2] / "spec" / "vectors" / "small_compact.cgh").read_bytes()
     _, infos = container.read_table(data)
     payloads = container.unpack(data, set(codec.REQUIRED_CHUNKS))[2]
     meta = json.loads(payloads["META"])
-    edit(meta["quant"])
+    edit(meta)
     payloads["META"] = json.dumps(meta).encode()
     return container.pack([container.Chunk(i.type, payloads[i.type], i.required) for i in infos])
 
@@ -343,6 +348,12 @@ def test_a_pre_release_draft_file_gets_a_clear_error(edit):
 def test_weight_steps_out_of_range_are_refused(steps):
     with pytest.raises(InvalidContentError, match="weight_steps must list 3 positive steps"):
         cgh.decode(_vector_with_quant(lambda quant: quant.update(weight_steps=steps)))
+
+
+def test_a_last_layer_that_does_not_output_the_sh_of_every_gaussian_is_refused():
+    """Its rows are read as colour triples: a count the spec forbids never reaches that reading."""
+    with pytest.raises(InvalidContentError, match="last layer must output"):
+        cgh.decode(_vector_with_meta(lambda meta: meta["mlp"][-1].update(out=meta["mlp"][-1]["out"] + 1)))
 
 
 @pytest.mark.parametrize(("chooser", "key", "choice"), [
