@@ -70,29 +70,62 @@ def pack_bits(width: np.ndarray, value: np.ndarray) -> np.ndarray:
     return out
 
 
-def normalize(counts: np.ndarray) -> np.ndarray:
-    """Frequency tables ``[T, ALPHABET]`` summing to ``TOTAL`` (all-zero rows stay zero), every
-    counted symbol at least 1 and none above ``MAX_FREQ``: the writer's choice (any such table decodes)."""
+# A table is stored as one byte per token (spec 4.3.2): 0 for a token the table never codes, 1 ..
+# MAX_CODE for a frequency of round(2^((code - 1) / LOG_STEPS)), and REST for the one token that takes
+# what the others leave of TOTAL. Frequencies on a log scale, 4 steps an octave (19 % apart), cost about
+# a third less to store than 12-bit counts, and coding with them about 0.05 % more (harolongo).
+LOG_STEPS = 4
+MAX_CODE = 1 + LOG_STEPS * PROB_BITS  # a frequency of TOTAL: more than any but a REST entry can take
+REST = 255
+
+
+def code_frequencies(codes: np.ndarray) -> np.ndarray:
+    """The frequencies of table codes other than REST (0 for 0 and REST)."""
+    codes = np.asarray(codes, np.int64)
+    f = np.rint(2.0 ** ((np.clip(codes, 1, MAX_CODE) - 1) / LOG_STEPS)).astype(np.int64)
+    return np.where((codes > 0) & (codes <= MAX_CODE), f, 0)
+
+
+def quantize_tables(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The writer's tables for token counts ``[T, ALPHABET]``: their codes (uint8) and the frequencies
+    they decode to. Each counted token gets the code nearest its share of TOTAL on the log scale,
+    the most counted one REST; where that would leave REST outside 1 .. MAX_FREQ, the largest other
+    entry (or, with none, the next token) moves a code at a time until it does not."""
     counts = np.asarray(counts, np.int64)
     total = counts.sum(axis=1, keepdims=True)
-    freq = np.where(counts > 0, np.maximum(1, counts * TOTAL // np.maximum(total, 1)), 0)
-    for t in np.flatnonzero(total[:, 0]):
-        row = freq[t]
-        order = np.argsort(-row, kind="stable")
-        diff = TOTAL - int(row.sum())  # rounding: the largest entries absorb it
-        if diff > 0:
-            row[order[0]] += diff
-        for j in order:
-            if diff >= 0:
-                break
-            take = min(int(row[j]) - 1, -diff)
-            row[j] -= take
-            diff += take
-        top = order[0]
-        if row[top] > MAX_FREQ:  # no symbol may be (nearly) free: see check_budget
-            other = order[1] if row[order[1]] > 0 else (top + 1) % ALPHABET
-            row[other] += row[top] - MAX_FREQ
-            row[top] = MAX_FREQ
+    share = np.maximum(counts * TOTAL / np.maximum(total, 1), 1.0)
+    codes = np.where(counts > 0, np.minimum(1 + np.rint(LOG_STEPS * np.log2(share)), MAX_CODE), 0).astype(np.int64)
+    rows = np.flatnonzero(total[:, 0])
+    top = np.argmax(counts, axis=1)
+    codes[rows, top[rows]] = 0
+    rest = TOTAL - code_frequencies(codes).sum(axis=1)
+    for t in rows[(rest[rows] < 1) | (rest[rows] > MAX_FREQ)]:  # rare: a dominant or a flat table
+        row = codes[t]
+        while not 1 <= rest[t] <= MAX_FREQ:
+            f = code_frequencies(row)
+            if rest[t] > MAX_FREQ:
+                j = int(np.argmax(f)) if f.any() else (top[t] + 1) % ALPHABET
+                row[j] += 1
+            else:
+                row[int(np.argmax(f))] -= 1
+            rest[t] = TOTAL - code_frequencies(row).sum()
+    codes[rows, top[rows]] = REST
+    return codes.astype(np.uint8), table_frequencies(codes, "the writer's tables")
+
+
+def table_frequencies(codes: np.ndarray, where: str) -> np.ndarray:
+    """The frequencies ``[T, ALPHABET]`` of stored table codes (spec 4.3.2). A row is all zero (a
+    table never used) or has exactly one REST, whose frequency is what the others leave of TOTAL and
+    must lie in 1 .. MAX_FREQ; any other code makes the file corrupt."""
+    codes = np.asarray(codes, np.int64)
+    used = codes.any(axis=1)
+    if ((codes > MAX_CODE) & (codes != REST)).any() or ((codes == REST).sum(axis=1) != used).any():
+        raise InvalidContentError(f"{where}: a table code is out of range, or a table lacks its one remainder entry")
+    freq = code_frequencies(codes)
+    rest = TOTAL - freq.sum(axis=1)
+    if ((rest < 1) | (rest > MAX_FREQ))[used].any():
+        raise InvalidContentError(f"{where}: a table's entries leave its remainder outside 1 .. {MAX_FREQ}")
+    freq[codes == REST] = rest[used]
     return freq
 
 

@@ -26,9 +26,10 @@ MIN_BLOCKS = 8  # ... so smaller assets use fewer lanes, S / 8 rounded up
 PREV_CLASSES, OTHER_CLASSES = 8, 4
 CONTEXTS = PREV_CLASSES * OTHER_CLASSES
 # Classes of the card neighbour's token (META quant.neighbour_classes, 1..8; 1: no such context). The
-# writer takes 3 or 1, whichever its cost estimate finds smaller: 3 takes 2.1 % off straight.hair's and
-# 1.1 % off harolongo's strand points at the paper's scale; on small files the larger tables cost more.
-NEIGHBOUR_CLASSES = 3
+# writer takes 4 or 1, whichever its cost estimate finds smaller: 4 takes 3.3 % off straight.hair's and
+# 2.2 % off harolongo's strand points at the paper's scale (with 12-bit tables 3 classes paid best, and
+# less); on small files the larger tables cost more.
+NEIGHBOUR_CLASSES = 4
 MAX_NEIGHBOUR_CLASSES = 8
 
 
@@ -70,7 +71,8 @@ class _Coding(NamedTuple):
     sym: np.ndarray  # [S, N, 3] tokens
     extra: np.ndarray  # [S, N, 3] their extra bits
     table: np.ndarray  # [S, N, 3] each token's table
-    freq: np.ndarray  # [T, ALPHABET] the tables
+    codes: np.ndarray  # [T, ALPHABET] the tables as stored (rans.quantize_tables) ...
+    freq: np.ndarray  # ... and their frequencies
     classes: int
     cost: float  # bytes: tokens, zstd-packed tables and extra bits
 
@@ -100,8 +102,8 @@ def _coding(arrays: list[np.ndarray], strand_card: np.ndarray | None, classes: t
                        prev, other, neighbour, c)
         n_tables = len(widths) * 3 * CONTEXTS * c
         counts = np.bincount((table * rans.ALPHABET + sym).ravel(), minlength=n_tables * rans.ALPHABET)  # int32
-        freq = rans.normalize(counts.reshape(n_tables, rans.ALPHABET))
-        trial = _Coding(sym, extra, table, freq, c, _cost(counts, freq) + extra_bytes)
+        codes, freq = rans.quantize_tables(counts.reshape(n_tables, rans.ALPHABET))
+        trial = _Coding(sym, extra, table, codes, freq, c, _cost(counts, codes, freq) + extra_bytes)
         if best is None or trial.cost < best.cost:
             best = trial
     return best
@@ -129,7 +131,7 @@ def write_residuals(w: StreamWriter, arrays: list[np.ndarray], strand_card: np.n
     step_table = _to_steps(coding.table, lanes, blocks).reshape(-1, lanes)
     step_active = np.repeat(active, step_sym.shape[0] // blocks)
     states, words = rans.encode(step_sym, step_table, step_active, tables)
-    _put_tables(w, tables.freq)
+    _put_tables(w, coding.codes)
     w.array(states)
     w.array(words)
     # in step order; the padding lanes of the last block have width 0 and add no bits
@@ -137,19 +139,19 @@ def write_residuals(w: StreamWriter, arrays: list[np.ndarray], strand_card: np.n
     return coding.classes
 
 
-def _cost(counts: np.ndarray, freq: np.ndarray) -> float:
+def _cost(counts: np.ndarray, codes: np.ndarray, freq: np.ndarray) -> float:
     """Bytes of the tokens counted in ``counts`` coded with the tables ``freq [T, ALPHABET]`` (what rANS
-    spends, within a few bytes), plus the tables as stored, zstd-packed (level 9)."""
+    spends, within a few bytes), plus the tables as stored (``codes``), zstd-packed (level 9)."""
     used = counts.reshape(freq.shape) > 0
     code_bits = float((counts.reshape(freq.shape)[used] * np.log2(rans.TOTAL / freq[used])).sum())
     packed = StreamWriter()
-    _put_tables(packed, freq)
+    _put_tables(packed, codes)
     return code_bits / 8 + len(zstandard.ZstdCompressor(level=9).compress(packed.getvalue()))
 
 
-def _put_tables(w: StreamWriter, freq: np.ndarray) -> None:
-    """The frequency tables' record (spec 4.3.2: ``u2[T, 76]``, byte-shuffled)."""
-    w.array(freq.astype(np.uint16), shuffle=True)
+def _put_tables(w: StreamWriter, codes: np.ndarray) -> None:
+    """The tables' record (spec 4.3.2: ``u1[T, 76]`` codes)."""
+    w.array(codes.astype(np.uint8))
 
 
 def read_residuals(r: StreamReader, strand_card: np.ndarray, widths: list[int], classes: int) -> np.ndarray:
@@ -159,7 +161,8 @@ def read_residuals(r: StreamReader, strand_card: np.ndarray, widths: list[int], 
     strands = len(strand_card)
     column_array, first, lanes, _ = _plan(widths, strands)
     n_tables = len(widths) * 3 * CONTEXTS * classes
-    tables = rans.Tables(r.array((n_tables, rans.ALPHABET), "token tables", ("<u2",)), "STRD token tables")
+    codes = r.array((n_tables, rans.ALPHABET), "token tables", ("|u1",))
+    tables = rans.Tables(rans.table_frequencies(codes, "STRD token tables"), "STRD token tables")
     states = r.array((lanes,), "rANS states", ("<u4",)).astype(np.uint32)
     words = r.array((None,), "rANS words", ("<u2",)).astype(np.uint16)
     extra_bits = r.array((None,), "extra bits", ("|u1",)).astype(np.uint8)

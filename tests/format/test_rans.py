@@ -132,14 +132,16 @@ def _records(data):
 
 def _rebuild(tables, states, words, extra):
     w = StreamWriter()
-    for a, shuffle in ((tables, True), (states, False), (words, False), (extra, False)):
-        w.array(a, shuffle=shuffle)
+    for a in (tables, states, words, extra):
+        w.array(a)
     return w.getvalue()
 
 
 @pytest.mark.parametrize("damage, error", [
     ("state_low", InvalidContentError), ("words_short", TruncatedError), ("words_long", InvalidContentError),
-    ("state_changed", CghFormatError), ("extra_short", InvalidContentError), ("table_sum", InvalidContentError),
+    ("state_changed", CghFormatError), ("extra_short", InvalidContentError), ("table_code", InvalidContentError),
+    ("table_two_rests", InvalidContentError), ("table_no_rest", InvalidContentError),
+    ("table_overfull", InvalidContentError),
 ])
 def test_damaged_streams_are_refused(damage, error):
     data, _ = _coded()
@@ -154,8 +156,17 @@ def test_damaged_streams_are_refused(damage, error):
         states[0] ^= 1 << 20
     elif damage == "extra_short":
         extra = extra[:-1]
-    else:
-        tables[np.flatnonzero(tables.sum(axis=1))[0], 0] += 1
+    else:  # the tables: a code beyond 49, a second or no remainder entry, entries that leave it below 1
+        row = tables[np.flatnonzero(tables.any(axis=1))[0]]
+        rest = int(np.flatnonzero(row == rans.REST)[0])
+        if damage == "table_code":
+            row[(rest + 1) % rans.ALPHABET] = 50
+        elif damage == "table_two_rests":
+            row[(rest + 1) % rans.ALPHABET] = rans.REST
+        elif damage == "table_no_rest":
+            row[rest] = 1
+        else:
+            row[(rest + 1) % rans.ALPHABET] = rans.MAX_CODE
     with pytest.raises(error) as info:
         residual_coder.read_residuals(StreamReader(_rebuild(tables, states, words, extra), "STRD"), np.zeros(50),
                                       [4, 7], 1)
@@ -169,8 +180,8 @@ def test_a_stream_claiming_more_symbols_than_it_can_hold_is_refused_at_once():
 
     w = StreamWriter()
     residual_coder.write_residuals(w, [np.zeros((8 * 4096, 1, 3), np.int64)])
-    assert (rans.Tables(StreamReader(w.getvalue(), "STRD").array((96, rans.ALPHABET), "t"), "t").freq
-            <= rans.MAX_FREQ).all()
+    codes = StreamReader(w.getvalue(), "STRD").array((96, rans.ALPHABET), "t")
+    assert rans.table_frequencies(codes, "t").max() == rans.MAX_FREQ
     start = time.perf_counter()
     with pytest.raises(InvalidContentError, match="cannot fit"):
         residual_coder.read_residuals(StreamReader(w.getvalue(), "STRD"), np.zeros(8 * 4096), [4000], 1)
@@ -182,7 +193,26 @@ def test_tables_with_a_free_symbol_are_refused():
     freq[0, 0] = rans.TOTAL
     with pytest.raises(InvalidContentError, match="above"):
         rans.Tables(freq, "STRD")
-    assert rans.normalize(np.eye(1, rans.ALPHABET, 0, dtype=np.int64) * 1000).max() == rans.MAX_FREQ
+    # the writer gives a table of one token another, enough to keep that one within MAX_FREQ
+    codes, freq = rans.quantize_tables(np.eye(1, rans.ALPHABET, 0, dtype=np.int64) * 1000)
+    assert freq[0, 0] == rans.MAX_FREQ and freq.sum() == rans.TOTAL and (codes > 0).sum() == 2
+
+
+@settings(max_examples=200, deadline=None)
+@given(seed=st.integers(0, 10**6), tokens=st.integers(1, rans.ALPHABET), skew=st.floats(0.0, 8.0))
+def test_the_writers_tables_decode_to_what_it_codes_with(seed, tokens, skew):
+    """Any counts, flat or dominated by one token: the stored codes decode to the frequencies the writer
+    codes with, which sum to TOTAL and give every counted token at least 1 and none above MAX_FREQ."""
+    rng = np.random.default_rng(seed)
+    counts = np.zeros((2, rans.ALPHABET), np.int64)  # the second row: a table never used
+    picked = rng.choice(rans.ALPHABET, tokens, replace=False)
+    counts[0, picked] = np.maximum(1, rng.exponential(1.0, tokens) ** skew * 1000).astype(np.int64)
+    codes, freq = rans.quantize_tables(counts)
+    assert codes.dtype == np.uint8 and not codes[1].any() and not freq[1].any()
+    assert np.array_equal(rans.table_frequencies(codes, "t"), freq)
+    row = freq[0]
+    assert row.sum() == rans.TOTAL and row.max() <= rans.MAX_FREQ and ((row > 0) >= (counts[0] > 0)).all()
+    rans.Tables(freq, "t")
 
 
 def test_the_estimate_counts_what_the_tokens_cost():
