@@ -519,6 +519,8 @@ cdef enum:  # rans.py, residual_coder.py
     ALPHABET = 76
     PROB_BITS = 12
     LOW = 65536
+    PREV_CLASSES = 8
+    OTHER_CLASSES = 4
     CONTEXTS = 32
 
 cdef enum:  # what decode_residuals returns: 0, or the first fault found
@@ -555,7 +557,8 @@ def decode_residuals(const uint8_t[::1] flat_slot, const uint32_t[::1] flat_freq
                      const uint8_t[::1] after_neighbour, int classes, uint8_t[:, :, ::1] sym, i64[:, :, ::1] out):
     """Decode the STRD token stream and extra bits into residuals ``out [S, N, 3]`` (``sym``: scratch
     of the same shape). ``classes`` > 1: a strand marked in ``after_neighbour [S]`` takes the bit class
-    of the previous lane's token (its card neighbour's, just decoded) as context too. Returns 0, or the
+    of the previous lane's token (its card neighbour's, just decoded) as context too, and the others a
+    class of their own. Returns 0, or the
     first fault found: a key of ``FAULTS``."""
     cdef Py_ssize_t strands = out.shape[0], n = out.shape[1], nwords = words.shape[0]
     cdef Py_ssize_t b, col, lane, s, act, pos = 0, blocks = (strands + lanes - 1) // lanes
@@ -591,10 +594,11 @@ def decode_residuals(const uint8_t[::1] flat_slot, const uint32_t[::1] flat_freq
                             o = prev[lane]
                         if ch == 2 and prev[lanes + lane] > o:
                             o = prev[lanes + lane]
-                        c = 0
-                        if classes > 1 and after_neighbour[s]:  # lane - 1's token of this step, decoded
-                            c = min(prev[ch * lanes + lane - 1], classes - 1)
-                        t = ((column_array[col] * 3 + ch) * CONTEXTS + min(p, 7) * 4 + min(o, 3)) * classes + c
+                        c = 0  # with classes > 1: 0 for a strand with no card neighbour before it, else 1 + ...
+                        if classes > 1 and after_neighbour[s]:  # ... lane - 1's token of this step, decoded
+                            c = 1 + min(prev[ch * lanes + lane - 1], classes - 2)
+                        t = (((column_array[col] * 3 + ch) * CONTEXTS + min(p, PREV_CLASSES - 1) * OTHER_CLASSES
+                              + min(o, OTHER_CLASSES - 1)) * classes + c)
                         x = xs[lane]
                         slot = x & ((1 << PROB_BITS) - 1)
                         tok = flat_slot[t * (1 << PROB_BITS) + slot]

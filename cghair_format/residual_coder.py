@@ -5,8 +5,9 @@ split into tokens and extra bits (:mod:`.rans`). A token's table depends on its 
 and a context: the bit length of the previous token of the same strand, array and channel, the
 largest bit length among the channels already coded at the same sample, and (with more than one
 neighbour class) the bit length of the card neighbour's token at the same sample and channel, where
-the neighbour is the strand one lane before. Strands are coded in blocks of ``L`` lanes, one strand
-per lane; within a block, column by column, channel u, v, delta.
+the neighbour is the strand one lane before; a strand with no such neighbour has a class of its own.
+Strands are coded in blocks of ``L`` lanes, one strand per lane; within a block, column by column,
+channel u, v, delta.
 """
 
 from __future__ import annotations
@@ -25,11 +26,12 @@ LANES = 4096  # at most; each lane costs its 4-byte state ...
 MIN_BLOCKS = 8  # ... so smaller assets use fewer lanes, S / 8 rounded up
 PREV_CLASSES, OTHER_CLASSES = 8, 4
 CONTEXTS = PREV_CLASSES * OTHER_CLASSES
-# Classes of the card neighbour's token (META quant.neighbour_classes, 1..8; 1: no such context). The
-# writer takes 4 or 1, whichever its cost estimate finds smaller: 4 takes 3.3 % off straight.hair's and
-# 2.2 % off harolongo's strand points at the paper's scale (with 12-bit tables 3 classes paid best, and
-# less); on small files the larger tables cost more.
-NEIGHBOUR_CLASSES = 4
+# Classes of the card neighbour's token (META quant.neighbour_classes, 1..8; 1: no such context; class 0
+# is for strands with no card neighbour before them). The writer takes 5 or 1, whichever its cost
+# estimate finds smaller: 5 takes 4.1 % off straight.hair's and 2.4 % off harolongo's strand points at
+# the paper's scale (with 12-bit tables 3 classes paid best, and less); on small files the larger
+# tables cost more.
+NEIGHBOUR_CLASSES = 5
 MAX_NEIGHBOUR_CLASSES = 8
 
 
@@ -44,9 +46,12 @@ def _plan(widths: list[int], strands: int):
 
 
 def _table(array: np.ndarray | int, ch: int, prev: np.ndarray, other: np.ndarray, neighbour: np.ndarray,
-           classes: int) -> np.ndarray:
+           after: np.ndarray, classes: int) -> np.ndarray:
+    """Each token's table (spec 4.3.2); with more than one neighbour class, a strand with no card
+    neighbour before it (``after`` false) takes class 0, the others 1 + their neighbour's bit class."""
+    e = np.where(after, 1 + np.minimum(neighbour, classes - 2), 0) if classes > 1 else 0
     return ((((array * 3 + ch) * CONTEXTS + np.minimum(prev, PREV_CLASSES - 1) * OTHER_CLASSES
-              + np.minimum(other, OTHER_CLASSES - 1)) * classes) + np.minimum(neighbour, classes - 1))
+              + np.minimum(other, OTHER_CLASSES - 1)) * classes) + e)
 
 
 def after_neighbour(strand_card: np.ndarray, lanes: int) -> np.ndarray:
@@ -92,6 +97,7 @@ def _coding(arrays: list[np.ndarray], strand_card: np.ndarray | None, classes: t
     other[..., 1] = bits[..., 0]
     other[..., 2] = np.maximum(bits[..., 0], bits[..., 1])
     neighbour = np.zeros_like(bits)
+    after = np.zeros(s, bool)
     if max(classes) > 1:
         after = after_neighbour(strand_card, lanes)
         neighbour[after] = bits[np.flatnonzero(after) - 1]
@@ -99,7 +105,7 @@ def _coding(arrays: list[np.ndarray], strand_card: np.ndarray | None, classes: t
     best = None
     for c in classes:
         table = _table(column_array[None, :, None].astype(np.int32), np.arange(3, dtype=np.int32)[None, None, :],
-                       prev, other, neighbour, c)
+                       prev, other, neighbour, after[:, None, None], c)
         n_tables = len(widths) * 3 * CONTEXTS * c
         counts = np.bincount((table * rans.ALPHABET + sym).ravel(), minlength=n_tables * rans.ALPHABET)  # int32
         codes, freq = rans.quantize_tables(counts.reshape(n_tables, rans.ALPHABET))

@@ -228,3 +228,12 @@ def test_the_estimate_counts_what_the_tokens_cost():
     expected = (-(counts[used] * np.log2(counts[used] / r.size)).sum() + extra) / 8
     assert rans.estimate_bytes(r) == pytest.approx(expected, rel=1e-12)
     assert rans.estimate_bytes(np.zeros(10, np.int64)) == 0
+
+
+def test_a_strand_with_no_card_neighbour_before_it_has_a_neighbour_class_of_its_own():
+    """Spec 4.3.2: with K > 1 neighbour classes, e = 1 + min(b, K - 2) after a card neighbour whose token
+    has bit class b, and 0 for the first strand of a card or block, not the class of a neighbour's 0."""
+    args = (np.int32(0), np.int32(0), np.zeros(4, np.uint8), np.zeros(4, np.uint8))
+    neighbour, after = np.array([0, 0, 3, 9], np.uint8), np.array([False, True, True, True])
+    assert list(residual_coder._table(*args, neighbour, after, 5)) == [0, 1, 4, 4]
+    assert list(residual_coder._table(*args, neighbour, after, 1)) == [0, 0, 0, 0]
