@@ -90,7 +90,8 @@ def quantize_tables(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The writer's tables for token counts ``[T, ALPHABET]``: their codes (uint8) and the frequencies
     they decode to. Each counted token gets the code nearest its share of TOTAL on the log scale,
     the most counted one REST; where that would leave REST outside 1 .. MAX_FREQ, the largest other
-    entry (or, with none, the next token) moves a code at a time until it does not."""
+    entry (or, with none, the next token) takes up or gives back the difference, as nearly as its
+    codes allow, until it does not."""
     counts = np.asarray(counts, np.int64)
     total = counts.sum(axis=1, keepdims=True)
     share = np.maximum(counts * TOTAL / np.maximum(total, 1), 1.0)
@@ -99,15 +100,17 @@ def quantize_tables(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     top = np.argmax(counts, axis=1)
     codes[rows, top[rows]] = 0
     rest = TOTAL - code_frequencies(codes).sum(axis=1)
-    for t in rows[(rest[rows] < 1) | (rest[rows] > MAX_FREQ)]:  # rare: a dominant or a flat table
+    for t in rows[(rest[rows] < 1) | (rest[rows] > MAX_FREQ)]:  # a dominant or a flat table
         row = codes[t]
         while not 1 <= rest[t] <= MAX_FREQ:
             f = code_frequencies(row)
-            if rest[t] > MAX_FREQ:
-                j = int(np.argmax(f)) if f.any() else (top[t] + 1) % ALPHABET
-                row[j] += 1
-            else:
-                row[int(np.argmax(f))] -= 1
+            j = int(np.argmax(f)) if f.any() else (top[t] + 1) % ALPHABET
+            # the code of j whose frequency takes up (or gives back) what the remainder is out by
+            want = f[j] + (rest[t] - MAX_FREQ if rest[t] > MAX_FREQ else rest[t] - 1)
+            step = np.ceil if rest[t] > MAX_FREQ else np.floor
+            row[j] = int(np.clip(1 + step(LOG_STEPS * np.log2(max(want, 1))), 1, MAX_CODE))
+            if code_frequencies(row[j]) == f[j]:  # no code lies between: move by one
+                row[j] += 1 if rest[t] > MAX_FREQ else -1
             rest[t] = TOTAL - code_frequencies(row).sum()
     codes[rows, top[rows]] = REST
     return codes.astype(np.uint8), table_frequencies(codes, "the writer's tables")
