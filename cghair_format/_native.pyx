@@ -558,8 +558,7 @@ def decode_residuals(const uint8_t[::1] flat_slot, const uint32_t[::1] flat_freq
     """Decode the STRD token stream and extra bits into residuals ``out [S, N, 3]`` (``sym``: scratch
     of the same shape). ``classes`` > 1: a strand marked in ``after_neighbour [S]`` takes the bit class
     of the previous lane's token (its card neighbour's, just decoded) as context too, and the others a
-    class of their own. Returns 0, or the
-    first fault found: a key of ``FAULTS``."""
+    class of their own. Returns 0, or the first fault found: a key of ``FAULTS``."""
     cdef Py_ssize_t strands = out.shape[0], n = out.shape[1], nwords = words.shape[0]
     cdef Py_ssize_t b, col, lane, s, act, pos = 0, blocks = (strands + lanes - 1) // lanes
     cdef int ch, tok, p, o, nb, t, c

@@ -638,11 +638,11 @@ def _optional_chunks(asset: HairAsset) -> list[container.Chunk]:
 
 def _put_hier(w: StreamWriter, y: np.ndarray, base_stride: int) -> np.ndarray:
     """Write ``y [rows, n]`` (step units) hierarchically; return it as a decoder will read it."""
-    base, levels = hier_encode(y, base_stride)
+    base, levels, rec = hier_encode(y, base_stride)
     w.ints(base)
     for r in levels:
         w.ints(r)
-    return hier_decode(base, levels, y.shape[1], base_stride)
+    return rec
 
 
 def _get_hier(r: StreamReader, rows: int, n: int, base_stride: int, name: str) -> np.ndarray:

@@ -71,15 +71,16 @@ def level_plan(n: int, base_stride: int, taps: tuple[int, ...] | None = None
     return np.array(base), tuple(levels)
 
 
-def hier_encode(y: np.ndarray, base_stride: int) -> tuple[np.ndarray, list[np.ndarray]]:
+def hier_encode(y: np.ndarray, base_stride: int) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
     """Code sequences ``y [S, n]`` (already in quantization-step units) along axis 1.
 
     Base samples: DPCM with linear extrapolation of the previous two reconstructed base samples,
     residuals ``round(y - pred)``, reconstruction integer. Refinement samples: ``pred`` = Lagrange
     interpolation of reconstructed neighbours, residual ``r = round(y - pred)``, reconstruction
     ``pred + r`` (no re-rounding, so a sample within half a step of its prediction costs a zero).
-    Every reconstructed sample is within 0.5 of ``y``. Returns the base residuals ``[S, nb]`` and
-    one residual array ``[S, L]`` per level, all int64.
+    Every reconstructed sample is within 0.5 of ``y``. Returns the base residuals ``[S, nb]``, one
+    residual array ``[S, L]`` per level (all int64) and the reconstruction ``[S, n]`` (float64), as
+    :func:`hier_decode` gives it.
     """
     yt = np.asarray(y, np.float64).T  # sample-major: each sample of every sequence is one contiguous row
     base, levels = level_plan(yt.shape[0], base_stride)
@@ -96,7 +97,7 @@ def hier_encode(y: np.ndarray, base_stride: int) -> tuple[np.ndarray, list[np.nd
         r = np.rint(yt[idx] - pred)
         rec[idx] = pred + r
         out.append(np.ascontiguousarray(r.T.astype(np.int64)))
-    return np.ascontiguousarray(base_res.T), out
+    return np.ascontiguousarray(base_res.T), out, np.ascontiguousarray(rec.T)
 
 
 def hier_decode(base_res: np.ndarray, level_res: list[np.ndarray], n: int, base_stride: int) -> np.ndarray:

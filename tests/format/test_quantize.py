@@ -35,9 +35,10 @@ def test_zigzag_is_exact_inverse(values):
 def test_hierarchical_coder_is_within_half_a_step(n, stride, seed, scale):
     rng = np.random.default_rng(seed)
     y = np.cumsum(rng.normal(size=(5, n)), axis=1) * scale
-    base, levels = hier_encode(y, stride)
+    base, levels, encoded = hier_encode(y, stride)
     rec = hier_decode(base, levels, n, stride)
     assert np.abs(rec - y).max() <= 0.5 + 1e-9 * scale
+    assert np.array_equal(encoded, rec)  # the writer's reconstruction is the reader's
     base_idx, plan = level_plan(n, stride)
     assert len(base_idx) + sum(len(idx) for idx, _, _ in plan) == n  # every sample coded exactly once
 
@@ -75,7 +76,7 @@ def test_level_plan_refuses_widths_that_do_not_fit(taps):
 def test_hierarchical_coder_zeroes_smooth_curves():
     t = np.linspace(0, 1, 100)
     y = 400 * np.sin(2 * t)[None, :]  # smooth: refinement residuals vanish
-    _, levels = hier_encode(y, 16)
+    _, levels, _ = hier_encode(y, 16)
     assert np.mean(np.concatenate(levels, axis=1) == 0) > 0.9
 
 
