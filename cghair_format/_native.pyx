@@ -194,6 +194,35 @@ cdef inline double step_ratio(const double* a, const double* b, const double* na
     return r
 
 
+# base_guide 3 (spec 4.3): a guided base sample after the first takes its step from the most alike of
+# the GUIDE_CANDIDATES strands before it on its card; a decoder keeps that many strands' scratch
+cdef enum:
+    CANDIDATES = 32
+GUIDE_CANDIDATES = CANDIDATES
+SCRATCH_STRANDS = CANDIDATES + 1
+
+
+cdef inline double diff_norm(const double* a, const double* b, const double* c, const double* d) noexcept nogil:
+    """``|(b - a) - (d - c)|`` of world points (``a`` may be NULL for zero, and then ``c`` too)."""
+    cdef double e, s = 0.0
+    cdef int i
+    for i in range(3):
+        e = (b[i] - (a[i] if a != NULL else 0.0)) - (d[i] - (c[i] if c != NULL else 0.0))
+        s = s + e * e
+    return sqrt(s)
+
+
+cdef inline double unlikeness(const double* w, const double* wm, const i64* base, Py_ssize_t j) noexcept nogil:
+    """How unlike the strand with world points ``wm`` is to the one with ``w`` before base sample
+    ``j >= 2`` (spec 4.3, ``base_guide`` 3): how their last two steps between base samples differ
+    (one, at ``j = 2``), plus a quarter of how far apart they are at base sample ``j - 1``."""
+    cdef i64 b = 3 * base[j - 1], a = 3 * base[j - 2]
+    cdef double d = diff_norm(w + a, w + b, wm + a, wm + b)
+    if j > 2:
+        d = d + diff_norm(w + 3 * base[j - 3], w + a, wm + 3 * base[j - 3], wm + a)
+    return d + 0.25 * diff_norm(NULL, w + b, NULL, wm + b)
+
+
 cdef inline void residual_steps(const double* j, const double* sc, double stretch_max, double* f) noexcept nogil:
     """The steps ``f`` in scaled card coordinates of a residual whose prediction a Newton search made (a
     refinement sample's, a guided base sample's; spec 4.3), from the Jacobian columns ``j [9]`` at that
@@ -314,15 +343,16 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
     """The recurrence of spec 4.3 for the strands ``strands_to_code`` (indices into ``[S]``; best
     grouped by card, whose triangles then stay in cache) of ``n`` points, into ``rec`` (scaled card
     coordinates ``[S, n, 3]``) and ``world`` (their world points). Decoding into ``uvd`` (float32
-    ``[S, n, 3]``, given): ``rec`` and ``world`` are two strands' scratch (``[2, n, 3]``: a strand's and
-    its neighbour's), and each strand's card coordinates ``rec / scale`` go to ``uvd``; returns how
+    ``[S, n, 3]``, given): ``rec`` and ``world`` are the scratch of the last ``SCRATCH_STRANDS`` strands
+    (``[SCRATCH_STRANDS, n, 3]``: a strand's and those before it that its base samples may follow), and each strand's card coordinates ``rec / scale`` go to ``uvd``; returns how
     many of them float32 cannot hold (inf or NaN there: a corrupt file). Otherwise returns 0.
 
-    With ``base_guide`` (1 or 2) a strand whose card neighbour came before it in ``strands_to_code``
+    With ``base_guide`` (1 to 3) a strand whose card neighbour came before it in ``strands_to_code``
     predicts its base samples from the neighbour's: its root from the neighbour's root, each later one
     by the neighbour's step in world space (with 2, times the ratio of the two strands' previous
-    steps), carried onto the card by the searched Newton steps (spec 4.3). ``strands_to_code`` must
-    then list every card's strands in file order, whole.
+    steps; with 3, after the first, the step of the most alike of the ``GUIDE_CANDIDATES`` strands
+    before it on the card, :func:`unlikeness`), carried onto the card by the searched Newton steps
+    (spec 4.3). ``strands_to_code`` must then list every card's strands in file order, whole.
 
     Levels: ``level_start [L + 1]`` delimits rows of ``idx [R]`` (the new indices), ``nb [R, W]`` and
     ``wt [R, W]`` (their interpolation neighbours and weights, summed left to right over the first
@@ -354,6 +384,9 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
     cdef double* W
     cdef double* RN
     cdef double* WN
+    cdef double* RM
+    cdef double* WM
+    cdef double best, d
     cdef const double* Y = NULL
     cdef const double* Z = NULL
     cdef i64* BR
@@ -368,7 +401,7 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
         return 0
     check_cards(strand_card, frames.shape[0], segments)
     shape = (strand_card.shape[0], rec.shape[1], 3)
-    own = (2,) + shape[1:] if scratch else shape  # the shape of rec and world
+    own = (SCRATCH_STRANDS,) + shape[1:] if scratch else shape  # the shape of rec and world
     if (frames.shape[1] != 18 or tuple(scale.shape)[:2] != shape[::2] or tuple(rec.shape)[:3] != own
             or tuple(world.shape)[:3] != own or tuple(res.shape)[:3] != (shape[0], nbase + idx.shape[0], 3)
             or (scratch and (encode or tuple(uvd.shape)[:3] != shape))
@@ -393,12 +426,12 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
             sc = &scale[s, 0]
             for ch in range(3):
                 inv_sc[ch] = 1.0 / sc[ch]
-            R = &rec[(t & 1) if scratch else s, 0, 0]
-            W = &world[(t & 1) if scratch else s, 0, 0]
+            R = &rec[(t % (CANDIDATES + 1)) if scratch else s, 0, 0]
+            W = &world[(t % (CANDIDATES + 1)) if scratch else s, 0, 0]
             RN = NULL  # with base_guide, the neighbour's reconstruction (spec 4.3)
             if base_guide > 0 and t > 0 and strand_card[strands_to_code[t - 1]] == card:
-                RN = &rec[((t - 1) & 1) if scratch else strands_to_code[t - 1], 0, 0]
-                WN = &world[((t - 1) & 1) if scratch else strands_to_code[t - 1], 0, 0]
+                RN = &rec[((t - 1) % (CANDIDATES + 1)) if scratch else strands_to_code[t - 1], 0, 0]
+                WN = &world[((t - 1) % (CANDIDATES + 1)) if scratch else strands_to_code[t - 1], 0, 0]
             BR = &res[s, 0, 0]
             LR = BR + 3 * nbase
             NB = NULL  # encoding: the residuals of this strand's neighbour (spec 4.3), when coded already
@@ -422,9 +455,22 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                     if base_guide == 2 and j > 1:  # scaled as the previous steps compare
                         a = base[j - 2]
                         rho = step_ratio(W + 3 * a, W + 3 * b, WN + 3 * a, WN + 3 * b)
+                    RM = RN
+                    WM = WN
+                    if base_guide == 3 and j > 1:  # the most alike strand of those before it (nearest first)
+                        best = unlikeness(W, WN, &base[0], j)
+                        kk = t - 2
+                        while kk >= 0 and kk >= t - CANDIDATES and strand_card[strands_to_code[kk]] == card:
+                            a = (kk % (CANDIDATES + 1)) if scratch else strands_to_code[kk]
+                            d = unlikeness(W, &world[a, 0, 0], &base[0], j)
+                            if d < best:
+                                best = d
+                                RM = &rec[a, 0, 0]
+                                WM = &world[a, 0, 0]
+                            kk -= 1
                     for ch in range(3):
-                        pred[ch] = R[3 * b + ch] + rho * (RN[3 * c + ch] - RN[3 * b + ch])
-                        goal[ch] = W[3 * b + ch] + rho * (WN[3 * c + ch] - WN[3 * b + ch])
+                        pred[ch] = R[3 * b + ch] + rho * (RM[3 * c + ch] - RM[3 * b + ch])
+                        goal[ch] = W[3 * b + ch] + rho * (WM[3 * c + ch] - WM[3 * b + ch])
                     newton(fr, segments, card, sc, inv_sc, goal, newton_steps, newton_halvings, pred, jac)
                     residual_steps(jac, sc, stretch_max, bf)
                 else:  # the strand's own base samples, per channel (spec 4.1)

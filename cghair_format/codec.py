@@ -292,7 +292,7 @@ def _parse_meta(raw: bytes) -> dict:
         need("newton_halvings", int, 0, 8, src=quant)
         need("stretch_max", (int, float), 1, 16, src=quant)
         need("neighbour_classes", int, 1, MAX_NEIGHBOUR_CLASSES, src=quant)
-        need("base_guide", int, 0, 2, src=quant)
+        need("base_guide", int, 0, 3, src=quant)
         orders = quant.get("base_order")
         if (not isinstance(orders, list) or len(orders) != 3
                 or not all(isinstance(k, int) and not isinstance(k, bool) and k in (1, 2) for k in orders)):
@@ -531,7 +531,7 @@ def _choose_base_samples(asset: HairAsset, q: dict, zone: DeadZone, strides: tup
     y = asset.uvd * scale[:, None, :]
     orders = {stride: _choose_base_order(asset.strand_card, y, stride) for stride in strides}
     sizes = {}
-    for stride, guide in [(stride, guide) for stride in strides for guide in (1, 2)] + [(strides[0], 0)]:
+    for stride, guide in [(stride, guide) for stride in strides for guide in (2, 3)] + [(strides[0], 0)]:
         plan = Prediction(stride, orders[stride], NEWTON_STEPS, newton_halvings=q["newton_halvings"],
                           stretch_max=q["stretch_max"], base_guide=guide)
         sizes[stride, guide] = coded_bytes(_sample_residuals(cmap, asset.strand_card, y, scale, plan,

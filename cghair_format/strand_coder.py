@@ -61,7 +61,8 @@ class Prediction:
     many times a Newton step that lands farther from its goal is halved before the search stops, how
     far a residual's step may stretch with the card's local scale (1: not at all), and whether a
     strand's base samples are predicted from its card neighbour's world steps (0: no, 1: yes, 2: scaled
-    by how the two strands' previous steps compare)."""
+    by how the two strands' previous steps compare, 3: after the first, from the most alike strand
+    before it on the card)."""
 
     base_stride: int
     base_order: tuple[int, int, int]
@@ -93,7 +94,7 @@ def _run_strands(cmap: CardMap, strand_card: np.ndarray, scale: np.ndarray, resi
     by card, each strand after its neighbour (which the base samples' guide reads and the dead zone may
     copy; a card's triangles stay in cache while its strands are coded). ``arrays``: encoding, ``rec``,
     ``world``, ``y`` and the dead zone's arguments; decoding, ``uvd`` (each block then gets its own
-    two-strand scratch)."""
+    scratch: a strand and those before it that its base samples may follow)."""
     base, levels = level_plan(n, plan.base_stride, plan.level_taps)
     level_start = np.cumsum([0] + [len(idx) for idx, _, _ in levels], dtype=np.int64)
     idx = np.concatenate([np.zeros(0, np.int64)] + [lv[0] for lv in levels]).astype(np.int64)
@@ -108,8 +109,8 @@ def _run_strands(cmap: CardMap, strand_card: np.ndarray, scale: np.ndarray, resi
 
     def block(b: slice) -> int:
         given = dict(arrays)
-        if "uvd" in given:  # decoding: the scratch of a strand and its neighbour per block
-            given["rec"], given["world"] = np.empty((2, n, 3)), np.empty((2, n, 3))
+        if "uvd" in given:  # decoding: per block, the scratch of a strand and those its base samples may follow
+            given["rec"], given["world"] = (np.empty((_native.SCRATCH_STRANDS, n, 3)) for _ in range(2))
         rec, world = given.pop("rec"), given.pop("world")
         return _native.run_strands(by_card[b], cmap.frames, cmap.segments, card, scale, base, orders, level_start,
                                    taps, idx, nb, wt, plan.newton_steps, plan.newton_halvings, plan.stretch_max,

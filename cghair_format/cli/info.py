@@ -44,7 +44,8 @@ def format_info(name: str, info: dict) -> str:
     return "\n".join(lines)
 
 
-GUIDES = ("", ", guided by the card neighbour's steps", ", guided by the card neighbour's steps, scaled")
+GUIDES = ("", ", guided by the card neighbour's steps", ", guided by the card neighbour's steps, scaled",
+          ", guided by the most alike earlier strand's steps")
 
 
 def _coding(quant: dict) -> str:

@@ -113,12 +113,13 @@ def main() -> None:
     _differs(data, {"neighbour_classes": 1})
     _expected("synth_cards_neighbour_classes", data)
     # curly hair on the same few cards, where the decoder halves some Newton steps and stretches residual
-    # steps (spec 4.3): decoding it with fewer halvings or unstretched gives other points (the assertion
-    # below keeps it so)
+    # steps (spec 4.3), and base samples follow the most alike earlier strand (base_guide 3): decoding it
+    # with fewer halvings, unstretched or guided by the card neighbour alone gives other points (the
+    # assertion below keeps it so)
     curly = build_cards(synthesize("curly", 48, 24, seed=2), n_cards=6, n_groups=2, segments=8, points=24,
                         seed=0, progress=False, sh_degree=1).asset
-    data = _encode(curly, "compact", guide=1)
-    for change in ({"newton_halvings": 0}, {"newton_halvings": 3}, {"stretch_max": 1}):
+    data = _encode(curly, "compact", guide=3)
+    for change in ({"newton_halvings": 0}, {"newton_halvings": 3}, {"stretch_max": 1}, {"base_guide": 1}):
         _differs(data, change)
     _expected("synth_curly_compact", data)
 
