@@ -195,32 +195,39 @@ cdef inline double step_ratio(const double* a, const double* b, const double* na
 
 
 # base_guide 3 (spec 4.3): a guided base sample after the first takes its step from the most alike of
-# the GUIDE_CANDIDATES strands before it on its card; a decoder keeps that many strands' scratch
+# the CANDIDATES strands before it on its card (a decoder keeps their scratch and its own), where
+# unlikeness weighs the strands' distance by UNLIKE_PLACE against how their steps differ
 cdef enum:
     CANDIDATES = 32
+cdef double UNLIKE_PLACE = 1.0 / 32
+cdef double ORIGIN[3]  # zero, as C's static storage starts
 GUIDE_CANDIDATES = CANDIDATES
 SCRATCH_STRANDS = CANDIDATES + 1
 
 
-cdef inline double diff_norm(const double* a, const double* b, const double* c, const double* d) noexcept nogil:
-    """``|(b - a) - (d - c)|`` of world points (``a`` may be NULL for zero, and then ``c`` too)."""
+cdef inline double diff2(const double* a, const double* b, const double* c, const double* d) noexcept nogil:
+    """``|(b - a) - (d - c)|^2`` of world points."""
     cdef double e, s = 0.0
     cdef int i
     for i in range(3):
-        e = (b[i] - (a[i] if a != NULL else 0.0)) - (d[i] - (c[i] if c != NULL else 0.0))
+        e = (b[i] - a[i]) - (d[i] - c[i])
         s = s + e * e
-    return sqrt(s)
+    return s
 
 
-cdef inline double unlikeness(const double* w, const double* wm, const i64* base, Py_ssize_t j) noexcept nogil:
+cdef inline double unlikeness(const double* w, const double* wm, const i64* base, Py_ssize_t j,
+                              double below) noexcept nogil:
     """How unlike the strand with world points ``wm`` is to the one with ``w`` before base sample
-    ``j >= 2`` (spec 4.3, ``base_guide`` 3): how their last two steps between base samples differ
-    (one, at ``j = 2``), plus a quarter of how far apart they are at base sample ``j - 1``."""
+    ``j >= 2`` (spec 4.3, ``base_guide`` 3): the squared differences of their last two steps between
+    base samples (one, at ``j = 2``), plus UNLIKE_PLACE times their squared distance at base sample
+    ``j - 1``. Stops (returning no less) once the sum reaches ``below``."""
     cdef i64 b = 3 * base[j - 1], a = 3 * base[j - 2]
-    cdef double d = diff_norm(w + a, w + b, wm + a, wm + b)
-    if j > 2:
-        d = d + diff_norm(w + 3 * base[j - 3], w + a, wm + 3 * base[j - 3], wm + a)
-    return d + 0.25 * diff_norm(NULL, w + b, NULL, wm + b)
+    cdef double d = diff2(w + a, w + b, wm + a, wm + b)
+    if j > 2 and d < below:
+        d = d + diff2(w + 3 * base[j - 3], w + a, wm + 3 * base[j - 3], wm + a)
+    if d < below:
+        d = d + UNLIKE_PLACE * diff2(ORIGIN, w + b, ORIGIN, wm + b)
+    return d
 
 
 cdef inline void residual_steps(const double* j, const double* sc, double stretch_max, double* f) noexcept nogil:
@@ -458,11 +465,11 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                     RM = RN
                     WM = WN
                     if base_guide == 3 and j > 1:  # the most alike strand of those before it (nearest first)
-                        best = unlikeness(W, WN, &base[0], j)
+                        best = unlikeness(W, WN, &base[0], j, INFINITY)
                         kk = t - 2
                         while kk >= 0 and kk >= t - CANDIDATES and strand_card[strands_to_code[kk]] == card:
                             a = (kk % (CANDIDATES + 1)) if scratch else strands_to_code[kk]
-                            d = unlikeness(W, &world[a, 0, 0], &base[0], j)
+                            d = unlikeness(W, &world[a, 0, 0], &base[0], j, best)
                             if d < best:
                                 best = d
                                 RM = &rec[a, 0, 0]
