@@ -194,8 +194,9 @@ cdef inline double step_ratio(const double* a, const double* b, const double* na
     return r
 
 
-# base_guide 3 (spec 4.3): a guided base sample after the first takes its step from the most alike of
-# the CANDIDATES strands before it on its card (a decoder keeps their scratch and its own), where
+# base_guide 3 and level_guide (spec 4.3): a guided base sample after the first takes its step, and a
+# base segment's refinement residuals are stored as differences from those, of the most alike of the
+# CANDIDATES strands before it on its card (a decoder keeps their scratch and its own), where
 # unlikeness weighs the strands' distance by UNLIKE_PLACE against how their steps differ
 cdef enum:
     CANDIDATES = 32
@@ -215,19 +216,19 @@ cdef inline double diff2(const double* a, const double* b, const double* c, cons
     return s
 
 
-cdef inline double unlikeness(const double* w, const double* wm, const i64* base, Py_ssize_t j,
-                              double below) noexcept nogil:
-    """How unlike the strand with world points ``wm`` is to the one with ``w`` before base sample
-    ``j >= 2`` (spec 4.3, ``base_guide`` 3): the squared differences of their last two steps between
-    base samples (one, at ``j = 2``), plus UNLIKE_PLACE times their squared distance at base sample
-    ``j - 1``. Stops (returning no less) once the sum reaches ``below``."""
-    cdef i64 b = 3 * base[j - 1], a = 3 * base[j - 2]
-    cdef double d = diff2(w + a, w + b, wm + a, wm + b)
-    if j > 2 and d < below:
-        d = d + diff2(w + 3 * base[j - 3], w + a, wm + 3 * base[j - 3], wm + a)
-    if d < below:
-        d = d + UNLIKE_PLACE * diff2(ORIGIN, w + b, ORIGIN, wm + b)
-    return d
+cdef inline double unlikeness(const double* w, const double* wm, const i64* base, Py_ssize_t first,
+                              Py_ssize_t last, Py_ssize_t at, double below) noexcept nogil:
+    """How unlike the strand with world points ``wm`` is to the one with ``w`` (spec 4.3, ``U``): the
+    squared differences of their steps ``base[k] -> base[k + 1]`` for ``k = first .. last``, then
+    UNLIKE_PLACE times their squared distance at ``base[at]``. Stops (returning no less) once the sum
+    reaches ``below``."""
+    cdef double d = 0.0
+    cdef Py_ssize_t k
+    for k in range(first, last + 1):
+        d = d + diff2(w + 3 * base[k], w + 3 * base[k + 1], wm + 3 * base[k], wm + 3 * base[k + 1])
+        if d >= below:
+            return d
+    return d + UNLIKE_PLACE * diff2(ORIGIN, w + 3 * base[at], ORIGIN, wm + 3 * base[at])
 
 
 cdef inline void residual_steps(const double* j, const double* sc, double stretch_max, double* f) noexcept nogil:
@@ -346,7 +347,8 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                 double stretch_max, int base_guide, double[:, :, ::1] rec, double[:, :, ::1] world,
                 i64[:, :, ::1] res,
                 const double[:, :, ::1] y=None, const double[:, :, ::1] dz_points=None, double dz_dist=-1.0,
-                bint neighbour_zone=False, float[:, :, ::1] uvd=None):
+                bint neighbour_zone=False, float[:, :, ::1] uvd=None, const i64[::1] row_seg=None,
+                i64[:, ::1] level_ref=None):
     """The recurrence of spec 4.3 for the strands ``strands_to_code`` (indices into ``[S]``; best
     grouped by card, whose triangles then stay in cache) of ``n`` points, into ``rec`` (scaled card
     coordinates ``[S, n, 3]``) and ``world`` (their world points). Decoding into ``uvd`` (float32
@@ -371,7 +373,14 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
     ``dz_dist`` of ``dz_points`` (``dz_dist < 0``: no dead zone). With ``neighbour_zone`` a sample
     first takes the residual of its card neighbour (the strand coded before it, same card: its
     stored difference is then zero) where that too maps within ``dz_dist``: ``strands_to_code`` must
-    then list a card's strands in file order, each after its neighbour."""
+    then list a card's strands in file order, each after its neighbour.
+
+    With ``row_seg`` (per level row, the base segment ``k`` it lies in, ``base[k] < idx < base[k + 1]``:
+    ``level_guide``) each base segment of a strand with a card neighbour has a reference, the most alike
+    of the strands before it (:func:`unlikeness`): decoding adds the reference's residuals to that
+    segment's level rows (stored as differences); encoding writes the references' strand indices to
+    ``level_ref [S, len(base) - 1]`` (-1: none; the caller takes the differences), and the neighbour
+    zone tries the reference's residual instead of the neighbour's."""
     cdef Py_ssize_t t, s, j, li, row, kk, i, ch
     cdef Py_ssize_t strands = strands_to_code.shape[0], nbase = base.shape[0], levels = level_start.shape[0] - 1
     cdef int encode = y is not None, dead_zone = encode and dz_points is not None and dz_dist >= 0
@@ -400,7 +409,9 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
     cdef i64* LR
     cdef i64* NB = NULL
     cdef i64 zero[3]
-    cdef i64 card, a, b, c
+    cdef i64 card, a, b, c, m
+    cdef int level_guide = row_seg is not None
+    cdef i64* segref = NULL
     zero[0] = 0
     zero[1] = 0
     zero[2] = 0
@@ -425,6 +436,16 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
     for li in range(levels):
         if level_taps[li] < 0 or level_taps[li] > nb.shape[1]:
             raise ValueError("run_strands: a level's interpolation width exceeds its neighbour columns")
+    if level_guide and (row_seg.shape[0] != idx.shape[0] or (level_ref is not None and (
+            level_ref.shape[0] != shape[0] or level_ref.shape[1] != max(nbase - 1, 0)))):
+        raise ValueError("run_strands: mismatched shapes")
+    if level_guide:
+        for row in range(idx.shape[0]):
+            if row_seg[row] < 0 or row_seg[row] >= nbase - 1:
+                raise ValueError("run_strands: a row's base segment is out of range")
+    segref = <i64*> calloc(max(nbase, 1), sizeof(i64))
+    if segref == NULL:
+        raise MemoryError()
     fr = &frames[0, 0]
     with nogil:
         for t in range(strands):
@@ -465,11 +486,11 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                     RM = RN
                     WM = WN
                     if base_guide == 3 and j > 1:  # the most alike strand of those before it (nearest first)
-                        best = unlikeness(W, WN, &base[0], j, INFINITY)
+                        best = unlikeness(W, WN, &base[0], max(j - 3, 0), j - 2, j - 1, INFINITY)
                         kk = t - 2
                         while kk >= 0 and kk >= t - CANDIDATES and strand_card[strands_to_code[kk]] == card:
                             a = (kk % (CANDIDATES + 1)) if scratch else strands_to_code[kk]
-                            d = unlikeness(W, &world[a, 0, 0], &base[0], j, best)
+                            d = unlikeness(W, &world[a, 0, 0], &base[0], max(j - 3, 0), j - 2, j - 1, best)
                             if d < best:
                                 best = d
                                 RM = &rec[a, 0, 0]
@@ -502,6 +523,21 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                 for ch in range(3):
                     R[3 * c + ch] = pred[ch] + BR[3 * j + ch] * bf[ch]
                 to_world(fr, segments, card, R + 3 * c, inv_sc, W + 3 * c)
+            if level_guide:  # per base segment, the most alike strand before it on the card
+                for kk in range(nbase - 1):
+                    segref[kk] = -1
+                    if t > 0 and strand_card[strands_to_code[t - 1]] == card:
+                        best = INFINITY
+                        j = t - 1
+                        while j >= 0 and j >= t - CANDIDATES and strand_card[strands_to_code[j]] == card:
+                            a = (j % (CANDIDATES + 1)) if scratch else strands_to_code[j]
+                            d = unlikeness(W, &world[a, 0, 0], &base[0], max(kk - 1, 0), min(kk + 1, nbase - 2), kk + 1, best)
+                            if d < best:
+                                best = d
+                                segref[kk] = strands_to_code[j]
+                            j -= 1
+                    if level_ref is not None:
+                        level_ref[s, kk] = segref[kk]
             for li in range(levels):
                 for row in range(level_start[li], level_start[li + 1]):
                     i = idx[row]
@@ -516,6 +552,13 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                             goal[ch] = goal[ch] + W[j + ch] * w
                     newton(fr, segments, card, sc, inv_sc, goal, newton_steps, newton_halvings, pred, jac)
                     residual_steps(jac, sc, stretch_max, f)
+                    m = segref[row_seg[row]] if level_guide else -1
+                    if level_guide and not encode and m >= 0:  # stored as the difference from m's
+                        for ch in range(3):
+                            LR[3 * row + ch] = <i64> (<uint64_t> LR[3 * row + ch]
+                                                      + <uint64_t> res[m, nbase + row, ch])
+                    if level_guide and dead_zone and neighbour_zone:
+                        NB = &res[m, 0, 0] if m >= 0 else NULL
                     if encode:
                         for ch in range(3):
                             LR[3 * row + ch] = <i64> rint((Y[3 * i + ch] - pred[ch]) / f[ch])
@@ -542,6 +585,7 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                         else:
                             uvd[s, i, ch] = <float> (v if v != v else (INFINITY if v > 0 else -INFINITY))
                             unrepresentable += 1
+    free(segref)
     return unrepresentable
 
 

@@ -211,8 +211,8 @@ def _meta(asset: HairAsset, prof: Profile, step: float | None, diag: float) -> d
             "lossless": False, "step": step, "card_step": step * CARD_STEP_FRACTION,
             "normal_bits": _normal_bits(asset, prof), "base_stride": prof.base_strides[0],
             "newton_halvings": NEWTON_HALVINGS, "stretch_max": STRETCH_MAX,
-            # the writer's choices (_Choices) replace these four in _quantize_geometry
-            "base_order": None, "base_guide": None, "newton_steps": None, "level_taps": None,
+            # the writer's choices (_Choices) replace these five in _quantize_geometry
+            "base_order": None, "base_guide": None, "newton_steps": None, "level_taps": None, "level_guide": None,
             "opacity_scale": prof.opacity_scale, "logit_levels": prof.logit_levels, "logit_floor": prof.logit_floor,
             "weight_steps": weight_steps(app.codebooks, [(x.weight, x.bias) for x in app.mlp], prof.weight_step)},
     }
@@ -275,12 +275,12 @@ def _parse_meta(raw: bytes) -> dict:
         raise InvalidContentError("META quant must be an object", chunk="META")
     if ("logit_step" in quant and "logit_levels" not in quant) or (
             quant.get("lossless") is False and any(key not in quant for key in (
-                "newton_halvings", "stretch_max", "neighbour_classes", "base_guide", "weight_steps"))):
+                "newton_halvings", "stretch_max", "neighbour_classes", "base_guide", "weight_steps", "level_guide"))):
         raise InvalidContentError("written by a pre-release draft of .cgh 1.0 (before the rANS strand coder, "
                                   "searched Newton steps, stretched residual steps, neighbour token contexts, "
-                                  "guided base samples, weights on steps or card normals as angles), which this "
-                                  "reader cannot decode: write the asset again from its source (cgh encode, or "
-                                  "cgh train --resume CHECKPOINT)", chunk="META")
+                                  "guided base samples, weights on steps, card normals as angles or level "
+                                  "references), which this reader cannot decode: write the asset again from its "
+                                  "source (cgh encode, or cgh train --resume CHECKPOINT)", chunk="META")
     if not need("lossless", bool, src=quant):
         for key in ("step", "card_step", "opacity_scale"):
             need(key, (int, float), 1e-30, src=quant)
@@ -293,6 +293,7 @@ def _parse_meta(raw: bytes) -> dict:
         need("stretch_max", (int, float), 1, 16, src=quant)
         need("neighbour_classes", int, 1, MAX_NEIGHBOUR_CLASSES, src=quant)
         need("base_guide", int, 0, 3, src=quant)
+        need("level_guide", int, 0, 1, src=quant)
         orders = quant.get("base_order")
         if (not isinstance(orders, list) or len(orders) != 3
                 or not all(isinstance(k, int) and not isinstance(k, bool) and k in (1, 2) for k in orders)):
@@ -315,6 +316,10 @@ def _parse_meta(raw: bytes) -> dict:
                 or not all(isinstance(m, int) and not isinstance(m, bool) and 0 <= m <= 7 for m in masks)):
             raise InvalidContentError(f"META quant.neighbour must list {arrays} channel masks in 0..7, got "
                                       f"{masks!r}", chunk="META")
+        if quant["level_guide"] and any(masks[1:]):
+            raise InvalidContentError(f"META quant.neighbour must be 0 for the refinement levels with level_guide "
+                                      f"(they are differences from their references' already), got {masks!r}",
+                                      chunk="META")
     return meta
 
 
@@ -330,6 +335,7 @@ class _Choices(NamedTuple):
     neighbour_zone: bool
     level_taps: tuple[int, ...]
     base_guide: int
+    level_guide: bool
 
 
 class _Geometry(NamedTuple):
@@ -369,10 +375,12 @@ def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag
         plan = replace(plan, newton_steps=_choose_newton_steps(cmap, asset.strand_card, y, scale, plan))
         neighbour_zone = _choose_neighbour_zone(cmap, asset.strand_card, y, scale, plan, zone)
         zone = zone._replace(neighbour=neighbour_zone)
-        choices = _Choices(stride, base_order, plan.newton_steps, neighbour_zone,
-                           _choose_level_taps(cmap, asset.strand_card, y, scale, plan, zone), guide)
+        plan = replace(plan, level_taps=_choose_level_taps(cmap, asset.strand_card, y, scale, plan, zone))
+        choices = _Choices(stride, base_order, plan.newton_steps, neighbour_zone, plan.level_taps, guide,
+                           _choose_level_guide(cmap, asset.strand_card, y, scale, plan, zone))
     q["base_order"], q["newton_steps"] = list(choices.base_order), choices.newton_steps
     q["level_taps"], q["base_guide"] = list(choices.level_taps), choices.base_guide
+    q["level_guide"] = int(choices.level_guide)
     base, levels, decoded_points = encode_uvd(cmap, asset.strand_card, y, scale, _prediction(q),
                                               dead_zone=zone._replace(neighbour=choices.neighbour_zone))
     return _Geometry(meta, cards_w, [base] + levels, decoded_points, choices)
@@ -430,7 +438,8 @@ def _geometry_chunks(asset: HairAsset, geometry: _Geometry) -> list[container.Ch
     if residuals is None:
         strd_w.array(asset.uvd.astype(np.float32), shuffle=True)
     else:
-        stored, meta["quant"]["neighbour"] = _with_neighbour_prediction(asset.strand_card, residuals)
+        stored, meta["quant"]["neighbour"] = _with_neighbour_prediction(asset.strand_card, residuals,
+                                                                        bool(meta["quant"]["level_guide"]))
         meta["quant"]["neighbour_classes"] = write_residuals(strd_w, stored, asset.strand_card,
                                                              (NEIGHBOUR_CLASSES, 1))
     groups = asset.cards.group.astype(np.uint16 if asset.appearance.n_groups <= 65536 else np.uint32)
@@ -471,7 +480,7 @@ def _appearance_chunks(asset: HairAsset, prof: Profile, quant: dict) -> list[con
     return chunks + _optional_chunks(asset)
 
 
-def _with_neighbour_prediction(strand_card: np.ndarray, residuals: list[np.ndarray]
+def _with_neighbour_prediction(strand_card: np.ndarray, residuals: list[np.ndarray], level_guide: bool = False
                                ) -> tuple[list[np.ndarray], list[int]]:
     """Per residual array and channel, the plain residuals or their differences from the card
     neighbour's (spec 4.3), whichever the entropy coder's estimate finds smaller. Returns the arrays
@@ -479,10 +488,10 @@ def _with_neighbour_prediction(strand_card: np.ndarray, residuals: list[np.ndarr
     delta)."""
     order, starts = neighbour_order(strand_card)
     stored, masks = [], []
-    for r in residuals:
+    for a, r in enumerate(residuals):
         r = r.copy()
         mask = 0
-        for ch in range(3):
+        for ch in range(3) if a == 0 or not level_guide else ():
             diff = neighbour_encode(r[..., ch], order, starts)
             if _estimate(diff) < _estimate(r[..., ch]):
                 r[..., ch] = diff
@@ -512,7 +521,7 @@ def _estimate(residuals: np.ndarray) -> float:
 
 def _prediction(q: dict) -> Prediction:
     return Prediction(q["base_stride"], tuple(q["base_order"]), q["newton_steps"], tuple(q["level_taps"]),
-                      q["newton_halvings"], float(q["stretch_max"]), q["base_guide"])
+                      q["newton_halvings"], float(q["stretch_max"]), q["base_guide"], bool(q["level_guide"]))
 
 
 def _choose_base_samples(asset: HairAsset, q: dict, zone: DeadZone, strides: tuple[int, ...]) -> tuple[int, int]:
@@ -603,6 +612,18 @@ def _choose_level_taps(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, sc
     return chosen if coded_bytes(mixed) < coded_bytes(trial[4]) else (4,) * levels
 
 
+def _choose_level_guide(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray,
+                        plan: Prediction, zone: DeadZone) -> bool:
+    """Whether each base segment's refinement residuals are stored as differences from those of the
+    most alike strand before it on the card (spec 4.3, ``level_guide``) rather than the card
+    neighbour's: whichever codes the strands of a sample of cards smaller. Wavy strands densified from
+    fewer pay (harolongo at the paper's scale: 1.7 % off the whole file; straight.hair 0.5 %;
+    harolongo's own strands 0.3 %); the Ratboy model's would cost 1.3 %."""
+    sizes = {guided: coded_bytes(_sample_residuals(cmap, strand_card, y, scale, replace(plan, level_guide=guided),
+                                                   zone, BASE_SAMPLE_CARDS)) for guided in (False, True)}
+    return sizes[True] < sizes[False]
+
+
 def _sample_residuals(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray, plan: Prediction,
                       zone: DeadZone, cards: int = 200) -> list[np.ndarray]:
     """The residual arrays as stored (base, then each level; after neighbour prediction) of the strands
@@ -614,7 +635,7 @@ def _sample_residuals(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, sca
     pick = np.flatnonzero(np.isin(strand_card, picked))
     base, levels, _ = encode_uvd(cmap, strand_card[pick], y[pick], scale[pick], plan,
                                  dead_zone=zone._replace(points=zone.points[pick]))
-    return _with_neighbour_prediction(strand_card[pick], [base] + levels)[0]
+    return _with_neighbour_prediction(strand_card[pick], [base] + levels, plan.level_guide)[0]
 
 
 def _optional_chunks(asset: HairAsset) -> list[container.Chunk]:

@@ -62,7 +62,8 @@ class Prediction:
     far a residual's step may stretch with the card's local scale (1: not at all), and whether a
     strand's base samples are predicted from its card neighbour's world steps (0: no, 1: yes, 2: scaled
     by how the two strands' previous steps compare, 3: after the first, from the most alike strand
-    before it on the card)."""
+    before it on the card), and whether each base segment's refinement residuals are differences from
+    those of the most alike strand before it on the card (``level_guide``)."""
 
     base_stride: int
     base_order: tuple[int, int, int]
@@ -71,6 +72,7 @@ class Prediction:
     newton_halvings: int = NEWTON_HALVINGS
     stretch_max: float = STRETCH_MAX
     base_guide: int = 0
+    level_guide: bool = False
 
 
 def base_residuals(y: np.ndarray, base: np.ndarray, orders: tuple[int, int, int]) -> np.ndarray:
@@ -107,6 +109,9 @@ def _run_strands(cmap: CardMap, strand_card: np.ndarray, scale: np.ndarray, resi
     base, orders = base.astype(np.int64), np.asarray(plan.base_order, np.int64)
     taps = np.asarray(plan.level_taps or (4,) * len(levels), np.int64)  # the columns of nb, wt each level uses
 
+    if plan.level_guide:
+        arrays["row_seg"] = _row_segments(n, plan.base_stride)
+
     def block(b: slice) -> int:
         given = dict(arrays)
         if "uvd" in given:  # decoding: per block, the scratch of a strand and those its base samples may follow
@@ -136,7 +141,8 @@ def encode_uvd(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.
     of ``cmap``, and the world points ``[S, P, 3]`` the decoder will reconstruct. Every reconstructed
     value is within 0.5 of ``y``, except samples where ``dead_zone`` (:class:`DeadZone`) lets a cheaper
     residual stand: the error stays bounded, the residuals it picks cost the least, and as the decoder
-    predicts from what it reconstructs, later samples simply see that reconstruction."""
+    predicts from what it reconstructs, later samples simply see that reconstruction. With
+    ``plan.level_guide`` the levels come as stored: differences from each base segment's reference's."""
     s, n = y.shape[:2]
     widths = level_widths(n, plan.base_stride)
     world = np.empty((s, n, 3))
@@ -144,10 +150,24 @@ def encode_uvd(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.
     zone = {} if dead_zone is None else {
         "dz_points": np.ascontiguousarray(dead_zone.points, np.float64), "dz_dist": float(dead_zone.distance),
         "neighbour_zone": dead_zone.neighbour}
+    if plan.level_guide:
+        zone["level_ref"] = ref = np.full((s, widths[0] - 1), -1, np.int64)
     _run_strands(cmap, strand_card, scale, residuals, n, plan, rec=np.empty((s, n, 3)), world=world,
                  y=np.ascontiguousarray(y, np.float64), **zone)
+    if plan.level_guide:  # the levels as differences from each base segment's reference's (spec 4.3)
+        rows = np.arange(widths[0], residuals.shape[1])
+        row_ref = ref[:, _row_segments(n, plan.base_stride)]
+        residuals[:, rows] -= np.where((row_ref >= 0)[..., None], residuals[np.maximum(row_ref, 0), rows], 0)
     base, *levels = np.split(residuals, np.cumsum(widths)[:-1], axis=1)
     return base, levels, world
+
+
+def _row_segments(n: int, base_stride: int) -> np.ndarray:
+    """Per refinement sample (the levels' rows in order), the base segment ``k`` it lies in:
+    ``base[k] < i < base[k + 1]`` (spec 4.3, ``level_guide``)."""
+    base, levels = level_plan(n, base_stride)
+    idx = np.concatenate([np.zeros(0, np.int64)] + [lv[0] for lv in levels])
+    return (np.searchsorted(base, idx, side="right") - 1).astype(np.int64)
 
 
 def level_widths(n: int, base_stride: int) -> list[int]:

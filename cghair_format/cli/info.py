@@ -46,6 +46,7 @@ def format_info(name: str, info: dict) -> str:
 
 GUIDES = ("", ", guided by the card neighbour's steps", ", guided by the card neighbour's steps, scaled",
           ", guided by the most alike earlier strand's steps")
+LEVEL_GUIDES = ("", ", level residuals as differences from the most alike earlier strand's")
 
 
 def _coding(quant: dict) -> str:
@@ -53,7 +54,7 @@ def _coding(quant: dict) -> str:
     if quant["lossless"]:
         return "float32 card coordinates (lossless)"
     return (f"step {quant['step']:.3g}, base samples every {quant['base_stride']} points"
-            f"{GUIDES[quant['base_guide']]}, "
+            f"{GUIDES[quant['base_guide']]}{LEVEL_GUIDES[quant['level_guide']]}, "
             f"levels interpolating {'/'.join(map(str, quant['level_taps'])) or '-'} points, "
             f"steps stretched up to {quant['stretch_max']:g}x, {quant['neighbour_classes']} neighbour token "
             f"class{'es' if quant['neighbour_classes'] > 1 else ''}")

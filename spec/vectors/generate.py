@@ -46,21 +46,23 @@ def _quant(data: bytes) -> dict:
     return json.loads(payloads["META"])["quant"]
 
 
-def _encode(asset, profile: str, guide: int, classes: int | None = None) -> bytes:
-    """``cgh.encode`` with the writer's choice of ``base_guide`` (spec 4.3) and, if given, of
-    ``neighbour_classes`` (4.3.2) forced: the small vectors then cover each way a decoder must go,
-    whichever the writer would pick for them."""
+def _encode(asset, profile: str, guide: int, classes: int | None = None, level_guide: bool = False) -> bytes:
+    """``cgh.encode`` with the writer's choices of ``base_guide`` and ``level_guide`` (spec 4.3) and, if
+    given, of ``neighbour_classes`` (4.3.2) forced: the small vectors then cover each way a decoder must
+    go, whichever the writer would pick for them."""
     codec = cgh.codec
-    choose, write = codec._choose_base_samples, codec.write_residuals
+    choose, write, levels = codec._choose_base_samples, codec.write_residuals, codec._choose_level_guide
     codec._choose_base_samples = lambda *args: (choose(*args)[0], guide)
+    codec._choose_level_guide = lambda *args: level_guide
     if classes is not None:  # the file's STRD only, not the writer's trial codings (no strand_card)
         codec.write_residuals = lambda w, arrays, card=None, tried=(1,): write(w, arrays, card,
                                                                                 tried if card is None else (classes,))
     try:
         data = cgh.encode(asset, profile)[0]
     finally:
-        codec._choose_base_samples, codec.write_residuals = choose, write
-    assert _quant(data)["base_guide"] == guide and (classes is None or _quant(data)["neighbour_classes"] == classes)
+        codec._choose_base_samples, codec.write_residuals, codec._choose_level_guide = choose, write, levels
+    assert _quant(data)["base_guide"] == guide and _quant(data)["level_guide"] == level_guide
+    assert classes is None or _quant(data)["neighbour_classes"] == classes
     return data
 
 
@@ -113,13 +115,14 @@ def main() -> None:
     _differs(data, {"neighbour_classes": 1})
     _expected("synth_cards_neighbour_classes", data)
     # curly hair on the same few cards, where the decoder halves some Newton steps and stretches residual
-    # steps (spec 4.3), and base samples follow the most alike earlier strand (base_guide 3): decoding it
-    # with fewer halvings, unstretched or guided by the card neighbour alone gives other points (the
-    # assertion below keeps it so)
+    # steps (spec 4.3), and base samples and level residuals follow the most alike earlier strand
+    # (base_guide 3, level_guide 1): decoding it with fewer halvings, unstretched, guided by the card
+    # neighbour alone or without level references gives other points (the assertion below keeps it so)
     curly = build_cards(synthesize("curly", 48, 24, seed=2), n_cards=6, n_groups=2, segments=8, points=24,
                         seed=0, progress=False, sh_degree=1).asset
-    data = _encode(curly, "compact", guide=3)
-    for change in ({"newton_halvings": 0}, {"newton_halvings": 3}, {"stretch_max": 1}, {"base_guide": 1}):
+    data = _encode(curly, "compact", guide=3, level_guide=True)
+    for change in ({"newton_halvings": 0}, {"newton_halvings": 3}, {"stretch_max": 1}, {"base_guide": 1},
+                   {"level_guide": 0}):
         _differs(data, change)
     _expected("synth_curly_compact", data)
 

@@ -36,6 +36,10 @@ def test_info_names_the_writers_strand_coding_choices(capsys):
     out = capsys.readouterr().out
     assert "every 8 points, guided by the card neighbour's steps, scaled" in out
     assert "3 neighbour token classes" in out
+    assert main(["info", str(vectors / "synth_curly_compact.cgh")]) == 0
+    out = capsys.readouterr().out
+    assert "guided by the most alike earlier strand's steps, level residuals as differences from the most " \
+           "alike earlier strand's" in out
     assert main(["info", str(vectors / "minimal_lossless.cgh")]) == 0
     assert "float32 card coordinates (lossless)" in capsys.readouterr().out
 
