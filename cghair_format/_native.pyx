@@ -526,9 +526,12 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
             if level_guide:  # per base segment, the most alike strand before it on the card
                 for kk in range(nbase - 1):
                     segref[kk] = -1
-                    if t > 0 and strand_card[strands_to_code[t - 1]] == card:
-                        best = INFINITY
-                        j = t - 1
+                    if t > 0 and strand_card[strands_to_code[t - 1]] == card:  # the neighbour, unless ...
+                        segref[kk] = strands_to_code[t - 1]
+                        a = ((t - 1) % (CANDIDATES + 1)) if scratch else strands_to_code[t - 1]
+                        best = unlikeness(W, &world[a, 0, 0], &base[0], max(kk - 1, 0), min(kk + 1, nbase - 2),
+                                          kk + 1, INFINITY)
+                        j = t - 2
                         while j >= 0 and j >= t - CANDIDATES and strand_card[strands_to_code[j]] == card:
                             a = (j % (CANDIDATES + 1)) if scratch else strands_to_code[j]
                             d = unlikeness(W, &world[a, 0, 0], &base[0], max(kk - 1, 0), min(kk + 1, nbase - 2), kk + 1, best)
