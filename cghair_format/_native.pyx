@@ -592,6 +592,32 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
     return unrepresentable
 
 
+def level_differences(i64[:, :, ::1] res, const i64[:, ::1] level_ref, const i64[::1] row_seg, Py_ssize_t nbase):
+    """The levels' rows of ``res [S, nbase + R, 3]`` made differences from those of their base segment's
+    reference (``level_ref [S, nbase - 1]``, a strand before them, -1: none; ``row_seg [R]``; spec 4.3,
+    ``level_guide``), in place: strands from the last, so that each reference is still whole when read.
+    Integers wrap as int64."""
+    cdef Py_ssize_t s, row, ch, rows = row_seg.shape[0]
+    cdef i64 m
+    if (res.shape[1] != nbase + rows or level_ref.shape[0] != res.shape[0] or level_ref.shape[1] != nbase - 1):
+        raise ValueError("level_differences: mismatched shapes")
+    for row in range(rows):
+        if row_seg[row] < 0 or row_seg[row] >= nbase - 1:
+            raise ValueError("level_differences: a row's base segment is out of range")
+    for s in range(res.shape[0]):
+        for row in range(nbase - 1):
+            if level_ref[s, row] >= s:
+                raise ValueError("level_differences: a reference is not a strand before its own")
+    with nogil:
+        for s in range(res.shape[0] - 1, -1, -1):
+            for row in range(rows):
+                m = level_ref[s, row_seg[row]]
+                if m >= 0:
+                    for ch in range(3):
+                        res[s, nbase + row, ch] = <i64> (<uint64_t> res[s, nbase + row, ch]
+                                                         - <uint64_t> res[m, nbase + row, ch])
+
+
 def undo_neighbour(i64[:, :, ::1] values, const i64[::1] order, const uint8_t[::1] starts,
                    const uint8_t[:, ::1] mask):
     """Neighbour prediction undone in place (spec 4.3): going through the strands in ``order``, each

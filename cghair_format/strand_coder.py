@@ -155,9 +155,7 @@ def encode_uvd(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.
     _run_strands(cmap, strand_card, scale, residuals, n, plan, rec=np.empty((s, n, 3)), world=world,
                  y=np.ascontiguousarray(y, np.float64), **zone)
     if plan.level_guide:  # the levels as differences from each base segment's reference's (spec 4.3)
-        rows = np.arange(widths[0], residuals.shape[1])
-        row_ref = ref[:, _row_segments(n, plan.base_stride)]
-        residuals[:, rows] -= np.where((row_ref >= 0)[..., None], residuals[np.maximum(row_ref, 0), rows], 0)
+        _native.level_differences(residuals, ref, _row_segments(n, plan.base_stride), widths[0])
     base, *levels = np.split(residuals, np.cumsum(widths)[:-1], axis=1)
     return base, levels, world
 
