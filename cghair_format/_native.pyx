@@ -231,6 +231,33 @@ cdef inline double unlikeness(const double* w, const double* wm, const i64* base
     return d + UNLIKE_PLACE * diff2(ORIGIN, w + 3 * base[at], ORIGIN, wm + 3 * base[at])
 
 
+cdef inline i64 slot(Py_ssize_t t, const i64[::1] strands_to_code, bint scratch) noexcept nogil:
+    """The row of ``rec`` and ``world`` holding the strand at position ``t``: its own, or decoding, one
+    of the scratch's SCRATCH_STRANDS in turn."""
+    return (t % (CANDIDATES + 1)) if scratch else strands_to_code[t]
+
+
+cdef inline Py_ssize_t most_alike(Py_ssize_t t, const i64[::1] strands_to_code, const i64[::1] strand_card,
+                                  const double[:, :, ::1] world, bint scratch, const double* w, const i64* base,
+                                  Py_ssize_t first, Py_ssize_t last, Py_ssize_t at) noexcept nogil:
+    """Of the CANDIDATES strands before position ``t`` of ``strands_to_code`` on its card (the one at
+    ``t - 1`` must be), the position of the most alike to the strand with world points ``w`` by
+    :func:`unlikeness` over ``first, last, at``: the neighbour ``t - 1``, unless one farther back is
+    less unlike (strictly: a tie, or NaN, keeps the nearer)."""
+    cdef i64 card = strand_card[strands_to_code[t]]
+    cdef Py_ssize_t k, pick = t - 1
+    cdef double d, best = unlikeness(w, &world[slot(t - 1, strands_to_code, scratch), 0, 0], base, first, last, at,
+                                     INFINITY)
+    k = t - 2
+    while k >= 0 and k >= t - CANDIDATES and strand_card[strands_to_code[k]] == card:
+        d = unlikeness(w, &world[slot(k, strands_to_code, scratch), 0, 0], base, first, last, at, best)
+        if d < best:
+            best = d
+            pick = k
+        k -= 1
+    return pick
+
+
 cdef inline void residual_steps(const double* j, const double* sc, double stretch_max, double* f) noexcept nogil:
     """The steps ``f`` in scaled card coordinates of a residual whose prediction a Newton search made (a
     refinement sample's, a guided base sample's; spec 4.3), from the Jacobian columns ``j [9]`` at that
@@ -402,7 +429,6 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
     cdef double* WN
     cdef double* RM
     cdef double* WM
-    cdef double best, d
     cdef const double* Y = NULL
     cdef const double* Z = NULL
     cdef i64* BR
@@ -454,12 +480,12 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
             sc = &scale[s, 0]
             for ch in range(3):
                 inv_sc[ch] = 1.0 / sc[ch]
-            R = &rec[(t % (CANDIDATES + 1)) if scratch else s, 0, 0]
-            W = &world[(t % (CANDIDATES + 1)) if scratch else s, 0, 0]
+            R = &rec[slot(t, strands_to_code, scratch), 0, 0]
+            W = &world[slot(t, strands_to_code, scratch), 0, 0]
             RN = NULL  # with base_guide, the neighbour's reconstruction (spec 4.3)
             if base_guide > 0 and t > 0 and strand_card[strands_to_code[t - 1]] == card:
-                RN = &rec[((t - 1) % (CANDIDATES + 1)) if scratch else strands_to_code[t - 1], 0, 0]
-                WN = &world[((t - 1) % (CANDIDATES + 1)) if scratch else strands_to_code[t - 1], 0, 0]
+                RN = &rec[slot(t - 1, strands_to_code, scratch), 0, 0]
+                WN = &world[slot(t - 1, strands_to_code, scratch), 0, 0]
             BR = &res[s, 0, 0]
             LR = BR + 3 * nbase
             NB = NULL  # encoding: the residuals of this strand's neighbour (spec 4.3), when coded already
@@ -485,17 +511,11 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                         rho = step_ratio(W + 3 * a, W + 3 * b, WN + 3 * a, WN + 3 * b)
                     RM = RN
                     WM = WN
-                    if base_guide == 3 and j > 1:  # the most alike strand of those before it (nearest first)
-                        best = unlikeness(W, WN, &base[0], max(j - 3, 0), j - 2, j - 1, INFINITY)
-                        kk = t - 2
-                        while kk >= 0 and kk >= t - CANDIDATES and strand_card[strands_to_code[kk]] == card:
-                            a = (kk % (CANDIDATES + 1)) if scratch else strands_to_code[kk]
-                            d = unlikeness(W, &world[a, 0, 0], &base[0], max(j - 3, 0), j - 2, j - 1, best)
-                            if d < best:
-                                best = d
-                                RM = &rec[a, 0, 0]
-                                WM = &world[a, 0, 0]
-                            kk -= 1
+                    if base_guide == 3 and j > 1:  # the most alike strand of those before it
+                        a = slot(most_alike(t, strands_to_code, strand_card, world, scratch, W, &base[0],
+                                            max(j - 3, 0), j - 2, j - 1), strands_to_code, scratch)
+                        RM = &rec[a, 0, 0]
+                        WM = &world[a, 0, 0]
                     for ch in range(3):
                         pred[ch] = R[3 * b + ch] + rho * (RM[3 * c + ch] - RM[3 * b + ch])
                         goal[ch] = W[3 * b + ch] + rho * (WM[3 * c + ch] - WM[3 * b + ch])
@@ -526,19 +546,10 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
             if level_guide:  # per base segment, the most alike strand before it on the card
                 for kk in range(nbase - 1):
                     segref[kk] = -1
-                    if t > 0 and strand_card[strands_to_code[t - 1]] == card:  # the neighbour, unless ...
-                        segref[kk] = strands_to_code[t - 1]
-                        a = ((t - 1) % (CANDIDATES + 1)) if scratch else strands_to_code[t - 1]
-                        best = unlikeness(W, &world[a, 0, 0], &base[0], max(kk - 1, 0), min(kk + 1, nbase - 2),
-                                          kk + 1, INFINITY)
-                        j = t - 2
-                        while j >= 0 and j >= t - CANDIDATES and strand_card[strands_to_code[j]] == card:
-                            a = (j % (CANDIDATES + 1)) if scratch else strands_to_code[j]
-                            d = unlikeness(W, &world[a, 0, 0], &base[0], max(kk - 1, 0), min(kk + 1, nbase - 2), kk + 1, best)
-                            if d < best:
-                                best = d
-                                segref[kk] = strands_to_code[j]
-                            j -= 1
+                    if t > 0 and strand_card[strands_to_code[t - 1]] == card:
+                        segref[kk] = strands_to_code[most_alike(t, strands_to_code, strand_card, world, scratch, W,
+                                                                &base[0], max(kk - 1, 0), min(kk + 1, nbase - 2),
+                                                                kk + 1)]
                     if level_ref is not None:
                         level_ref[s, kk] = segref[kk]
             for li in range(levels):

@@ -485,7 +485,8 @@ def _with_neighbour_prediction(strand_card: np.ndarray, residuals: list[np.ndarr
     """Per residual array and channel, the plain residuals or their differences from the card
     neighbour's (spec 4.3), whichever the entropy coder's estimate finds smaller. Returns the arrays
     to store and, per array, the mask of channels stored as differences (bit 0 u, bit 1 v, bit 2
-    delta)."""
+    delta). With ``level_guide`` the levels are left as they are: differences from their references'
+    already."""
     order, starts = neighbour_order(strand_card)
     stored, masks = [], []
     for a, r in enumerate(residuals):
