@@ -8,12 +8,13 @@ and is called on independent blocks of strands from several threads (:mod:`.para
   (residuals from scaled card coordinates) or decoding (scaled card coordinates from residuals).
 - :func:`undo_neighbour`: the neighbour prediction across the strands of a card (spec 4.3), undone.
 - :func:`decode_residuals`: the STRD token stream and extra bits (spec 4.3.2), decoded.
+- :func:`encode_rans`: the STRD tokens, rANS-coded (the writer's side of spec 4.3.2).
 - :func:`pack_bits`: the extra bits, packed (the writer's side of spec 4.3.2).
 """
 
 from libc.float cimport FLT_MAX
 from libc.math cimport INFINITY, fabs, floor, isfinite, rint, sqrt
-from libc.stdint cimport uint8_t, uint16_t, uint32_t, uint64_t
+from libc.stdint cimport int32_t, uint8_t, uint16_t, uint32_t, uint64_t
 from libc.stdlib cimport calloc, free
 
 ctypedef long long i64
@@ -790,6 +791,35 @@ def decode_residuals(const uint8_t[::1] flat_slot, const uint32_t[::1] flat_freq
     free(xs)
     free(prev)
     return fault
+
+
+def encode_rans(const uint8_t[:, ::1] sym, const int32_t[:, ::1] table, const i64[::1] active,
+                const uint32_t[::1] flat_freq, const uint32_t[::1] flat_start, uint32_t[::1] states,
+                uint16_t[::1] words):
+    """rANS-code steps of symbols ``sym [N, L]`` under tables ``table [N, L]`` (lanes ``>= active[n]``
+    idle at step ``n``), last step first, as :func:`decode_residuals` reads them back: the lanes'
+    final states go to ``states [L]``, the words to the end of ``words`` (which must hold
+    ``N * L``). Returns where the words begin."""
+    cdef Py_ssize_t n, lane, pos = words.shape[0], lanes = states.shape[0]
+    cdef uint64_t x, f
+    cdef i64 k
+    if sym.shape[1] != lanes or table.shape[0] != sym.shape[0] or table.shape[1] != lanes \
+            or active.shape[0] != sym.shape[0] or words.shape[0] < sym.shape[0] * lanes:
+        raise ValueError("encode_rans: mismatched shapes")
+    with nogil:
+        for lane in range(lanes):
+            states[lane] = LOW
+        for n in range(sym.shape[0] - 1, -1, -1):
+            for lane in range(min(active[n], lanes) - 1, -1, -1):
+                k = <i64> table[n, lane] * ALPHABET + sym[n, lane]
+                x = states[lane]
+                f = flat_freq[k]
+                if x >= f << 20:  # ((LOW >> PROB_BITS) << 16) * f: emit a word, as the decoder reads one
+                    pos -= 1
+                    words[pos] = x & 0xFFFF
+                    x >>= 16
+                states[lane] = <uint32_t> (((x // f) << PROB_BITS) + x % f + flat_start[k])
+    return pos
 
 
 def pack_bits(const uint8_t[::1] width, const uint64_t[::1] value, uint8_t[::1] out):

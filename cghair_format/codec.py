@@ -9,6 +9,7 @@ import json
 import math
 import os
 import tempfile
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import BinaryIO, NamedTuple
@@ -17,9 +18,9 @@ import numpy as np
 
 from . import container, rans
 from .asset import ACTIVATIONS, UP_AXES, WEIGHT_MODES, Appearance, Cards, HairAsset, MlpLayer
-from .errors import AssetError, InvalidContentError, LimitError
+from .errors import AssetError, CghFormatError, InvalidContentError, LimitError
 from .geometry import CardMap, angle_normals, card_scales, normal_angles, strand_points
-from .parallel import map_blocks
+from .parallel import map_blocks, map_threads
 from .profiles import Profile, get_profile
 from .quantize import (
     TAPS,
@@ -175,8 +176,12 @@ def encode(asset: HairAsset, profile: str | Profile = "compact", keep_order: boo
     if passed is None:
         raise AssetError(f"could not meet the position tolerance {tol:g} (error {err:g})")
     step, err, geometry = passed
-    chunks = _geometry_chunks(asset, geometry) + _appearance_chunks(asset, prof, geometry.meta["quant"])
-    data = container.pack(chunks, level=prof.zstd_level)
+    level, quant = prof.zstd_level, dict(geometry.meta["quant"])
+    with ThreadPoolExecutor(max_workers=1) as background:  # zstd on the appearance while STRD is coded
+        appearance = background.submit(lambda: [container.compress(c, level)
+                                                for c in _appearance_chunks(asset, prof, quant)])
+        stored = map_threads(lambda c: container.compress(c, level), _geometry_chunks(asset, geometry))
+        data = container.assemble(stored + appearance.result())
     _, infos = container.read_table(data)
     return data, EncodeReport(prof.name, step, err, diag, {i.type: i.stored for i in infos}, order)
 
@@ -539,13 +544,18 @@ def _choose_base_samples(asset: HairAsset, q: dict, zone: DeadZone, strides: tup
     cmap = CardMap(asset.cards)
     scale = _uvd_scale(*card_scales(asset.cards, q["step"]), asset.strand_card, q["step"])
     y = asset.uvd * scale[:, None, :]
-    orders = {stride: _choose_base_order(asset.strand_card, y, stride) for stride in strides}
-    sizes = {}
-    for stride, guide in [(stride, guide) for stride in strides for guide in (2, 3)] + [(strides[0], 0)]:
+    orders = dict(zip(strides, map_threads(lambda stride: _choose_base_order(asset.strand_card, y, stride),
+                                           list(strides)), strict=True))
+    tried = [(stride, guide) for stride in strides for guide in (2, 3)] + [(strides[0], 0)]
+
+    def size(trial: tuple[int, int]) -> float:
+        stride, guide = trial
         plan = Prediction(stride, orders[stride], NEWTON_STEPS, newton_halvings=q["newton_halvings"],
                           stretch_max=q["stretch_max"], base_guide=guide)
-        sizes[stride, guide] = coded_bytes(_sample_residuals(cmap, asset.strand_card, y, scale, plan,
-                                                             zone._replace(neighbour=True), BASE_SAMPLE_CARDS))
+        return coded_bytes(_sample_residuals(cmap, asset.strand_card, y, scale, plan, zone._replace(neighbour=True),
+                                             BASE_SAMPLE_CARDS))
+
+    sizes = dict(zip(tried, map_threads(size, tried), strict=True))
     return min(sizes, key=sizes.get)
 
 
@@ -584,10 +594,10 @@ def _choose_neighbour_zone(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray
     a sample of cards smaller. It pays where a card's strands are much alike (strands densified from
     fewer, 10-18 % off STRD at the paper's scale) and costs a little where they are not (the Ratboy
     model: 1.5 %)."""
-    sizes = {neighbour: sum(map(_estimate, _sample_residuals(cmap, strand_card, y, scale, plan,
-                                                             zone._replace(neighbour=neighbour), 64)))
-             for neighbour in (True, False)}
-    return min(sizes, key=sizes.get)
+    tried = [True, False]
+    sizes = map_threads(lambda neighbour: sum(map(_estimate, _sample_residuals(
+        cmap, strand_card, y, scale, plan, zone._replace(neighbour=neighbour), 64))), tried)
+    return tried[int(np.argmin(sizes))]
 
 
 def _choose_level_taps(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray,
@@ -604,8 +614,8 @@ def _choose_level_taps(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, sc
     check."""
     levels = len(level_plan(y.shape[1], plan.base_stride)[1])
     widths = (2, 4, 6)
-    trial = {t: _sample_residuals(cmap, strand_card, y, scale, replace(plan, level_taps=(t,) * levels), zone)
-             for t in widths}
+    trial = dict(zip(widths, map_threads(lambda t: _sample_residuals(
+        cmap, strand_card, y, scale, replace(plan, level_taps=(t,) * levels), zone), list(widths)), strict=True))
     chosen = tuple(widths[k] for k in np.argmin([list(map(_estimate, trial[t][1:])) for t in widths], axis=0))
     if chosen == (4,) * levels:
         return chosen
@@ -620,9 +630,9 @@ def _choose_level_guide(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, s
     neighbour's: whichever codes the strands of a sample of cards smaller. Wavy strands densified from
     fewer pay (harolongo at the paper's scale: 1.7 % off the whole file; straight.hair 0.5 %;
     harolongo's own strands 0.3 %); the Ratboy model's would cost 1.3 %."""
-    sizes = {guided: coded_bytes(_sample_residuals(cmap, strand_card, y, scale, replace(plan, level_guide=guided),
-                                                   zone, BASE_SAMPLE_CARDS)) for guided in (False, True)}
-    return sizes[True] < sizes[False]
+    unguided, guided = map_threads(lambda g: coded_bytes(_sample_residuals(
+        cmap, strand_card, y, scale, replace(plan, level_guide=g), zone, BASE_SAMPLE_CARDS)), [False, True])
+    return guided < unguided
 
 
 def _sample_residuals(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray, plan: Prediction,
@@ -731,36 +741,17 @@ def _decode_chunks(meta: dict, payloads: dict[str, bytes]) -> HairAsset:
                         layer["activation"])
                for j, (i, o, layer) in enumerate(zip(widths[:-1], widths[1:], meta["mlp"], strict=True))]
     else:
-        stride, step = q["base_stride"], q["step"]
         cards = _decode_cards(rd["CARD"], c, m + 1, q)
-        su, sv = card_scales(cards, step)
-        columns = level_widths(p, stride)
-        residuals = read_residuals(rd["STRD"], strand_card, columns, q["neighbour_classes"])
-        _undo_neighbour_prediction(strand_card, residuals, columns, q["neighbour"])
-        scale = _uvd_scale(su, sv, strand_card, step)
-        uvd = decode_uvd(CardMap(cards), strand_card, residuals, p, scale, _prediction(q))
-        opacity = np.clip(_get_hier(rd["OPAC"], s, p - 1, stride, "opacity") / q["opacity_scale"], 0, 1)
-        if meta["weight_mode"] == "hard":
-            idx = rd["LOGT"].ints((s,), "assignment")
-            if idx.min() < 0 or idx.max() >= k:
-                raise InvalidContentError(f"codebook assignment outside [0, {k})", chunk="LOGT")
-            logits = np.full((s, k), q["logit_floor"], np.float32)
-            logits[np.arange(s), idx] = 0.0
-        else:
-            top = rd["LOGT"].array((s,), "largest logit", ("|u1", "<u2")).astype(np.int64)
-            others = rd["LOGT"].array((s, k - 1), "other logits", ("|u1", "<u2", "<u4")).astype(np.int64)
-            if top.size and (top.min() < 0 or top.max() >= k):
-                raise InvalidContentError(f"largest logit's index outside [0, {k})", chunk="LOGT")
-            if others.size and (others.min() < 0 or others.max() > q["logit_levels"]):
-                raise InvalidContentError(f"soft logits outside [0, {q['logit_levels']}]", chunk="LOGT")
-            levels = np.full((s, k), q["logit_levels"], np.int64)
-            levels[np.arange(k)[None, :] != top[:, None]] = others.ravel()
-            logits = softmax_levels_decode(levels, meta["temperature"], q["logit_levels"], q["logit_floor"])
-        qc = rd["CBKS"].ints((nt, k, d), "codebooks")
-        coded = [(rd["MLPW"].ints((o, i), f"mlp[{j}].weight"), rd["MLPW"].ints((o,), f"mlp[{j}].bias"))
-                 for j, (i, o) in enumerate(zip(widths[:-1], widths[1:], strict=True))]
-        codebooks, layers = weights_decode(q["weight_steps"], qc, coded)
-        mlp = [MlpLayer(w, b, layer["activation"]) for (w, b), layer in zip(layers, meta["mlp"], strict=True)]
+        # the strand points (whose rANS decoder runs on one core) while the appearance streams decode;
+        # a fault in STRD is raised first, as it comes first in the file
+        with ThreadPoolExecutor(max_workers=1) as background:
+            points = background.submit(_decode_strand_points, rd["STRD"], cards, strand_card, p, q)
+            try:
+                opacity, logits, codebooks, mlp = _decode_quantized_appearance(rd, meta, s, p, q)
+            except CghFormatError:
+                points.result()
+                raise
+            uvd = points.result()
     cards.group = rd["CARD"].array((c,), "group", ("<u2", "<u4")).astype(np.int32)
     for reader in rd.values():
         reader.finish()
@@ -771,6 +762,45 @@ def _decode_chunks(meta: dict, payloads: dict[str, bytes]) -> HairAsset:
                       meta["attribution"])
     _decode_optional(asset, payloads, s, p)
     return asset
+
+
+def _decode_strand_points(r: StreamReader, cards: Cards, strand_card: np.ndarray, p: int, q: dict) -> np.ndarray:
+    """The strands' card coordinates ``[S, p, 3]`` from STRD's residuals (after ``strand_card``)."""
+    columns = level_widths(p, q["base_stride"])
+    residuals = read_residuals(r, strand_card, columns, q["neighbour_classes"])
+    _undo_neighbour_prediction(strand_card, residuals, columns, q["neighbour"])
+    scale = _uvd_scale(*card_scales(cards, q["step"]), strand_card, q["step"])
+    return decode_uvd(CardMap(cards), strand_card, residuals, p, scale, _prediction(q))
+
+
+def _decode_quantized_appearance(rd: dict[str, StreamReader], meta: dict, s: int, p: int, q: dict
+                                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[MlpLayer]]:
+    """Opacities, logits, codebooks and MLP layers of a quantized file."""
+    nt, k, d = meta["groups"], meta["k"], meta["latent_dim"]
+    widths = [d] + [layer["out"] for layer in meta["mlp"]]
+    opacity = np.clip(_get_hier(rd["OPAC"], s, p - 1, q["base_stride"], "opacity") / q["opacity_scale"], 0, 1)
+    if meta["weight_mode"] == "hard":
+        idx = rd["LOGT"].ints((s,), "assignment")
+        if idx.min() < 0 or idx.max() >= k:
+            raise InvalidContentError(f"codebook assignment outside [0, {k})", chunk="LOGT")
+        logits = np.full((s, k), q["logit_floor"], np.float32)
+        logits[np.arange(s), idx] = 0.0
+    else:
+        top = rd["LOGT"].array((s,), "largest logit", ("|u1", "<u2")).astype(np.int64)
+        others = rd["LOGT"].array((s, k - 1), "other logits", ("|u1", "<u2", "<u4")).astype(np.int64)
+        if top.size and (top.min() < 0 or top.max() >= k):
+            raise InvalidContentError(f"largest logit's index outside [0, {k})", chunk="LOGT")
+        if others.size and (others.min() < 0 or others.max() > q["logit_levels"]):
+            raise InvalidContentError(f"soft logits outside [0, {q['logit_levels']}]", chunk="LOGT")
+        levels = np.full((s, k), q["logit_levels"], np.int64)
+        levels[np.arange(k)[None, :] != top[:, None]] = others.ravel()
+        logits = softmax_levels_decode(levels, meta["temperature"], q["logit_levels"], q["logit_floor"])
+    qc = rd["CBKS"].ints((nt, k, d), "codebooks")
+    coded = [(rd["MLPW"].ints((o, i), f"mlp[{j}].weight"), rd["MLPW"].ints((o,), f"mlp[{j}].bias"))
+             for j, (i, o) in enumerate(zip(widths[:-1], widths[1:], strict=True))]
+    codebooks, layers = weights_decode(q["weight_steps"], qc, coded)
+    mlp = [MlpLayer(w, b, layer["activation"]) for (w, b), layer in zip(layers, meta["mlp"], strict=True)]
+    return opacity, logits, codebooks, mlp
 
 
 def _decode_optional(asset: HairAsset, payloads: dict[str, bytes], s: int, p: int) -> None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import struct
 import zlib
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import zstandard
 
@@ -50,22 +51,36 @@ def crc32(data: bytes | memoryview) -> int:
     return zlib.crc32(data) & 0xFFFFFFFF
 
 
+class Stored(NamedTuple):
+    """A chunk as it goes into the file: its codec and the bytes stored."""
+
+    chunk: Chunk
+    codec: int
+    body: bytes
+
+
+def compress(c: Chunk, level: int = 19) -> Stored:
+    """A chunk zstd-compressed at ``level``, or raw where that is not smaller."""
+    if len(c.type) != 4 or not c.type.isascii():
+        raise ValueError(f"chunk type must be 4 ASCII characters, got {c.type!r}")
+    if len(c.payload) > MAX_RAW_CHUNK:
+        raise LimitError(f"chunk {c.type!r} of {len(c.payload)} bytes exceeds {MAX_RAW_CHUNK}")
+    z = zstandard.ZstdCompressor(level=level, write_content_size=True).compress(c.payload)
+    return Stored(c, CODEC_ZSTD, z) if len(z) < len(c.payload) else Stored(c, CODEC_RAW, c.payload)
+
+
 def pack(chunks: list[Chunk], level: int = 19) -> bytes:
     """Serialise chunks: header, table, then each chunk (zstd when smaller) aligned to 8 bytes."""
     if len(chunks) > MAX_CHUNKS:
         raise LimitError(f"{len(chunks)} chunks exceed the limit of {MAX_CHUNKS}")
-    for c in chunks:
-        if len(c.type) != 4 or not c.type.isascii():
-            raise ValueError(f"chunk type must be 4 ASCII characters, got {c.type!r}")
-        if len(c.payload) > MAX_RAW_CHUNK:
-            raise LimitError(f"chunk {c.type!r} of {len(c.payload)} bytes exceeds {MAX_RAW_CHUNK}")
+    return assemble(map_threads(lambda c: compress(c, level), chunks))
 
-    def body(c: Chunk) -> tuple[Chunk, int, bytes]:
-        z = zstandard.ZstdCompressor(level=level, write_content_size=True).compress(c.payload)
-        return (c, CODEC_ZSTD, z) if len(z) < len(c.payload) else (c, CODEC_RAW, c.payload)
 
-    bodies = map_threads(body, chunks)
-    offset = _align(HEADER_SIZE + ENTRY_SIZE * len(chunks))
+def assemble(bodies: list[Stored]) -> bytes:
+    """The file of chunks already compressed (:func:`compress`), in this order."""
+    if len(bodies) > MAX_CHUNKS:
+        raise LimitError(f"{len(bodies)} chunks exceed the limit of {MAX_CHUNKS}")
+    offset = _align(HEADER_SIZE + ENTRY_SIZE * len(bodies))
     table, layout = b"", []
     for c, codec, stored in bodies:
         flags = FLAG_REQUIRED if c.required else 0
@@ -75,7 +90,7 @@ def pack(chunks: list[Chunk], level: int = 19) -> bytes:
         offset = _align(offset + len(stored))
     total = offset
     out = bytearray(total)
-    out[:HEADER_SIZE] = _header(VERSION_MAJOR, VERSION_MINOR, 0, total, len(chunks), table)
+    out[:HEADER_SIZE] = _header(VERSION_MAJOR, VERSION_MINOR, 0, total, len(bodies), table)
     out[HEADER_SIZE:HEADER_SIZE + len(table)] = table
     for off, stored in layout:
         out[off:off + len(stored)] = stored

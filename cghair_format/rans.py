@@ -1,5 +1,5 @@
-"""A multi-lane rANS entropy coder with static context tables (spec 4.3.2): the writer, in vectorized
-numpy; the reader is compiled (:func:`._native.decode_residuals`).
+"""A multi-lane rANS entropy coder with static context tables (spec 4.3.2): tokens and tables in
+numpy; the coding itself is compiled (:func:`._native.encode_rans`, :func:`._native.decode_residuals`).
 
 Unsigned integers are split into a token (coded with rANS under a frequency table that the caller
 picks per symbol: its context) and raw extra bits. ``L`` lanes each hold a rANS state and code their
@@ -172,22 +172,14 @@ class Tables:
 
 def encode(sym: np.ndarray, table: np.ndarray, active: np.ndarray, tables: Tables) -> tuple[np.ndarray, np.ndarray]:
     """Code steps of symbols ``sym [N, L]`` under ``table [N, L]``; lanes ``>= active[n]`` are idle at
-    step ``n``. Returns the lanes' initial states for the decoder (uint32 ``[L]``) and the words."""
-    n_steps, lanes = sym.shape
-    x = np.full(lanes, LOW, np.uint64)
-    flat = table.astype(np.int64) * ALPHABET + sym
-    out = []
-    for n in range(n_steps - 1, -1, -1):
-        a = int(active[n])
-        xs = x[:a]
-        f = tables.flat_freq[flat[n, :a]].astype(np.uint64)
-        emit = xs >= f << np.uint64(20)  # ((LOW >> PROB_BITS) << 16) * f
-        if emit.any():
-            out.append((xs[emit] & np.uint64(0xFFFF))[::-1])
-            xs[emit] >>= np.uint64(16)
-        x[:a] = ((xs // f) << np.uint64(PROB_BITS)) + xs % f + tables.flat_start[flat[n, :a]]
-    words = np.concatenate(out)[::-1] if out else np.zeros(0, np.uint64)
-    return x.astype(np.uint32), words.astype(np.uint16)
+    step ``n``. Returns the lanes' initial states for the decoder (uint32 ``[L]``) and the words
+    (compiled: :func:`._native.encode_rans`)."""
+    states = np.empty(sym.shape[1], np.uint32)
+    words = np.empty(sym.size, np.uint16)
+    start = _native.encode_rans(np.ascontiguousarray(sym, np.uint8), np.ascontiguousarray(table, np.int32),
+                                np.ascontiguousarray(active, np.int64), tables.flat_freq, tables.flat_start,
+                                states, words)
+    return states, words[start:].copy()
 
 
 def check_budget(symbols: int, words: int, lanes: int, tables: Tables, where: str) -> None:

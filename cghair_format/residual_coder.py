@@ -102,17 +102,25 @@ def _coding(arrays: list[np.ndarray], strand_card: np.ndarray | None, classes: t
         after = after_neighbour(strand_card, lanes)
         neighbour[after] = bits[np.flatnonzero(after) - 1]
     extra_bytes = float(rans.token_widths(sym).sum(dtype=np.int64)) / 8
+
+    def table(c: int) -> np.ndarray:
+        return _table(column_array[None, :, None].astype(np.int32), np.arange(3, dtype=np.int32)[None, None, :],
+                      prev, other, neighbour, after[:, None, None], c)
+
+    # counted once with the most classes: with c classes a token's class is min(its class then, c - 1)
+    most = max(classes)
+    tables = table(most)
+    counts = np.bincount((tables * rans.ALPHABET + sym).ravel(), minlength=len(widths) * 3 * CONTEXTS * most
+                         * rans.ALPHABET).reshape(-1, most, rans.ALPHABET)
     best = None
     for c in classes:
-        table = _table(column_array[None, :, None].astype(np.int32), np.arange(3, dtype=np.int32)[None, None, :],
-                       prev, other, neighbour, after[:, None, None], c)
-        n_tables = len(widths) * 3 * CONTEXTS * c
-        counts = np.bincount((table * rans.ALPHABET + sym).ravel(), minlength=n_tables * rans.ALPHABET)  # int32
-        codes, freq = rans.quantize_tables(counts.reshape(n_tables, rans.ALPHABET))
-        trial = _Coding(sym, extra, table, codes, freq, c, _cost(counts, codes, freq) + extra_bytes)
-        if best is None or trial.cost < best.cost:
-            best = trial
-    return best
+        merged = np.concatenate([counts[:, :c - 1], counts[:, c - 1:].sum(axis=1, keepdims=True)], axis=1)
+        codes, freq = rans.quantize_tables(merged.reshape(-1, rans.ALPHABET))
+        cost = _cost(merged, codes, freq) + extra_bytes
+        if best is None or cost < best[1]:
+            best = c, cost, codes, freq
+    c, cost, codes, freq = best
+    return _Coding(sym, extra, tables if c == most else table(c), codes, freq, c, cost)
 
 
 def coded_bytes(arrays: list[np.ndarray]) -> float:
