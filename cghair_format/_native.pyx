@@ -689,7 +689,7 @@ cdef inline int token_bits(int tok) noexcept nogil:
     return n
 
 
-def decode_residuals(const uint8_t[::1] flat_slot, const uint32_t[::1] flat_freq, const uint32_t[::1] flat_start,
+def decode_residuals(const uint32_t[::1] flat_freq, const uint32_t[::1] flat_start,
                      const uint32_t[::1] states, const uint16_t[::1] words, const uint8_t[::1] extra,
                      const i64[::1] column_array, const uint8_t[::1] first, int lanes,
                      const uint8_t[::1] after_neighbour, int classes, uint8_t[:, :, ::1] sym, i64[:, :, ::1] out):
@@ -701,6 +701,7 @@ def decode_residuals(const uint8_t[::1] flat_slot, const uint32_t[::1] flat_freq
     cdef Py_ssize_t b, col, lane, s, act, pos = 0, blocks = (strands + lanes - 1) // lanes
     cdef int ch, tok, p, o, nb, t, c
     cdef uint32_t x, slot, f
+    cdef const uint32_t* row
     cdef uint64_t z, total_bits = 0, bitpos = 0, i
     cdef uint32_t* xs = <uint32_t*> calloc(lanes, sizeof(uint32_t))
     cdef int* prev = <int*> calloc(3 * lanes, sizeof(int))
@@ -738,11 +739,14 @@ def decode_residuals(const uint8_t[::1] flat_slot, const uint32_t[::1] flat_freq
                               + min(o, OTHER_CLASSES - 1)) * classes + c)
                         x = xs[lane]
                         slot = x & ((1 << PROB_BITS) - 1)
-                        tok = flat_slot[t * (1 << PROB_BITS) + slot]
-                        if tok >= ALPHABET:
+                        row = &flat_start[t * ALPHABET]
+                        tok = 0  # the token whose range holds slot: small tokens are the likely ones
+                        while tok + 1 < ALPHABET and row[tok + 1] <= slot:
+                            tok += 1
+                        f = flat_freq[t * ALPHABET + tok]
+                        if f == 0:  # only an empty table has none
                             fault = EMPTY_TABLE
                             break
-                        f = flat_freq[t * ALPHABET + tok]
                         x = f * (x >> PROB_BITS) + slot - flat_start[t * ALPHABET + tok]
                         if x < LOW:
                             if pos >= nwords:

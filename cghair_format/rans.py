@@ -24,7 +24,6 @@ PROB_BITS = 12
 TOTAL = 1 << PROB_BITS
 LOW = 1 << 16  # states live in [LOW, 2^32); renormalization moves 16-bit words
 MAX_FREQ = TOTAL - 16  # every symbol costs at least log2(TOTAL / MAX_FREQ) bits: no free symbols
-NO_SYMBOL = 255
 
 
 def bit_length(u: np.ndarray) -> np.ndarray:
@@ -150,7 +149,7 @@ def estimate_bytes(r: np.ndarray) -> float:
 
 
 class Tables:
-    """Frequency tables ``[T, ALPHABET]`` with their cumulative starts and slot lookup, flattened."""
+    """Frequency tables ``[T, ALPHABET]`` with their cumulative starts, flattened."""
 
     def __init__(self, freq: np.ndarray, where: str) -> None:
         freq = np.asarray(freq, np.int64)
@@ -164,10 +163,6 @@ class Tables:
         self.freq = freq.astype(np.uint32)
         self.flat_freq = self.freq.ravel()
         self.flat_start = (np.cumsum(freq, axis=1) - freq).astype(np.uint32).ravel()
-        slot = np.full((len(freq), TOTAL), NO_SYMBOL, np.uint8)
-        for t in np.flatnonzero(sums):
-            slot[t] = np.repeat(np.arange(ALPHABET, dtype=np.uint8), freq[t])
-        self.flat_slot = slot.ravel()
 
 
 def encode(sym: np.ndarray, table: np.ndarray, active: np.ndarray, tables: Tables) -> tuple[np.ndarray, np.ndarray]:

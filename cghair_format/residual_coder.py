@@ -185,7 +185,7 @@ def read_residuals(r: StreamReader, strand_card: np.ndarray, widths: list[int], 
     n = len(column_array)
     rans.check_budget(strands * n * 3, len(words), lanes, tables, "STRD")
     values = np.empty((strands, n, 3), np.int64)
-    fault = _native.decode_residuals(tables.flat_slot, tables.flat_freq, tables.flat_start, states, words,
+    fault = _native.decode_residuals(tables.flat_freq, tables.flat_start, states, words,
                                      extra_bits, column_array.astype(np.int64), first.astype(np.uint8), lanes,
                                      after_neighbour(strand_card, lanes).astype(np.uint8), classes,
                                      np.empty((strands, n, 3), np.uint8), values)

@@ -141,7 +141,7 @@ def _rebuild(tables, states, words, extra):
     ("state_low", InvalidContentError), ("words_short", TruncatedError), ("words_long", InvalidContentError),
     ("state_changed", CghFormatError), ("extra_short", InvalidContentError), ("table_code", InvalidContentError),
     ("table_two_rests", InvalidContentError), ("table_no_rest", InvalidContentError),
-    ("table_overfull", InvalidContentError),
+    ("table_overfull", InvalidContentError), ("table_emptied", InvalidContentError),
 ])
 def test_damaged_streams_are_refused(damage, error):
     data, _ = _coded()
@@ -156,6 +156,8 @@ def test_damaged_streams_are_refused(damage, error):
         states[0] ^= 1 << 20
     elif damage == "extra_short":
         extra = extra[:-1]
+    elif damage == "table_emptied":  # a table the stream codes with, left empty (as an unused one is)
+        tables[np.flatnonzero(tables.any(axis=1))[0]] = 0
     else:  # the tables: a code beyond 49, a second or no remainder entry, entries that leave it below 1
         row = tables[np.flatnonzero(tables.any(axis=1))[0]]
         rest = int(np.flatnonzero(row == rans.REST)[0])
@@ -171,6 +173,8 @@ def test_damaged_streams_are_refused(damage, error):
         residual_coder.read_residuals(StreamReader(_rebuild(tables, states, words, extra), "STRD"), np.zeros(50),
                                       [4, 7], 1)
     assert isinstance(info.value, CghFormatError) and "STRD" in str(info.value)
+    if damage == "table_emptied":
+        assert "empty frequency table" in str(info.value)
 
 
 def test_a_stream_claiming_more_symbols_than_it_can_hold_is_refused_at_once():
