@@ -4,9 +4,9 @@ A fresh array of hundreds of MB costs more to fault in than to fill: decoding th
 to Gaussians writes 475 MB of SH, a matrix product of about 0.1 s. numpy's own allocation asks for
 transparent huge pages, which are quick once the process has freed some, but the first such array
 of a process (and, now and then, a later one) stalls while the kernel finds them: 1.05 s, then
-0.05-0.22 s, for 475 MB on this project's 2-core machine (README, "Decode time"). An anonymous
-mapping that the kernel populates at once (``MAP_POPULATE``, Linux) takes 0.13-0.20 s every time,
-page by page faulting 0.27-0.33 s.
+0.05-0.22 s, for 475 MB on this project's 2-core machine (COMPRESSION.md, "Decode time, earlier
+runs"). An anonymous mapping that the kernel populates at once (``MAP_POPULATE``, Linux) takes
+0.13-0.20 s every time, page by page faulting 0.27-0.33 s.
 """
 
 from __future__ import annotations
