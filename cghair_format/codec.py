@@ -18,7 +18,7 @@ import numpy as np
 
 from . import container, rans
 from .asset import ACTIVATIONS, UP_AXES, WEIGHT_MODES, Appearance, Cards, HairAsset, MlpLayer
-from .errors import AssetError, CghFormatError, InvalidContentError, LimitError
+from .errors import AssetError, InvalidContentError, LimitError
 from .geometry import CardMap, angle_normals, card_scales, normal_angles, strand_points
 from .parallel import map_blocks, map_threads
 from .profiles import Profile, get_profile
@@ -748,7 +748,7 @@ def _decode_chunks(meta: dict, payloads: dict[str, bytes]) -> HairAsset:
             points = background.submit(_decode_strand_points, rd["STRD"], cards, strand_card, p, q)
             try:
                 opacity, logits, codebooks, mlp = _decode_quantized_appearance(rd, meta, s, p, q)
-            except CghFormatError:
+            except Exception:
                 points.result()
                 raise
             uvd = points.result()
