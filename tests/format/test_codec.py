@@ -106,6 +106,15 @@ def test_latents_and_mlp_follow_the_spec_and_large_outputs_live_in_their_own_map
     np.testing.assert_allclose(small, h, rtol=1e-5, atol=1e-5)
 
 
+@pytest.mark.parametrize("profile", ["high", "compact"])
+def test_the_writer_writes_the_same_bytes_every_time(profile):
+    """Its trial codings run two at a time on threads, and the appearance chunks are compressed on
+    another while STRD is coded: the file must not depend on which finishes first."""
+    asset = example_asset(4, strands=60, points=20, cards=5)
+    first = cgh.encode(asset, profile)[0]
+    assert all(cgh.encode(asset, profile)[0] == first for _ in range(4))
+
+
 def test_sources_path_bytes_and_file_objects(tmp_path):
     a = example_asset(5)
     path = tmp_path / "a.cgh"
