@@ -232,7 +232,7 @@ cdef inline double unlikeness(const double* w, const double* wm, const i64* base
     return d + UNLIKE_PLACE * diff2(ORIGIN, w + 3 * base[at], ORIGIN, wm + 3 * base[at])
 
 
-cdef inline i64 slot(Py_ssize_t t, const i64[::1] strands_to_code, bint scratch) noexcept nogil:
+cdef inline i64 scratch_row(Py_ssize_t t, const i64[::1] strands_to_code, bint scratch) noexcept nogil:
     """The row of ``rec`` and ``world`` holding the strand at position ``t``: its own, or decoding, one
     of the scratch's SCRATCH_STRANDS in turn."""
     return (t % (CANDIDATES + 1)) if scratch else strands_to_code[t]
@@ -247,11 +247,11 @@ cdef inline Py_ssize_t most_alike(Py_ssize_t t, const i64[::1] strands_to_code, 
     less unlike (strictly: a tie, or NaN, keeps the nearer)."""
     cdef i64 card = strand_card[strands_to_code[t]]
     cdef Py_ssize_t k, pick = t - 1
-    cdef double d, best = unlikeness(w, &world[slot(t - 1, strands_to_code, scratch), 0, 0], base, first, last, at,
-                                     INFINITY)
+    cdef double d, best = unlikeness(w, &world[scratch_row(t - 1, strands_to_code, scratch), 0, 0], base, first,
+                                     last, at, INFINITY)
     k = t - 2
     while k >= 0 and k >= t - CANDIDATES and strand_card[strands_to_code[k]] == card:
-        d = unlikeness(w, &world[slot(k, strands_to_code, scratch), 0, 0], base, first, last, at, best)
+        d = unlikeness(w, &world[scratch_row(k, strands_to_code, scratch), 0, 0], base, first, last, at, best)
         if d < best:
             best = d
             pick = k
@@ -481,12 +481,12 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
             sc = &scale[s, 0]
             for ch in range(3):
                 inv_sc[ch] = 1.0 / sc[ch]
-            R = &rec[slot(t, strands_to_code, scratch), 0, 0]
-            W = &world[slot(t, strands_to_code, scratch), 0, 0]
+            R = &rec[scratch_row(t, strands_to_code, scratch), 0, 0]
+            W = &world[scratch_row(t, strands_to_code, scratch), 0, 0]
             RN = NULL  # with base_guide, the neighbour's reconstruction (spec 4.3)
             if base_guide > 0 and t > 0 and strand_card[strands_to_code[t - 1]] == card:
-                RN = &rec[slot(t - 1, strands_to_code, scratch), 0, 0]
-                WN = &world[slot(t - 1, strands_to_code, scratch), 0, 0]
+                RN = &rec[scratch_row(t - 1, strands_to_code, scratch), 0, 0]
+                WN = &world[scratch_row(t - 1, strands_to_code, scratch), 0, 0]
             BR = &res[s, 0, 0]
             LR = BR + 3 * nbase
             NB = NULL  # encoding: the residuals of this strand's neighbour (spec 4.3), when coded already
@@ -513,8 +513,8 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                     RM = RN
                     WM = WN
                     if base_guide == 3 and j > 1:  # the most alike strand of those before it
-                        a = slot(most_alike(t, strands_to_code, strand_card, world, scratch, W, &base[0],
-                                            max(j - 3, 0), j - 2, j - 1), strands_to_code, scratch)
+                        a = scratch_row(most_alike(t, strands_to_code, strand_card, world, scratch, W, &base[0],
+                                                   max(j - 3, 0), j - 2, j - 1), strands_to_code, scratch)
                         RM = &rec[a, 0, 0]
                         WM = &world[a, 0, 0]
                     for ch in range(3):
@@ -747,7 +747,7 @@ def decode_residuals(const uint32_t[::1] flat_freq, const uint32_t[::1] flat_sta
                         if f == 0:  # only an empty table has none
                             fault = EMPTY_TABLE
                             break
-                        x = f * (x >> PROB_BITS) + slot - flat_start[t * ALPHABET + tok]
+                        x = f * (x >> PROB_BITS) + slot - row[tok]
                         if x < LOW:
                             if pos >= nwords:
                                 fault = WORDS_END_EARLY

@@ -71,8 +71,6 @@ def compress(c: Chunk, level: int = 19) -> Stored:
 
 def pack(chunks: list[Chunk], level: int = 19) -> bytes:
     """Serialise chunks: header, table, then each chunk (zstd when smaller) aligned to 8 bytes."""
-    if len(chunks) > MAX_CHUNKS:
-        raise LimitError(f"{len(chunks)} chunks exceed the limit of {MAX_CHUNKS}")
     return assemble(map_threads(lambda c: compress(c, level), chunks))
 
 
