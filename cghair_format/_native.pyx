@@ -10,6 +10,9 @@ and is called on independent blocks of strands from several threads (:mod:`.para
 - :func:`decode_residuals`: the STRD token stream and extra bits (spec 4.3.2), decoded.
 - :func:`encode_rans`: the STRD tokens, rANS-coded (the writer's side of spec 4.3.2).
 - :func:`pack_bits`: the extra bits, packed (the writer's side of spec 4.3.2).
+- :func:`blend_strands`, :func:`place_points`: interpolated strands' points and card coordinates
+  (spec 4.5); the writer's search for them: :func:`nearest_roots`, :func:`best_blends`,
+  :func:`fit_blends`, :func:`blend_misses`.
 """
 
 from libc.float cimport FLT_MAX
@@ -376,7 +379,7 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                 i64[:, :, ::1] res,
                 const double[:, :, ::1] y=None, const double[:, :, ::1] dz_points=None, double dz_dist=-1.0,
                 bint neighbour_zone=False, float[:, :, ::1] uvd=None, const i64[::1] row_seg=None,
-                i64[:, ::1] level_ref=None):
+                i64[:, ::1] level_ref=None, Py_ssize_t first=0):
     """The recurrence of spec 4.3 for the strands ``strands_to_code`` (indices into ``[S]``; best
     grouped by card, whose triangles then stay in cache) of ``n`` points, into ``rec`` (scaled card
     coordinates ``[S, n, 3]``) and ``world`` (their world points). Decoding into ``uvd`` (float32
@@ -408,7 +411,11 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
     of the strands before it (:func:`unlikeness`): decoding adds the reference's residuals to that
     segment's level rows (stored as differences); encoding writes the references' strand indices to
     ``level_ref [S, len(base) - 1]`` (-1: none; the caller takes the differences), and the neighbour
-    zone tries the reference's residual instead of the neighbour's."""
+    zone tries the reference's residual instead of the neighbour's.
+
+    Encoding, the strands before position ``first`` of ``strands_to_code`` are coded already (their
+    ``rec``, ``world`` and ``res`` as the writer left them, before the level differences): the strands
+    after them follow them as if coded in one run."""
     cdef Py_ssize_t t, s, j, li, row, kk, i, ch
     cdef Py_ssize_t strands = strands_to_code.shape[0], nbase = base.shape[0], levels = level_start.shape[0] - 1
     cdef int encode = y is not None, dead_zone = encode and dz_points is not None and dz_dist >= 0
@@ -460,6 +467,8 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
             raise ValueError("run_strands: a strand index is out of range")
     if not stretch_max >= 1.0:
         raise ValueError("run_strands: stretch_max must be at least 1")
+    if first < 0 or first > strands or (first > 0 and not encode):
+        raise ValueError("run_strands: first must lie in [0, strands], and be 0 decoding")
     for li in range(levels):
         if level_taps[li] < 0 or level_taps[li] > nb.shape[1]:
             raise ValueError("run_strands: a level's interpolation width exceeds its neighbour columns")
@@ -475,7 +484,7 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
         raise MemoryError()
     fr = &frames[0, 0]
     with nogil:
-        for t in range(strands):
+        for t in range(first, strands):
             s = strands_to_code[t]
             card = strand_card[s]
             sc = &scale[s, 0]
@@ -951,3 +960,377 @@ def segment_frames(const float[:, :, ::1] points, double thickness, float[:, :, 
                 scales[s, i, 0] = <float> thickness
                 scales[s, i, 1] = <float> thickness
                 scales[s, i, 2] = <float> (length / 2)
+
+
+# --- Interpolated strands (spec 4.5) -----------------------------------------------------------------
+
+cdef inline void keep_nearest(i64* best, double* best_d, int k, i64 cand, double d) noexcept nogil:
+    """Insert ``cand`` at distance ``d`` into the ``k`` nearest so far (sorted, nearest first, ties
+    to the earlier candidate; ``best`` -1 where empty)."""
+    cdef int i = k - 1
+    if best[i] >= 0 and d >= best_d[i]:
+        return
+    while i > 0 and (best[i - 1] < 0 or d < best_d[i - 1]):
+        best[i] = best[i - 1]
+        best_d[i] = best_d[i - 1]
+        i -= 1
+    best[i] = cand
+    best_d[i] = d
+
+
+def nearest_roots(const double[:, ::1] roots, const i64[::1] order, const i64[:, ::1] lo, const i64[:, ::1] hi,
+                  i64[:, ::1] out, Py_ssize_t first):
+    """Per strand ``s = first + row`` (rows of ``lo``, ``hi``, ``out``), the ``out.shape[1]`` strands with
+    the nearest roots (nearest first, -1 where fewer) among those listed in ``order[lo[row, c]:hi[row, c]]``
+    over the cells ``c`` around its own (a grid: :func:`.children.root_candidates`), itself left out."""
+    cdef Py_ssize_t row, c, t, n = lo.shape[0], k = out.shape[1]
+    cdef i64 o, s
+    cdef double d
+    cdef double* best_d
+    if hi.shape[0] != n or out.shape[0] != n or lo.shape[1] != hi.shape[1] or k < 1 or first < 0 \
+            or first + n > roots.shape[0]:
+        raise ValueError("nearest_roots: mismatched shapes")
+    for row in range(n):
+        for c in range(lo.shape[1]):
+            if lo[row, c] < 0 or hi[row, c] > order.shape[0]:
+                raise ValueError("nearest_roots: a cell is out of range")
+    for t in range(order.shape[0]):
+        if order[t] < 0 or order[t] >= roots.shape[0]:
+            raise ValueError("nearest_roots: a strand index is out of range")
+    best_d = <double*> calloc(k, sizeof(double))
+    if best_d == NULL:
+        raise MemoryError()
+    with nogil:
+        for row in range(n):
+            s = first + row
+            for t in range(k):
+                out[row, t] = -1
+            for c in range(lo.shape[1]):
+                for t in range(lo[row, c], hi[row, c]):
+                    o = order[t]
+                    if o == s:
+                        continue
+                    d = ((roots[o, 0] - roots[s, 0]) * (roots[o, 0] - roots[s, 0])
+                         + (roots[o, 1] - roots[s, 1]) * (roots[o, 1] - roots[s, 1])
+                         + (roots[o, 2] - roots[s, 2]) * (roots[o, 2] - roots[s, 2]))
+                    keep_nearest(&out[row, 0], best_d, <int> k, o, d)
+    free(best_d)
+
+
+cdef double THIN = 0.9999  # roots this near a line (cos^2 of their angle at the first) leave the weights to the points
+
+
+cdef inline bint solve2(double g11, double g12, double g22, double h1, double h2, double* a, double* b) noexcept nogil:
+    """``[g11 g12; g12 g22] (a, b) = (h1, h2)``; False where the system is singular."""
+    cdef double det = g11 * g22 - g12 * g12
+    if not (fabs(det) > 1e-12 * (g11 * g22) and g11 > 0 and g22 > 0):
+        return False
+    a[0] = (g22 * h1 - g12 * h2) / det
+    b[0] = (g11 * h2 - g12 * h1) / det
+    return True
+
+
+cdef inline double blend_miss(const double[:, ::1] desc, const double[:, ::1] tangent, i64 s, i64 i, i64 j,
+                              i64 l, double wj, double wl, double limit) noexcept nogil:
+    """The largest squared distance across the strand (along ``tangent``, its unit tangents, left out:
+    a blend resampled at even arc length slides along it), over the descriptor's points, between
+    strand ``s`` and the blend ``(1 - wj - wl) i + wj j + wl l``; stops once above ``limit``."""
+    cdef Py_ssize_t f, c, n = desc.shape[1]
+    cdef double worst = 0.0, d2, e, along
+    cdef double wi = 1.0 - wj - wl
+    for f in range(n - 3, -1, -3):  # from the tip, where blends part most: most stop sooner
+        d2 = 0.0
+        along = 0.0
+        for c in range(f, f + 3):
+            e = desc[s, c] - wi * desc[i, c] - wj * desc[j, c] - wl * desc[l, c]
+            d2 = d2 + e * e
+            along = along + e * tangent[s, c]
+        d2 = d2 - along * along
+        if d2 > worst:
+            worst = d2
+            if worst > limit:
+                break
+    return worst
+
+
+cdef inline double dot_rows(const double[:, ::1] x, i64 a, i64 a0, i64 b, i64 b0) noexcept nogil:
+    """``(x[a] - x[a0]) . (x[b] - x[b0])``."""
+    cdef Py_ssize_t c
+    cdef double t = 0.0
+    for c in range(x.shape[1]):
+        t = t + (x[a, c] - x[a0, c]) * (x[b, c] - x[b0, c])
+    return t
+
+
+def best_blends(const double[:, ::1] roots, const double[:, ::1] desc, const double[:, ::1] tangent,
+                const i64[::1] strands, const i64[:, ::1] cand,
+                const uint8_t[::1] usable, double root_tol, double slack, double good, i64[:, ::1] parents,
+                double[:, ::1] weights, double[::1] miss):
+    """Per strand ``s = strands[row]`` (rows of ``cand``, ``parents``, ``weights``, ``miss``), the blend of two or three ``usable`` strands among its candidates ``cand[s]``
+    that best predicts it: over the pairs and triples whose roots blend to within ``root_tol`` of its
+    root with weights of at least ``-slack`` (and at most ``1 + slack``), with the weights that blend the
+    roots so (or, where the three roots lie nearly in a line, the least-squares weights of ``desc``),
+    the one whose largest distance across the strand at the points of ``desc`` (rows of points x 3;
+    ``tangent``, the strand's unit tangents there) is least, or the first within ``good``. Writes the three parents (a pair repeats its second), their weights and that distance
+    (``miss``; infinity where none qualifies, parents -1)."""
+    cdef Py_ssize_t row, a, b, c, e, n = cand.shape[0], k = cand.shape[1]
+    cdef i64 i, j, l, s
+    cdef double rtol2 = root_tol * root_tol, good2 = good * good, best, d2, gjj, gjl, gll, hj, hl, wj, wl, r2, xx, t
+    cdef double* dist  # [k, k] the candidates' roots' squared distances, then [k] theirs to the strand's
+    if (roots.shape[0] != desc.shape[0] or usable.shape[0] != desc.shape[0] or parents.shape[0] != n
+            or tangent.shape[0] != desc.shape[0] or tangent.shape[1] != desc.shape[1]
+            or weights.shape[0] != n or miss.shape[0] != n or parents.shape[1] != 3 or weights.shape[1] != 3
+            or desc.shape[1] % 3 != 0 or strands.shape[0] != n or roots.shape[1] != 3):
+        raise ValueError("best_blends: mismatched shapes")
+    for row in range(n):
+        if strands[row] < 0 or strands[row] >= roots.shape[0]:
+            raise ValueError("best_blends: a strand index is out of range")
+        for a in range(k):
+            if cand[row, a] >= roots.shape[0] or cand[row, a] < -1:
+                raise ValueError("best_blends: a candidate is out of range")
+    dist = <double*> calloc(k * k + k, sizeof(double))
+    if dist == NULL:
+        raise MemoryError()
+    with nogil:
+        for row in range(n):
+            s = strands[row]
+            best = INFINITY
+            parents[row, 0] = -1
+            parents[row, 1] = -1
+            parents[row, 2] = -1
+            for a in range(k):  # (sides from squared distances: the roots' dot products below follow)
+                i = cand[row, a]
+                if i < 0:
+                    continue
+                dist[k * k + a] = dot_rows(roots, s, i, s, i)
+                for b in range(a + 1, k):
+                    if cand[row, b] >= 0:
+                        t = dot_rows(roots, cand[row, b], i, cand[row, b], i)
+                        dist[a * k + b] = t
+                        dist[b * k + a] = t
+            for a in range(k):
+                i = cand[row, a]
+                if i < 0 or not usable[i] or best <= good2:
+                    continue
+                xx = dist[k * k + a]
+                for b in range(a + 1, k):
+                    j = cand[row, b]
+                    if j < 0 or not usable[j] or best <= good2:
+                        continue
+                    gjj = dist[a * k + b]
+                    hj = (xx + gjj - dist[k * k + b]) / 2
+                    if gjj > 0:  # the pair i, j
+                        wj = hj / gjj
+                        if -slack <= wj <= 1 + slack and xx - wj * hj <= rtol2:
+                            d2 = blend_miss(desc, tangent, s, i, j, j, wj, 0.0, best)
+                            if d2 < best:
+                                best = d2
+                                parents[row, 0], parents[row, 1], parents[row, 2] = i, j, j
+                                weights[row, 0], weights[row, 1], weights[row, 2] = 1 - wj, wj, 0.0
+                    for c in range(b + 1, k):
+                        l = cand[row, c]
+                        if l < 0 or not usable[l]:
+                            continue
+                        gll = dist[a * k + c]
+                        gjl = (gjj + gll - dist[b * k + c]) / 2
+                        hl = (xx + gll - dist[k * k + c]) / 2
+                        if gjl * gjl < THIN * gjj * gll:  # the roots' blend says the weights
+                            if not solve2(gjj, gjl, gll, hj, hl, &wj, &wl):
+                                continue
+                        elif not solve2(dot_rows(desc, j, i, j, i), dot_rows(desc, j, i, l, i),
+                                        dot_rows(desc, l, i, l, i), dot_rows(desc, s, i, j, i),
+                                        dot_rows(desc, s, i, l, i), &wj, &wl):
+                            continue  # roots in a line: the points' least squares do
+                        if wj < -slack or wl < -slack or wj + wl > 1 + slack:
+                            continue
+                        r2 = xx - 2 * (wj * hj + wl * hl) + wj * wj * gjj + 2 * wj * wl * gjl + wl * wl * gll
+                        if r2 > rtol2:  # (the squared distance left at the root)
+                            continue
+                        d2 = blend_miss(desc, tangent, s, i, j, l, wj, wl, best)
+                        if d2 < best:
+                            best = d2
+                            parents[row, 0], parents[row, 1], parents[row, 2] = i, j, l
+                            weights[row, 0], weights[row, 1], weights[row, 2] = 1 - wj - wl, wj, wl
+            miss[row] = sqrt(best)
+    free(dist)
+
+
+cdef inline void respace(const double* x, int p, double* length, double* out) noexcept nogil:
+    """``out [p, 3]``: the polyline ``x [p, 3]`` resampled at even arc length (spec 4.5)."""
+    cdef int i, c, seg = 0
+    cdef double target, t, d, e
+    length[0] = 0.0
+    for i in range(1, p):
+        d = 0.0
+        for c in range(3):
+            e = x[3 * i + c] - x[3 * (i - 1) + c]
+            d = d + e * e
+        length[i] = length[i - 1] + sqrt(d)
+    for i in range(p):
+        if i == p - 1:
+            for c in range(3):
+                out[3 * i + c] = x[3 * i + c]
+            continue
+        target = length[p - 1] * i / (p - 1)
+        while seg < p - 2 and length[seg + 1] < target:
+            seg += 1
+        d = length[seg + 1] - length[seg]
+        t = (target - length[seg]) / d if d > 0 else 0.0
+        for c in range(3):
+            out[3 * i + c] = x[3 * seg + c] + t * (x[3 * (seg + 1) + c] - x[3 * seg + c])
+
+
+cdef inline void blend_one(const double[:, :, ::1] guides, const i64* parents, const i64* weights, int weight_one,
+                           bint respaced, double* blend, double* length, double* out) noexcept nogil:
+    """One child's points (:func:`blend_strands`) into ``out [P, 3]`` (``blend [P, 3]``, ``length [P]``:
+    scratch)."""
+    cdef Py_ssize_t i, c, p = guides.shape[1]
+    cdef double w0 = <double> weights[0] / weight_one, w1 = <double> weights[1] / weight_one
+    cdef double w2 = <double> weights[2] / weight_one
+    cdef double* target = blend if respaced else out
+    for i in range(p):
+        for c in range(3):
+            target[3 * i + c] = (w0 * guides[parents[0], i, c] + w1 * guides[parents[1], i, c]
+                                 + w2 * guides[parents[2], i, c])
+    if respaced:
+        respace(blend, <int> p, length, out)
+
+
+cdef check_blends(const double[:, :, ::1] guides, const i64[:, ::1] parents, const i64[:, ::1] weights,
+                  int weight_one, const uint8_t[::1] respaced, Py_ssize_t n, Py_ssize_t p):
+    cdef Py_ssize_t s, c
+    if (parents.shape[0] != n or parents.shape[1] != 3 or weights.shape[0] != n or weights.shape[1] != 3
+            or respaced.shape[0] != n or guides.shape[1] != p or guides.shape[2] != 3 or p < 2 or weight_one <= 0):
+        raise ValueError("blend: mismatched shapes")
+    for s in range(n):
+        for c in range(3):
+            if parents[s, c] < 0 or parents[s, c] >= guides.shape[0]:
+                raise ValueError("blend: a parent is out of range")
+
+
+def blend_strands(const double[:, :, ::1] guides, const i64[:, ::1] parents, const i64[:, ::1] weights,
+                  int weight_one, const uint8_t[::1] respaced, double[:, :, ::1] out):
+    """Interpolated strands' world points (spec 4.5): per child, the blend ``sum_k weights[k]
+    guides[parents[k]] / weight_one`` of its parents' points, resampled at even arc length where
+    ``respaced``."""
+    cdef Py_ssize_t s, n = parents.shape[0], p = guides.shape[1]
+    cdef double* blend
+    cdef double* length
+    check_blends(guides, parents, weights, weight_one, respaced, n, p)
+    if out.shape[0] != n or out.shape[1] != p or out.shape[2] != 3:
+        raise ValueError("blend_strands: mismatched shapes")
+    blend = <double*> calloc(3 * p, sizeof(double))
+    length = <double*> calloc(p, sizeof(double))
+    if blend == NULL or length == NULL:
+        free(blend)
+        free(length)
+        raise MemoryError()
+    with nogil:
+        for s in range(n):
+            blend_one(guides, &parents[s, 0], &weights[s, 0], weight_one, respaced[s], blend, length, &out[s, 0, 0])
+    free(blend)
+    free(length)
+
+
+def blend_misses(const double[:, :, ::1] guides, const i64[:, ::1] parents, const i64[:, ::1] weights,
+                 int weight_one, const uint8_t[::1] respaced, const double[:, :, ::1] targets, double[::1] miss):
+    """Per child, the largest distance between its :func:`blend_strands` points and ``targets``."""
+    cdef Py_ssize_t s, i, c, n = parents.shape[0], p = guides.shape[1]
+    cdef double* blend
+    cdef double* length
+    cdef double* one
+    cdef double d2, e, worst
+    check_blends(guides, parents, weights, weight_one, respaced, n, p)
+    if targets.shape[0] != n or targets.shape[1] != p or targets.shape[2] != 3 or miss.shape[0] != n:
+        raise ValueError("blend_misses: mismatched shapes")
+    blend = <double*> calloc(3 * p, sizeof(double))
+    length = <double*> calloc(p, sizeof(double))
+    one = <double*> calloc(3 * p, sizeof(double))
+    if blend == NULL or length == NULL or one == NULL:
+        free(blend)
+        free(length)
+        free(one)
+        raise MemoryError()
+    with nogil:
+        for s in range(n):
+            blend_one(guides, &parents[s, 0], &weights[s, 0], weight_one, respaced[s], blend, length, one)
+            worst = 0.0
+            for i in range(p):
+                d2 = 0.0
+                for c in range(3):
+                    e = one[3 * i + c] - targets[s, i, c]
+                    d2 = d2 + e * e
+                if d2 > worst:
+                    worst = d2
+            miss[s] = sqrt(worst)
+    free(blend)
+    free(length)
+    free(one)
+
+
+def place_points(const double[:, ::1] frames, int segments, const double[:, :, ::1] goal, const i64[::1] card,
+                 int steps, int halvings, double per_unit2, float[:, :, ::1] uvd):
+    """Card coordinates (float32, into ``uvd``) of strands' world points ``goal [n, P, 3]`` on their cards
+    (spec 4.5): each point from the searched Newton steps, starting from the previous point's
+    coordinates stepped on by the last step (the root from ``(0, 1/2, 0)``). Returns how many
+    coordinates float32 cannot hold (a corrupt file)."""
+    cdef Py_ssize_t s, i, c, n = goal.shape[0], p = goal.shape[1]
+    cdef double cur[3]
+    cdef double prev[3]
+    cdef double j[9]
+    cdef Py_ssize_t bad = 0
+    if (card.shape[0] != n or uvd.shape[0] != n or uvd.shape[1] != p or uvd.shape[2] != 3 or goal.shape[2] != 3
+            or frames.shape[1] != 18):
+        raise ValueError("place_points: mismatched shapes")
+    check_cards(card, frames.shape[0], segments)
+    with nogil:
+        for s in range(n):
+            cur[0], cur[1], cur[2] = 0.0, 0.5, 0.0
+            for i in range(p):
+                newton_solve(&frames[0, 0], segments, card[s], &goal[s, i, 0], steps, halvings, cur, per_unit2, j)
+                for c in range(3):
+                    uvd[s, i, c] = <float> cur[c]
+                    if not isfinite(uvd[s, i, c]):
+                        bad += 1
+                    if i > 0:  # the next point starts one more of the last step on
+                        cur[c], prev[c] = 2 * cur[c] - prev[c], cur[c]
+                    else:
+                        prev[c] = cur[c]
+    return bad
+
+
+def fit_blends(const double[:, :, ::1] targets, const double[:, :, ::1] sources, const i64[:, ::1] parents,
+               double[:, ::1] weights):
+    """Per row, the weights (summing to 1) of the blend of ``sources[parents[row]]`` nearest
+    ``targets[row]`` by least squares over all points; where the three do not span a plane (a pair:
+    the third parent repeats the second), the pair's, the third weight 0."""
+    cdef Py_ssize_t r, i, c, n = targets.shape[0], p = targets.shape[1]
+    cdef i64 a, b, d
+    cdef double e1, e2, x, g11, g12, g22, h1, h2, w1, w2
+    if (sources.shape[1] != p or targets.shape[2] != 3 or sources.shape[2] != 3 or parents.shape[0] != n
+            or parents.shape[1] != 3 or weights.shape[0] != n or weights.shape[1] != 3):
+        raise ValueError("fit_blends: mismatched shapes")
+    for r in range(n):
+        for c in range(3):
+            if parents[r, c] < 0 or parents[r, c] >= sources.shape[0]:
+                raise ValueError("fit_blends: a parent is out of range")
+    with nogil:
+        for r in range(n):
+            a, b, d = parents[r, 0], parents[r, 1], parents[r, 2]
+            g11 = g12 = g22 = h1 = h2 = 0.0
+            for i in range(p):
+                for c in range(3):
+                    e1 = sources[b, i, c] - sources[a, i, c]
+                    e2 = sources[d, i, c] - sources[a, i, c]
+                    x = targets[r, i, c] - sources[a, i, c]
+                    g11 = g11 + e1 * e1
+                    g12 = g12 + e1 * e2
+                    g22 = g22 + e2 * e2
+                    h1 = h1 + e1 * x
+                    h2 = h2 + e2 * x
+            if not solve2(g11, g12, g22, h1, h2, &w1, &w2):
+                w1 = h1 / g11 if g11 > 0 else 0.0
+                w2 = 0.0
+            weights[r, 0] = 1.0 - w1 - w2
+            weights[r, 1] = w1
+            weights[r, 2] = w2

@@ -18,6 +18,14 @@ import numpy as np
 
 from . import container, rans
 from .asset import ACTIVATIONS, UP_AXES, WEIGHT_MODES, Appearance, Cards, HairAsset, MlpLayer
+from .children import (
+    WEIGHT_ONE,
+    Children,
+    best_weights,
+    find_children,
+    fit_weights,
+    place_children,
+)
 from .errors import AssetError, InvalidContentError, LimitError
 from .geometry import CardMap, angle_normals, card_scales, normal_angles, strand_points
 from .parallel import map_blocks, map_threads
@@ -44,10 +52,12 @@ from .strand_coder import (
     NEWTON_HALVINGS,
     NEWTON_STEPS,
     STRETCH_MAX,
+    Coded,
     DeadZone,
     Prediction,
     base_residuals,
     canonical_order,
+    coded_uvd,
     decode_uvd,
     encode_uvd,
     level_widths,
@@ -59,6 +69,10 @@ from .streams import StreamReader, StreamWriter
 
 REQUIRED_CHUNKS = ("META", "CARD", "STRD", "OPAC", "LOGT", "CBKS", "MLPW")
 OPTIONAL_CHUNKS = ("SIDS", "ROOT", "SCOL", "XMET")
+FAMILY_CHUNK = "CHLD"  # required where META quant.children > 0 (spec 4.5), absent otherwise
+MIN_CHILD_SHARE = 0.1  # interpolated strands are stored where at least this share of the strands are (below
+# it they cost more than they save: harolongo's own strands, 287 children of 7,905, +0.3 %)
+KNOWN_CHUNKS = frozenset(REQUIRED_CHUNKS + OPTIONAL_CHUNKS + (FAMILY_CHUNK,))
 LIMITS = {"strands": 1 << 24, "points": 4096, "cards": 1 << 20, "segments": 1024, "groups": 1 << 16,
           "k": 256, "latent_dim": 4096, "mlp_layers": 16, "mlp_width": 1 << 20, "meta_bytes": 1 << 20}
 CARD_STEP_FRACTION = 4  # card geometry is quantized this much coarser than strand points (which are coded
@@ -136,35 +150,47 @@ def encode(asset: HairAsset, profile: str | Profile = "compact", keep_order: boo
     """Serialise a validated asset; returns the bytes and what the quantization measured.
 
     The quantized profiles store the strands card by card, alike strands one after another (spec 4.3),
-    which codes smaller: ``report.strand_order`` maps them back to the input's (the asset's optional
-    per-strand data travel with their strands). ``keep_order`` keeps the input's order instead, at a
-    cost (the paper-scale straight.hair benchmark file grows by 28 %); the lossless profile always
-    keeps it."""
+    and strands that blend others last, as children of those (4.5), which codes smaller:
+    ``report.strand_order`` maps them back to the input's (the asset's optional per-strand data travel
+    with their strands). ``keep_order`` keeps the input's order instead, and stores no children, at a
+    cost; the lossless profile always keeps it."""
     prof = get_profile(profile)
     asset.validate()
-    order = None
-    if not prof.lossless and not keep_order:
-        order = canonical_order(asset.cards, asset.strand_card, asset.uvd)
-        asset = asset.take_strands(order)
     points = strand_points(asset.cards, asset.strand_card, asset.uvd).astype(np.float64)
     diag = float(np.linalg.norm(points.reshape(-1, 3).max(0) - points.reshape(-1, 3).min(0)))
     tol = prof.position_tolerance * max(diag, 1e-12)
+    reorder = not prof.lossless and not keep_order
+    input_asset, input_points = asset, points
+    kids = find_children(points, tol) if reorder else None
+    if kids is not None and np.count_nonzero(kids.child) < MIN_CHILD_SHARE * len(points):
+        kids = None  # a few children cost their guides more than they save
+    order, family = None, None
     # measured, the largest point error is about 1.0 step (half a step on each of u, v, delta): start
     # where it usually meets the bound at once, then tighten or grow
     step = None if prof.lossless else STEP_START * tol
-    passed = None  # (step, error, quantized geometry) of the largest step that met the bound so far
+    passed = None  # (step, error, quantized geometry, arrangement) of the largest step that met the bound so far
     choices, nudged = None, False
     for attempt in range(MAX_TIGHTENINGS):
-        geometry = _quantize_geometry(asset, prof, step, diag, points, tol, choices)
+        if reorder:
+            asset, points, order, family = _arrange(input_asset, input_points, kids)
+        geometry = _quantize_geometry(asset, prof, step, diag, points, tol, choices, family)
         choices = geometry.choices
+        if family is not None and (geometry.child_miss > tol).any():
+            # children that the decoded guides place too far become guides, last on their cards (the
+            # guides before them decode as they did, so the other children stay where they were)
+            late = np.zeros(len(input_points), bool)
+            late[order[family.guides:][geometry.child_miss > tol]] = True
+            before = order
+            asset, points, order, family = _arrange(input_asset, input_points, kids, late, order[:family.guides])
+            geometry = _with_late_guides(geometry, before, order, family.guides, asset, points)
         decoded = geometry.decoded_points
         dist = np.zeros(1) if decoded is None else np.linalg.norm(decoded - points, axis=-1)
         err = float(dist.max())
         if step is None:
-            passed = (step, err, geometry)
+            passed = (step, err, geometry, (asset, order))
             break
         if err <= tol:
-            passed = (step, err, geometry)
+            passed = (step, err, geometry, (asset, order))
             if attempt > 0 or err >= GROW_BELOW * tol:
                 break  # only a first step well inside the bound is retried larger
         elif passed is not None:
@@ -175,7 +201,7 @@ def encode(asset: HairAsset, profile: str | Profile = "compact", keep_order: boo
             step *= TIGHTEN_TARGET * tol / err if err > 0 else 1 / GROW_BELOW
     if passed is None:
         raise AssetError(f"could not meet the position tolerance {tol:g} (error {err:g})")
-    step, err, geometry = passed
+    step, err, geometry, (asset, order) = passed
     level, quant = prof.zstd_level, dict(geometry.meta["quant"])
     with ThreadPoolExecutor(max_workers=1) as background:  # zstd on the appearance while STRD is coded
         appearance = background.submit(lambda: [container.compress(c, level)
@@ -187,11 +213,14 @@ def encode(asset: HairAsset, profile: str | Profile = "compact", keep_order: boo
 
 
 def decode(data: bytes) -> HairAsset:
-    _, _, payloads = container.unpack(data, set(REQUIRED_CHUNKS) | set(OPTIONAL_CHUNKS))
+    _, _, payloads = container.unpack(data, set(KNOWN_CHUNKS))
     for name in REQUIRED_CHUNKS:
         if name not in payloads:
             raise InvalidContentError(f"required chunk {name!r} is missing", chunk=name)
     meta = _parse_meta(payloads["META"])
+    if (FAMILY_CHUNK in payloads) != (meta["quant"].get("children", 0) > 0):
+        raise InvalidContentError(f"chunk {FAMILY_CHUNK} must be present exactly when META quant.children is "
+                                  f"above 0", chunk=FAMILY_CHUNK)
     try:
         asset = _decode_chunks(meta, payloads)
         asset.validate()
@@ -299,6 +328,8 @@ def _parse_meta(raw: bytes) -> dict:
         need("neighbour_classes", int, 1, MAX_NEIGHBOUR_CLASSES, src=quant)
         need("base_guide", int, 0, 3, src=quant)
         need("level_guide", int, 0, 1, src=quant)
+        if "children" in quant:
+            need("children", int, 0, meta["strands"] - 1, src=quant)
         orders = quant.get("base_order")
         if (not isinstance(orders, list) or len(orders) != 3
                 or not all(isinstance(k, int) and not isinstance(k, bool) and k in (1, 2) for k in orders)):
@@ -352,13 +383,65 @@ class _Geometry(NamedTuple):
     residuals: list[np.ndarray] | None
     decoded_points: np.ndarray | None
     choices: _Choices | None
+    family: _Family | None = None  # the interpolated strands, with their weights fitted to the decoded guides
+    child_miss: np.ndarray | None = None  # [children] how far each child's decoded points are left, at most
+    coding: _Coding | None = None  # with a family: what coding more guides after these takes
+
+
+class _Coding(NamedTuple):
+    """The strand coder's state with a family (:func:`_with_late_guides`): the quantized cards' map, the
+    guides' input card coordinates on them (file order), the coder's state and the dead zone's reach."""
+
+    cmap: CardMap
+    cards: Cards
+    card_uvd: np.ndarray
+    state: Coded
+    zone_distance: float
+
+
+class _Family(NamedTuple):
+    """The file's interpolated strands (spec 4.5): the first ``guides`` strands are coded in STRD, the
+    rest are children of ``parents`` (indices among the guides) with ``weights``."""
+
+    guides: int
+    parents: np.ndarray  # [children, 3] int64
+    weights: np.ndarray  # [children, 3] int64, summing to WEIGHT_ONE
+    respaced: np.ndarray  # [children] bool: the blend resampled at even arc length
+
+
+def _arrange(asset: HairAsset, points: np.ndarray, kids: Children | None, late: np.ndarray | None = None,
+             chains: np.ndarray | None = None) -> tuple[HairAsset, np.ndarray, np.ndarray, _Family | None]:
+    """The asset and its points in file order (spec 4.3, 4.5): the guides card by card in the writer's
+    chains, then the ``late`` guides by card (children that the decoded guides placed too far: each
+    ends its card's chain, so the guides before it decode as they did), then the children by their
+    first parent; that order (indices into the input) and the family (None: no children). ``chains``:
+    the guides' chains if known (:func:`canonical_order` of the strands not children)."""
+    if kids is None or not kids.child.any():
+        order = canonical_order(asset.cards, asset.strand_card, asset.uvd)
+        return asset.take_strands(order), points[order], order, None
+    late = np.zeros(len(kids.child), bool) if late is None else late
+    guides = np.flatnonzero(~kids.child)
+    if chains is None:
+        chains = guides[canonical_order(asset.cards, asset.strand_card[guides], asset.uvd[guides])]
+    guides, later = chains, np.flatnonzero(late)
+    guides = np.concatenate([guides, later[np.argsort(asset.strand_card[later], kind="stable")]])
+    children = np.flatnonzero(kids.child & ~late)
+    at = np.full(len(kids.child), -1, np.int64)
+    at[guides] = np.arange(len(guides))
+    parents = at[kids.parents[children]]
+    by_parent = np.lexsort((parents[:, 2], parents[:, 1], parents[:, 0]))
+    order = np.concatenate([guides, children[by_parent]])
+    family = _Family(len(guides), parents[by_parent], kids.weights[children[by_parent]],
+                     kids.respaced[children[by_parent]])
+    return asset.take_strands(order), points[order], order, family
 
 
 def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag: float, points: np.ndarray,
-                       tol: float, choices: _Choices | None = None) -> _Geometry:
+                       tol: float, choices: _Choices | None = None, family: _Family | None = None) -> _Geometry:
     """What depends on the step: META, the CARD streams, and (quantized profiles) the STRD residual
     arrays and the world points a decoder will get (``points``: the input's), with ``choices`` (None:
-    made here)."""
+    made here). With a ``family`` STRD codes the guides, and the children are placed on the decoded
+    ones (:func:`_place_family`)."""
     meta = _meta(asset, prof, step, diag)
     q = meta["quant"]
     cards_w = StreamWriter()
@@ -366,11 +449,14 @@ def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag
         for a in (asset.cards.spine, asset.cards.normal, asset.cards.half_width):
             cards_w.array(a.astype(np.float32), shuffle=True)
         return _Geometry(meta, cards_w, None, None, None)
-    zone = DeadZone(points, DEAD_ZONE * prof.position_tolerance * diag)
+    coded = asset if family is None else asset.take_strands(np.arange(family.guides))
+    zone = DeadZone(points[:coded.n_strands], DEAD_ZONE * prof.position_tolerance * diag)
     stride, guide = ((choices.base_stride, choices.base_guide) if choices is not None
-                     else _choose_base_samples(asset, q, zone, prof.base_strides))
+                     else _choose_base_samples(coded, q, zone, prof.base_strides))
     q["base_stride"] = stride  # before the cards, whose coding takes it too
-    cards_w, cards, cmap, uvd = _quantized_cards(asset, q, points, tol)
+    strand_card = asset.strand_card
+    asset = coded  # the children's card coordinates come from their parents (4.5)
+    cards_w, cards, cmap, uvd = _quantized_cards(asset, q, points[:asset.n_strands], tol)
     scale = _uvd_scale(*card_scales(cards, q["step"]), asset.strand_card, q["step"])
     y = uvd * scale[:, None, :]
     if choices is None:
@@ -386,9 +472,66 @@ def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag
     q["base_order"], q["newton_steps"] = list(choices.base_order), choices.newton_steps
     q["level_taps"], q["base_guide"] = list(choices.level_taps), choices.base_guide
     q["level_guide"] = int(choices.level_guide)
-    base, levels, decoded_points = encode_uvd(cmap, asset.strand_card, y, scale, _prediction(q),
-                                              dead_zone=zone._replace(neighbour=choices.neighbour_zone))
-    return _Geometry(meta, cards_w, [base] + levels, decoded_points, choices)
+    base, levels, decoded_points, state = encode_uvd(
+        cmap, asset.strand_card, y, scale, _prediction(q), dead_zone=zone._replace(neighbour=choices.neighbour_zone),
+        room=0 if family is None else len(points))
+    if family is None:
+        return _Geometry(meta, cards_w, [base] + levels, decoded_points, choices)
+    q["children"] = len(family.parents)
+    family, world = _place_family(cmap, q["step"], strand_card, coded_uvd(state, scale), family, points)
+    miss = np.linalg.norm(world[family.guides:] - points[family.guides:], axis=-1).max(1)
+    return _Geometry(meta, cards_w, [base] + levels, world, choices, family, miss,
+                     _Coding(cmap, cards, uvd, state, zone.distance))
+
+
+def _with_late_guides(geometry: _Geometry, before: np.ndarray, order: np.ndarray, guides: int, asset: HairAsset,
+                      points: np.ndarray) -> _Geometry:
+    """``geometry`` (of the file order ``before``) in the file order ``order`` (:func:`_arrange`; ``asset``
+    and ``points`` in it), which makes the strands from its children up to ``guides`` guides, coded
+    after the others, each last on its card (spec 4.5): only they are coded, the guides before them
+    decode as they did, and the other children keep their weights and points."""
+    family, coding = geometry.family, geometry.coding
+    g0 = family.guides
+    at = np.empty(len(before), np.int64)
+    at[before] = np.arange(len(before))
+    was = at[order]  # where each strand was in the geometry's file order
+    kids = was[guides:]  # (the new guides, was[g0:guides], are coded below)
+    meta = json.loads(json.dumps(geometry.meta))
+    q = meta["quant"]
+    q["children"] = len(kids)
+    if not len(kids):
+        del q["children"]  # (and no CHLD: every child became a guide)
+    card = asset.strand_card[:guides]
+    on_cards, _ = _on_cards(coding.cards, coding.cmap, card[g0:], asset.uvd[g0:guides], points[g0:guides],
+                            1e-3 * q["step"])
+    uvd = np.concatenate([coding.card_uvd, on_cards])
+    scale = _uvd_scale(*card_scales(coding.cards, q["step"]), card, q["step"])
+    zone = DeadZone(points[:guides], coding.zone_distance, geometry.choices.neighbour_zone)
+    base, levels, _, state = encode_uvd(coding.cmap, card, uvd * scale[:, None, :], scale, _prediction(q),
+                                        dead_zone=zone, before=coding.state)
+    late_world = coding.cmap.strands(card[g0:], coded_uvd(state, scale, g0))
+    world = np.concatenate([geometry.decoded_points[:g0], late_world.astype(np.float32).astype(np.float64),
+                            geometry.decoded_points[kids]])
+    kept = _Family(guides, family.parents[kids - g0], family.weights[kids - g0], family.respaced[kids - g0])
+    return _Geometry(meta, geometry.cards, [base] + levels, world, geometry.choices, kept,
+                     geometry.child_miss[kids - g0], coding._replace(card_uvd=uvd, state=state))
+
+
+def _place_family(cmap: CardMap, step: float, strand_card: np.ndarray, guides_uvd: np.ndarray, family: _Family,
+                  points: np.ndarray) -> tuple[_Family, np.ndarray]:
+    """The family with each child's weights refitted to the decoded guides (``guides_uvd``; ``points``,
+    the input's in file order): the search's or a least-squares fit's, whichever places the child
+    nearer its points; and the world points ``[S, P, 3]`` a decoder will get for every strand."""
+    g = family.guides
+    card = strand_card.astype(np.int64)
+    guides = cmap.strands(card[:g], guides_uvd)
+    kids = points[g:]
+    weights, respaced, _ = best_weights(kids, guides, family.parents,
+                                        [family.weights / WEIGHT_ONE, fit_weights(kids, guides, family.parents)])
+    family = family._replace(weights=weights, respaced=respaced)
+    world = cmap.strands(card[g:], place_children(cmap, step, guides, family.parents, weights, respaced, card[g:]))
+    # as a reader gets them (float32, :func:`.geometry.strand_points`)
+    return family, np.concatenate([guides, world]).astype(np.float32).astype(np.float64)
 
 
 def _quantized_cards(asset: HairAsset, q: dict, points: np.ndarray, tol: float
@@ -443,14 +586,48 @@ def _geometry_chunks(asset: HairAsset, geometry: _Geometry) -> list[container.Ch
     if residuals is None:
         strd_w.array(asset.uvd.astype(np.float32), shuffle=True)
     else:
-        stored, meta["quant"]["neighbour"] = _with_neighbour_prediction(asset.strand_card, residuals,
+        coded = asset.strand_card[:len(residuals[0])]  # the guides, where there are children (spec 4.5)
+        stored, meta["quant"]["neighbour"] = _with_neighbour_prediction(coded, residuals,
                                                                         bool(meta["quant"]["level_guide"]))
-        meta["quant"]["neighbour_classes"] = write_residuals(strd_w, stored, asset.strand_card,
-                                                             (NEIGHBOUR_CLASSES, 1))
+        meta["quant"]["neighbour_classes"] = write_residuals(strd_w, stored, coded, (NEIGHBOUR_CLASSES, 1))
     groups = asset.cards.group.astype(np.uint16 if asset.appearance.n_groups <= 65536 else np.uint32)
     cards_w.array(groups, shuffle=True)
-    return [container.Chunk("META", json.dumps(meta, separators=(",", ":")).encode("utf-8")),
-            container.Chunk("CARD", cards_w.getvalue()), container.Chunk("STRD", strd_w.getvalue())]
+    chunks = [container.Chunk("META", json.dumps(meta, separators=(",", ":")).encode("utf-8")),
+              container.Chunk("CARD", cards_w.getvalue()), container.Chunk("STRD", strd_w.getvalue())]
+    if geometry.family is not None and len(geometry.family.parents):
+        chunks.append(container.Chunk(FAMILY_CHUNK, _family_payload(geometry.family)))
+    return chunks
+
+
+def _family_payload(family: _Family) -> bytes:
+    """CHLD (spec 4.5): each child's first parent as the difference from the previous child's, its
+    other parents as differences from its first, its second and third weights, and whether its blend
+    is resampled at even arc length."""
+    w = StreamWriter()
+    first = family.parents[:, 0]
+    w.ints(np.diff(first, prepend=0))
+    w.ints(family.parents[:, 1:] - first[:, None])
+    w.ints(family.weights[:, 1:])
+    w.array(family.respaced.astype(np.uint8))
+    return w.getvalue()
+
+
+def _read_family(payload: bytes, guides: int, children: int) -> _Family:
+    r = StreamReader(payload, FAMILY_CHUNK)
+    first = np.cumsum(r.ints((children,), "first parents"))
+    parents = np.concatenate([first[:, None], first[:, None] + r.ints((children, 2), "other parents")], axis=1)
+    second = r.ints((children, 2), "weights")
+    respaced = r.array((children,), "resampled", ("|u1",))
+    r.finish()
+    if respaced.size and respaced.max() > 1:
+        raise InvalidContentError("a child's resampling flag is neither 0 nor 1", chunk=FAMILY_CHUNK)
+    if parents.size and (parents.min() < 0 or parents.max() >= guides):
+        raise InvalidContentError(f"a child's parent lies outside the {guides} guide strands", chunk=FAMILY_CHUNK)
+    if second.size and np.abs(second).max() > 2 * WEIGHT_ONE:
+        raise InvalidContentError(f"a child's weight lies outside [-2, 2] (in units of 1/{WEIGHT_ONE})",
+                                  chunk=FAMILY_CHUNK)
+    weights = np.concatenate([WEIGHT_ONE - second.sum(1, keepdims=True), second], axis=1)
+    return _Family(guides, parents.astype(np.int64), weights.astype(np.int64), respaced.astype(bool))
 
 
 def _appearance_chunks(asset: HairAsset, prof: Profile, quant: dict) -> list[container.Chunk]:
@@ -583,7 +760,7 @@ def _choose_newton_steps(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, 
     sizes = {}
     for steps in (plan.newton_steps, 0):
         trial = replace(plan, newton_steps=steps)
-        base, levels, _ = encode_uvd(cmap, strand_card[pick], y[pick], scale[pick], trial)
+        base, levels, *_ = encode_uvd(cmap, strand_card[pick], y[pick], scale[pick], trial)
         sizes[steps] = sum(_estimate(r) for r in [base] + levels)
     return min(sizes, key=sizes.get)
 
@@ -644,7 +821,7 @@ def _sample_residuals(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, sca
     ids = np.unique(strand_card)
     picked = ids[np.linspace(0, len(ids) - 1, min(cards, len(ids))).astype(np.int64)]
     pick = np.flatnonzero(np.isin(strand_card, picked))
-    base, levels, _ = encode_uvd(cmap, strand_card[pick], y[pick], scale[pick], plan,
+    base, levels, *_ = encode_uvd(cmap, strand_card[pick], y[pick], scale[pick], plan,
                                  dead_zone=zone._replace(points=zone.points[pick]))
     return _with_neighbour_prediction(strand_card[pick], [base] + levels, plan.level_guide)[0]
 
@@ -745,7 +922,8 @@ def _decode_chunks(meta: dict, payloads: dict[str, bytes]) -> HairAsset:
         # the strand points (whose rANS decoder runs on one core) while the appearance streams decode;
         # a fault in STRD is raised first, as it comes first in the file
         with ThreadPoolExecutor(max_workers=1) as background:
-            points = background.submit(_decode_strand_points, rd["STRD"], cards, strand_card, p, q)
+            points = background.submit(_decode_strand_points, rd["STRD"], cards, strand_card, p, q,
+                                       payloads.get(FAMILY_CHUNK))
             try:
                 opacity, logits, codebooks, mlp = _decode_quantized_appearance(rd, meta, s, p, q)
             except Exception:
@@ -764,13 +942,29 @@ def _decode_chunks(meta: dict, payloads: dict[str, bytes]) -> HairAsset:
     return asset
 
 
-def _decode_strand_points(r: StreamReader, cards: Cards, strand_card: np.ndarray, p: int, q: dict) -> np.ndarray:
-    """The strands' card coordinates ``[S, p, 3]`` from STRD's residuals (after ``strand_card``)."""
+def _decode_strand_points(r: StreamReader, cards: Cards, strand_card: np.ndarray, p: int, q: dict,
+                          family_payload: bytes | None) -> np.ndarray:
+    """The strands' card coordinates ``[S, p, 3]``: the guides' from STRD's residuals (after
+    ``strand_card``), then the children's from CHLD (spec 4.5)."""
+    g = len(strand_card) - q.get("children", 0)
+    guide_card = strand_card[:g]
     columns = level_widths(p, q["base_stride"])
-    residuals = read_residuals(r, strand_card, columns, q["neighbour_classes"])
-    _undo_neighbour_prediction(strand_card, residuals, columns, q["neighbour"])
-    scale = _uvd_scale(*card_scales(cards, q["step"]), strand_card, q["step"])
-    return decode_uvd(CardMap(cards), strand_card, residuals, p, scale, _prediction(q))
+    residuals = read_residuals(r, guide_card, columns, q["neighbour_classes"])
+    _undo_neighbour_prediction(guide_card, residuals, columns, q["neighbour"])
+    scale = _uvd_scale(*card_scales(cards, q["step"]), guide_card, q["step"])
+    cmap = CardMap(cards)
+    uvd = decode_uvd(cmap, guide_card, residuals, p, scale, _prediction(q))
+    if family_payload is None:
+        return uvd
+    family = _read_family(family_payload, g, len(strand_card) - g)
+    card = strand_card.astype(np.int64)
+    guides = cmap.strands(card[:g], uvd)
+    try:
+        children = place_children(cmap, q["step"], guides, family.parents, family.weights, family.respaced,
+                                  card[g:])
+    except ValueError as exc:
+        raise InvalidContentError(f"{exc} (a corrupt step or weights)", chunk=FAMILY_CHUNK) from None
+    return np.concatenate([uvd, children])
 
 
 def _decode_quantized_appearance(rd: dict[str, StreamReader], meta: dict, s: int, p: int, q: dict
@@ -832,7 +1026,7 @@ def read_info(source) -> dict:
     """What ``cgh info`` prints: header, chunk table and counts, without decoding the streams."""
     data = _read_bytes(source)
     version, infos = container.read_table(data)
-    _, _, payloads = container.unpack(data, set(REQUIRED_CHUNKS) | set(OPTIONAL_CHUNKS), {"META"})
+    _, _, payloads = container.unpack(data, set(KNOWN_CHUNKS), {"META"})
     if "META" not in payloads:
         raise InvalidContentError("required chunk 'META' is missing", chunk="META")
     meta = _parse_meta(payloads["META"])

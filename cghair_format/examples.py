@@ -43,3 +43,24 @@ def example_asset(seed: int = 0, strands: int = 64, points: int = 16, cards: int
                             weight_mode, 1.0)
     return HairAsset(card_set, strand_card, uvd, opacity, appearance, thickness=2e-4, meters_per_unit=1.0,
                      up_axis="Y", generator="cghair examples", attribution="").validate()
+
+
+def with_interpolated_strands(asset: HairAsset, seed: int = 0) -> HairAsset:
+    """``asset`` and as many strands again, each a blend of three strands of one card (random weights
+    summing to 1, every other blend resampled at even arc length) placed on that card as a decoder
+    places an interpolated strand (spec 4.5): a groom of guides and children."""
+    from . import children
+    from .geometry import CardMap, strand_points
+
+    rng = np.random.default_rng(seed)
+    s = asset.n_strands
+    world = strand_points(asset.cards, asset.strand_card, asset.uvd).astype(np.float64)
+    first = rng.integers(0, s, s)
+    parents = np.array([[f, *rng.choice(np.flatnonzero(asset.strand_card == asset.strand_card[f]), 2)]
+                        for f in first], np.int64)
+    weights = children.quantize_weights(rng.dirichlet(np.ones(3), s))
+    diag = float(np.linalg.norm(world.reshape(-1, 3).max(0) - world.reshape(-1, 3).min(0)))
+    grown = asset.take_strands(np.r_[np.arange(s), first])
+    grown.uvd[s:] = children.place_children(CardMap(asset.cards), 1e-6 * diag, world, parents, weights,
+                                            np.arange(s) % 2 == 0, asset.strand_card[first])
+    return grown.validate()

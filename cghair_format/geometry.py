@@ -168,6 +168,19 @@ class CardMap:
                            np.ascontiguousarray(uvd, np.float64), out)
         return out
 
+    def strands(self, strand_card: np.ndarray, uvd: np.ndarray) -> np.ndarray:
+        """World points ``[S, P, 3]`` (float64) of strands' card coordinates ``uvd [S, P, 3]``, by blocks
+        of strands on every core."""
+        s, p = uvd.shape[:2]
+        out = np.empty((s, p, 3))
+
+        def block(b: slice) -> None:
+            card = np.repeat(np.asarray(strand_card[b], np.int64), p)
+            out[b] = self(card, uvd[b].reshape(-1, 3).astype(np.float64)).reshape(-1, p, 3)
+
+        map_blocks(block, s)
+        return out
+
     def invert(self, card: np.ndarray, uvd: np.ndarray, points: np.ndarray, steps: int = 4
                ) -> tuple[np.ndarray, np.ndarray]:
         """Card coordinates ``[N, 3]`` (float64) that map to ``points [N, 3]`` on cards ``card [N]``,
@@ -185,13 +198,4 @@ def strand_points(cards: Cards, strand_card: np.ndarray, uvd: np.ndarray) -> np.
 
     ``x = sum_j beta_j V_j + delta * normalize(sum_j beta_j N_j)`` over the point's card triangle.
     """
-    s, p = uvd.shape[:2]
-    cmap = CardMap(cards)
-    out = np.empty((s, p, 3), np.float32)
-
-    def block(b: slice) -> None:
-        card = np.repeat(strand_card[b].astype(np.int64), p)
-        out[b] = cmap(card, uvd[b].reshape(-1, 3)).reshape(-1, p, 3)
-
-    map_blocks(block, s)
-    return out
+    return CardMap(cards).strands(strand_card, uvd).astype(np.float32)

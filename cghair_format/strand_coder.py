@@ -91,12 +91,13 @@ def base_residuals(y: np.ndarray, base: np.ndarray, orders: tuple[int, int, int]
 
 
 def _run_strands(cmap: CardMap, strand_card: np.ndarray, scale: np.ndarray, residuals: np.ndarray, n: int,
-                 plan: Prediction, **arrays) -> int:
+                 plan: Prediction, after: int = 0, **arrays) -> int:
     """The compiled recurrence :func:`._native.run_strands` over blocks of whole cards in parallel, card
     by card, each strand after its neighbour (which the base samples' guide reads and the dead zone may
     copy; a card's triangles stay in cache while its strands are coded). ``arrays``: encoding, ``rec``,
     ``world``, ``y`` and the dead zone's arguments; decoding, ``uvd`` (each block then gets its own
-    scratch: a strand and those before it that its base samples may follow)."""
+    scratch: a strand and those before it that its base samples may follow). Encoding with ``after``,
+    the strands before it are coded already, and each card's others come last on it."""
     base, levels = level_plan(n, plan.base_stride, plan.level_taps)
     level_start = np.cumsum([0] + [len(idx) for idx, _, _ in levels], dtype=np.int64)
     idx = np.concatenate([np.zeros(0, np.int64)] + [lv[0] for lv in levels]).astype(np.int64)
@@ -112,16 +113,21 @@ def _run_strands(cmap: CardMap, strand_card: np.ndarray, scale: np.ndarray, resi
     if plan.level_guide:
         arrays["row_seg"] = _row_segments(n, plan.base_stride)
 
-    def block(b: slice) -> int:
+    def block(b: slice, first: int = 0) -> int:
         given = dict(arrays)
         if "uvd" in given:  # decoding: per block, the scratch of a strand and those its base samples may follow
             given["rec"], given["world"] = (np.empty((_native.SCRATCH_STRANDS, n, 3)) for _ in range(2))
         rec, world = given.pop("rec"), given.pop("world")
         return _native.run_strands(by_card[b], cmap.frames, cmap.segments, card, scale, base, orders, level_start,
                                    taps, idx, nb, wt, plan.newton_steps, plan.newton_halvings, plan.stretch_max,
-                                   plan.base_guide, rec, world, residuals, **given)
+                                   plan.base_guide, rec, world, residuals, first=first, **given)
 
-    return sum(map_threads(block, card_blocks(starts)))
+    if after == 0:
+        return sum(map_threads(block, card_blocks(starts)))
+    bounds = np.r_[np.flatnonzero(starts), len(card)]
+    cards = [(slice(a, b), int(np.count_nonzero(by_card[a:b] < after)))
+             for a, b in zip(bounds[:-1], bounds[1:], strict=True) if by_card[b - 1] >= after]
+    return sum(map_threads(lambda c: block(*c), cards))
 
 
 def card_blocks(starts: np.ndarray, rows: int = BLOCK_ROWS) -> list[slice]:
@@ -135,29 +141,59 @@ def card_blocks(starts: np.ndarray, rows: int = BLOCK_ROWS) -> list[slice]:
     return [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
 
 
+class Coded(NamedTuple):
+    """What :func:`encode_uvd` leaves for a later call to go on from: the residuals before the level
+    differences, the scaled reconstructions, their world points and the level references, each with
+    room for more rows, of which the first ``count`` are coded."""
+
+    residuals: np.ndarray
+    rec: np.ndarray
+    world: np.ndarray
+    level_ref: np.ndarray | None
+    count: int
+
+
 def encode_uvd(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray, plan: Prediction,
-               dead_zone: DeadZone | None = None):
+               dead_zone: DeadZone | None = None, before: Coded | None = None, room: int = 0):
     """Residuals (base, levels) of scaled card coordinates ``y [S, P, 3]`` (``uvd * scale``) on the cards
-    of ``cmap``, and the world points ``[S, P, 3]`` the decoder will reconstruct. Every reconstructed
+    of ``cmap``, the world points ``[S, P, 3]`` the decoder will reconstruct and the :class:`Coded`
+    state. Every reconstructed
     value is within 0.5 of ``y``, except samples where ``dead_zone`` (:class:`DeadZone`) lets a cheaper
     residual stand: the error stays bounded, the residuals it picks cost the least, and as the decoder
     predicts from what it reconstructs, later samples simply see that reconstruction. With
-    ``plan.level_guide`` the levels come as stored: differences from each base segment's reference's."""
+    ``plan.level_guide`` the levels come as stored: differences from each base segment's reference's.
+    With ``room`` rows (more than ``S``) the state can go on: with ``before`` (such a call on the first
+    of these strands, with the same cards and plan, and room for all) only the rest are coded, each
+    last on its card, and the first strands decode as they did."""
     s, n = y.shape[:2]
     widths = level_widths(n, plan.base_stride)
-    world = np.empty((s, n, 3))
-    residuals = np.empty((s, sum(widths), 3), np.int64)
+    if before is not None:
+        raw, rec, world, ref, after = before
+        if len(rec) < s:
+            raise ValueError(f"encode_uvd: the state has room for {len(rec)} strands, not {s}")
+    else:
+        rows, after = max(s, room), 0
+        raw = np.empty((rows, sum(widths), 3), np.int64)
+        rec, world = np.empty((rows, n, 3)), np.empty((rows, n, 3))
+        ref = np.full((rows, widths[0] - 1), -1, np.int64) if plan.level_guide else None
     zone = {} if dead_zone is None else {
         "dz_points": np.ascontiguousarray(dead_zone.points, np.float64), "dz_dist": float(dead_zone.distance),
         "neighbour_zone": dead_zone.neighbour}
-    if plan.level_guide:
-        zone["level_ref"] = ref = np.full((s, widths[0] - 1), -1, np.int64)
-    _run_strands(cmap, strand_card, scale, residuals, n, plan, rec=np.empty((s, n, 3)), world=world,
+    if ref is not None:
+        zone["level_ref"] = ref[:s]
+    _run_strands(cmap, strand_card, scale, raw[:s], n, plan, after, rec=rec[:s], world=world[:s],
                  y=np.ascontiguousarray(y, np.float64), **zone)
+    # (the levels' differences go to a copy where the raw residuals may be gone on from)
+    residuals = raw[:s].copy() if plan.level_guide and (len(raw) > s or before is not None) else raw[:s]
     if plan.level_guide:  # the levels as differences from each base segment's reference's (spec 4.3)
-        _native.level_differences(residuals, ref, _row_segments(n, plan.base_stride), widths[0])
+        _native.level_differences(residuals, ref[:s], _row_segments(n, plan.base_stride), widths[0])
     base, *levels = np.split(residuals, np.cumsum(widths)[:-1], axis=1)
-    return base, levels, world
+    return base, levels, world[:s], Coded(raw, rec, world, ref, s)
+
+
+def coded_uvd(coded: Coded, scale: np.ndarray, first: int = 0) -> np.ndarray:
+    """The card coordinates (float32) that :func:`decode_uvd` gets for the coded strands from ``first`` on."""
+    return (coded.rec[first:coded.count] / scale[first:, None, :]).astype(np.float32)  # as the decoder divides
 
 
 def _row_segments(n: int, base_stride: int) -> np.ndarray:

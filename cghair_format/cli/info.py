@@ -50,11 +50,12 @@ LEVEL_GUIDES = ("", ", level residuals as differences from the most alike earlie
 
 
 def _coding(quant: dict) -> str:
-    """The strand coder's settings (META quant, spec 4.3) in a line."""
+    """The strand coder's settings (META quant, spec 4.3 and 4.5) in a line."""
     if quant["lossless"]:
         return "float32 card coordinates (lossless)"
     return (f"step {quant['step']:.3g}, base samples every {quant['base_stride']} points"
             f"{GUIDES[quant['base_guide']]}{LEVEL_GUIDES[quant['level_guide']]}, "
             f"levels interpolating {'/'.join(map(str, quant['level_taps'])) or '-'} points, "
             f"steps stretched up to {quant['stretch_max']:g}x, {quant['neighbour_classes']} neighbour token "
-            f"class{'es' if quant['neighbour_classes'] > 1 else ''}")
+            f"class{'es' if quant['neighbour_classes'] > 1 else ''}"
+            + (f"; {quant['children']:,} strands interpolated from 2-3 others (CHLD)" if quant.get("children") else ""))

@@ -13,7 +13,8 @@ import numpy as np
 
 import cghair_format as cgh
 from cghair_format import container
-from cghair_format.examples import example_asset
+from cghair_format.examples import example_asset, with_interpolated_strands
+from cghair_format.streams import StreamReader, StreamWriter
 
 HERE = Path(__file__).resolve().parent
 
@@ -28,8 +29,7 @@ def _expected(name: str, data: bytes) -> None:
 
 def _rechunk(data: bytes, edit) -> bytes:
     """Unpack, let ``edit`` change the chunk list, pack again with valid checksums."""
-    known = {"META", "CARD", "STRD", "OPAC", "LOGT", "CBKS", "MLPW", "SIDS", "ROOT", "SCOL", "XMET"}
-    _, infos, payloads = container.unpack(data, known)
+    _, infos, payloads = container.unpack(data, set(cgh.codec.KNOWN_CHUNKS))
     chunks = [container.Chunk(i.type, payloads[i.type], i.required) for i in infos]
     return container.pack(edit(chunks))
 
@@ -42,7 +42,7 @@ def _meta_edit(chunks, change):
 
 
 def _quant(data: bytes) -> dict:
-    payloads = container.unpack(data, set(cgh.codec.REQUIRED_CHUNKS) | set(cgh.codec.OPTIONAL_CHUNKS))[2]
+    payloads = container.unpack(data, set(cgh.codec.KNOWN_CHUNKS))[2]
     return json.loads(payloads["META"])["quant"]
 
 
@@ -64,6 +64,19 @@ def _encode(asset, profile: str, guide: int, classes: int | None = None, level_g
     assert _quant(data)["base_guide"] == guide and _quant(data)["level_guide"] == level_guide
     assert classes is None or _quant(data)["neighbour_classes"] == classes
     return data
+
+
+def _bad_parent(chunk):
+    """CHLD with its first child's first parent moved past the last guide."""
+    r = StreamReader(chunk.payload, "CHLD")
+    first, others, weights = r.ints((None,), "first"), r.ints((None, 2), "others"), r.ints((None, 2), "weights")
+    respaced = r.array((None,), "respaced", ("|u1",))
+    first[0] += 1 << 20
+    w = StreamWriter()
+    for a in (first, others, weights):
+        w.ints(a)
+    w.array(respaced)
+    return container.Chunk("CHLD", w.getvalue())
 
 
 def _differs(data: bytes, change: dict) -> None:
@@ -125,6 +138,16 @@ def main() -> None:
                    {"level_guide": 0}):
         _differs(data, change)
     _expected("synth_curly_compact", data)
+    # interpolated strands (spec 4.5): half the strands are blends of others, plain and resampled; a
+    # decoder that takes none, or resamples none, gets other points
+    data = cgh.encode(with_interpolated_strands(built, seed=4), "compact")[0]
+    assert _quant(data)["children"] > 0
+    family = cgh.codec._read_family(container.unpack(data, set(cgh.codec.KNOWN_CHUNKS))[2]["CHLD"],
+                                    96 - _quant(data)["children"], _quant(data)["children"])
+    assert family.respaced.any() and not family.respaced.all()
+    _differs(data, {"children": 0})
+    _expected("synth_children_compact", data)
+    children = data
 
     reject = {}
 
@@ -149,6 +172,10 @@ def main() -> None:
     padded = bytearray(cgh.encode(minimal, "lossless")[0])
     padded[-1] = 0xAA
     bad("reject_nonzero_padding", bytes(padded), "CghFormatError", "padding")
+    bad("reject_children_without_chld", _rechunk(children, lambda c: [x for x in c if x.type != "CHLD"]),
+        "InvalidContentError", "CHLD")
+    bad("reject_child_parent", _rechunk(children, lambda c: [_bad_parent(x) if x.type == "CHLD" else x for x in c]),
+        "InvalidContentError", "parent")
     (HERE / "reject.json").write_text(json.dumps(reject, indent=2) + "\n")
 
 

@@ -229,8 +229,8 @@ def test_an_isolated_miss_nudges_the_step_and_many_tighten_it(missing, nudged, m
     step 1 % smaller. Many points beyond it mean the step is too coarse: it shrinks with the error."""
     real, steps = cgh.codec._quantize_geometry, []
 
-    def first_attempt_misses(asset, prof, step, diag, points, tol, choices):
-        geometry = real(asset, prof, step, diag, points, tol, choices)
+    def first_attempt_misses(asset, prof, step, diag, points, tol, choices, family):
+        geometry = real(asset, prof, step, diag, points, tol, choices, family)
         steps.append(step)
         if len(steps) == 1:  # move ``missing`` points 1.2 tolerances off their input
             decoded = geometry.decoded_points.copy()

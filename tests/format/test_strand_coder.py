@@ -101,7 +101,7 @@ def test_real_hair_stores_neighbour_differences_and_decodes_the_same_points():
     # the same residuals stored without the transform (every mask 0) reconstruct the same points, and
     # their STRD is larger
     _, infos = container.read_table(data)
-    payloads = container.unpack(data, set(codec.REQUIRED_CHUNKS) | set(codec.OPTIONAL_CHUNKS))[2]
+    payloads = container.unpack(data, set(codec.KNOWN_CHUNKS))[2]
     r = StreamReader(payloads["STRD"], "STRD")
     strand_card = np.cumsum(r.ints((asset.n_strands,), "strand_card"))
     columns = level_widths(asset.points_per_strand, quant["base_stride"])
@@ -352,7 +352,7 @@ def _vector_with_meta(edit) -> bytes:
     """spec/vectors/small_compact.cgh with its META changed by ``edit`` (checksums redone)."""
     data = (codec.Path(__file__).parents[2] / "spec" / "vectors" / "small_compact.cgh").read_bytes()
     _, infos = container.read_table(data)
-    payloads = container.unpack(data, set(codec.REQUIRED_CHUNKS))[2]
+    payloads = container.unpack(data, set(codec.KNOWN_CHUNKS))[2]
     meta = json.loads(payloads["META"])
     edit(meta)
     payloads["META"] = json.dumps(meta).encode()
@@ -443,11 +443,11 @@ def test_the_dead_zone_stores_more_zeros_and_keeps_the_bound(neighbour, monkeypa
     # cheaper (Ratboy: 391 zeros with the neighbour zone, 392 without)
     unguided(monkeypatch)
     data, report = cgh.encode(asset, "compact")
-    args, kw, (base, levels, world) = calls[-1]
+    args, kw, (base, levels, world, *_) = calls[-1]
     assert kw["dead_zone"].neighbour == neighbour
     points, distance = kw["dead_zone"].points, kw["dead_zone"].distance
     assert distance == pytest.approx(0.97 * 2e-4 * report.bbox_diagonal)
-    plain_base, plain_levels, _ = real(*args)  # the same step without the dead zone
+    plain_base, plain_levels, *_ = real(*args)  # the same step without the dead zone
     strand_card = args[1]
     stored, _ = codec._with_neighbour_prediction(strand_card, [base] + levels)
     plain_stored, _ = codec._with_neighbour_prediction(strand_card, [plain_base] + plain_levels)
@@ -531,7 +531,7 @@ def test_the_writers_base_estimate_codes_what_the_compiled_coder_stores(order):
     scale = np.abs(np.random.default_rng(0).normal(100, 10, (30, 3)))
     y = asset.uvd.astype(np.float64) * scale[:, None, :]
     base_idx, _ = level_plan(40, 16)
-    base, _, _ = encode_uvd(CardMap(asset.cards), asset.strand_card, y, scale, Prediction(16, order, 2))
+    base, *_ = encode_uvd(CardMap(asset.cards), asset.strand_card, y, scale, Prediction(16, order, 2))
     assert np.array_equal(base, base_residuals(y, base_idx, order))
     assert not np.array_equal(base_residuals(y, base_idx, (1, 1, 1)), base_residuals(y, base_idx, (2, 2, 2)))
 
