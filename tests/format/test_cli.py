@@ -40,6 +40,8 @@ def test_info_names_the_writers_strand_coding_choices(capsys):
     out = capsys.readouterr().out
     assert "guided by the most alike earlier strand's steps, level residuals as differences from the most " \
            "alike earlier strand's" in out
+    assert main(["info", str(vectors / "synth_children_compact.cgh")]) == 0
+    assert "strands interpolated from 2-3 others (CHLD)" in capsys.readouterr().out
     assert main(["info", str(vectors / "minimal_lossless.cgh")]) == 0
     assert "float32 card coordinates (lossless)" in capsys.readouterr().out
 
