@@ -218,9 +218,10 @@ def decode(data: bytes) -> HairAsset:
         if name not in payloads:
             raise InvalidContentError(f"required chunk {name!r} is missing", chunk=name)
     meta = _parse_meta(payloads["META"])
-    if (FAMILY_CHUNK in payloads) != (meta["quant"].get("children", 0) > 0):
+    children = 0 if meta["quant"]["lossless"] else meta["quant"].get("children", 0)
+    if (FAMILY_CHUNK in payloads) != (children > 0):
         raise InvalidContentError(f"chunk {FAMILY_CHUNK} must be present exactly when META quant.children is "
-                                  f"above 0", chunk=FAMILY_CHUNK)
+                                  f"above 0 (quantized files only)", chunk=FAMILY_CHUNK)
     try:
         asset = _decode_chunks(meta, payloads)
         asset.validate()

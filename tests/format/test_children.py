@@ -125,6 +125,10 @@ def test_chld_and_the_children_count_go_together(groom):
     meta = chunks[0].payload.replace(b'"children":', b'"childrem":')
     with pytest.raises(InvalidContentError, match="CHLD"):
         cgh.decode(container.pack([container.Chunk("META", meta)] + chunks[1:]))
+    lossless = container.unpack(cgh.encode(example_asset(0), "lossless")[0], set(codec.KNOWN_CHUNKS))[2]
+    with pytest.raises(InvalidContentError, match="CHLD"):  # lossless files have no children
+        cgh.decode(container.pack([container.Chunk(t, lossless[t]) for t in codec.REQUIRED_CHUNKS]
+                                  + [c for c in chunks if c.type == "CHLD"]))
 
 
 @pytest.mark.filterwarnings("error")
