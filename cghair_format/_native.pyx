@@ -1066,14 +1066,16 @@ def best_blends(const double[:, ::1] roots, const double[:, ::1] desc, const dou
                 const i64[::1] strands, const i64[:, ::1] cand,
                 const uint8_t[::1] usable, double root_tol, double slack, double good, i64[:, ::1] parents,
                 double[:, ::1] weights, double[::1] miss):
-    """Per strand ``s = strands[row]`` (rows of ``cand``, ``parents``, ``weights``, ``miss``), the blend of two or three ``usable`` strands among its candidates ``cand[s]``
-    that best predicts it: over the pairs and triples whose roots blend to within ``root_tol`` of its
-    root with weights of at least ``-slack`` (and at most ``1 + slack``), with the weights that blend the
-    roots so (or, where the three roots lie nearly in a line, the least-squares weights of ``desc``),
-    the one whose largest distance across the strand at the points of ``desc`` (rows of points x 3;
-    ``tangent``, the strand's unit tangents there) is least, or the first within ``good``. Writes the three parents (a pair repeats its second), their weights and that distance
-    (``miss``; infinity where none qualifies, parents -1)."""
-    cdef Py_ssize_t row, a, b, c, e, n = cand.shape[0], k = cand.shape[1]
+    """Per strand ``s = strands[row]`` (rows of ``cand``, ``parents``, ``weights``, ``miss``), the blend
+    of two or three ``usable`` strands among its candidates ``cand[row]`` that best predicts it: over
+    the pairs and triples whose roots blend to within ``root_tol`` of its root with weights of at least
+    ``-slack`` (and at most ``1 + slack``), with the weights that blend the roots so (or, where the
+    three roots lie nearly in a line, the least-squares weights of ``desc``), the one whose largest
+    distance across the strand at the points of ``desc`` (rows of points x 3; ``tangent``, the
+    strand's unit tangents there) is least, or the first within ``good``. Writes the three parents (a
+    pair repeats its second), their weights and that distance (``miss``; infinity where none
+    qualifies, parents -1)."""
+    cdef Py_ssize_t row, a, b, c, n = cand.shape[0], k = cand.shape[1]
     cdef i64 i, j, l, s
     cdef double rtol2 = root_tol * root_tol, good2 = good * good, best, d2, gjj, gjl, gll, hj, hl, wj, wl, r2, xx, t
     cdef double* dist  # [k, k] the candidates' roots' squared distances, then [k] theirs to the strand's

@@ -43,7 +43,7 @@ class Children(NamedTuple):
     respaced: np.ndarray  # [S] bool
 
 
-def root_candidates(roots: np.ndarray, k: int = CANDIDATES) -> np.ndarray:
+def root_candidates(roots: np.ndarray, k: int) -> np.ndarray:
     """Per strand, the ``k`` other strands with the nearest roots (``[S, k]``, nearest first, -1 where
     fewer), sought in the 27 cells around its own of a grid that holds about ``k`` roots a cell."""
     roots = np.ascontiguousarray(roots, np.float64)

@@ -164,27 +164,26 @@ def encode(asset: HairAsset, profile: str | Profile = "compact", keep_order: boo
     kids = find_children(points, tol) if reorder else None
     if kids is not None and np.count_nonzero(kids.child) < MIN_CHILD_SHARE * len(points):
         kids = None  # a few children cost their guides more than they save
-    order, family = None, None
+    arranged = _arrange(input_asset, input_points, kids) if reorder else (asset, points, None, None)
     # measured, the largest point error is about 1.0 step (half a step on each of u, v, delta): start
     # where it usually meets the bound at once, then tighten or grow
     step = None if prof.lossless else STEP_START * tol
     passed = None  # (step, error, quantized geometry, arrangement) of the largest step that met the bound so far
     choices, nudged = None, False
     for attempt in range(MAX_TIGHTENINGS):
-        if reorder:
-            asset, points, order, family = _arrange(input_asset, input_points, kids)
+        asset, points, order, family = arranged
         geometry = _quantize_geometry(asset, prof, step, diag, points, tol, choices, family)
         choices = geometry.choices
-        if family is not None and (geometry.child_miss > tol).any():
+        dist = _distances(geometry, points)
+        if family is not None and (dist[family.guides:] > tol).any():
             # children that the decoded guides place too far become guides, last on their cards (the
             # guides before them decode as they did, so the other children stay where they were)
             late = np.zeros(len(input_points), bool)
-            late[order[family.guides:][geometry.child_miss > tol]] = True
+            late[order[family.guides:][(dist[family.guides:] > tol).any(axis=1)]] = True
             before = order
             asset, points, order, family = _arrange(input_asset, input_points, kids, late, order[:family.guides])
             geometry = _with_late_guides(geometry, before, order, family.guides, asset, points)
-        decoded = geometry.decoded_points
-        dist = np.zeros(1) if decoded is None else np.linalg.norm(decoded - points, axis=-1)
+            dist = _distances(geometry, points)
         err = float(dist.max())
         if step is None:
             passed = (step, err, geometry, (asset, order))
@@ -231,6 +230,12 @@ def decode(data: bytes) -> HairAsset:
 
 
 # --- META ----------------------------------------------------------------------------------------
+
+def _distances(geometry: _Geometry, points: np.ndarray) -> np.ndarray:
+    """How far each point a decoder gets lies from the input's ``points`` (``[S, P]``; lossless: 0)."""
+    decoded = geometry.decoded_points
+    return np.zeros((1, 1)) if decoded is None else np.linalg.norm(decoded - points, axis=-1)
+
 
 def _meta(asset: HairAsset, prof: Profile, step: float | None, diag: float) -> dict:
     app = asset.appearance
@@ -385,7 +390,6 @@ class _Geometry(NamedTuple):
     decoded_points: np.ndarray | None
     choices: _Choices | None
     family: _Family | None = None  # the interpolated strands, with their weights fitted to the decoded guides
-    child_miss: np.ndarray | None = None  # [children] how far each child's decoded points are left, at most
     coding: _Coding | None = None  # with a family: what coding more guides after these takes
 
 
@@ -480,8 +484,7 @@ def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag
         return _Geometry(meta, cards_w, [base] + levels, decoded_points, choices)
     q["children"] = len(family.parents)
     family, world = _place_family(cmap, q["step"], strand_card, coded_uvd(state, scale), family, points)
-    miss = np.linalg.norm(world[family.guides:] - points[family.guides:], axis=-1).max(1)
-    return _Geometry(meta, cards_w, [base] + levels, world, choices, family, miss,
+    return _Geometry(meta, cards_w, [base] + levels, world, choices, family,
                      _Coding(cmap, cards, uvd, state, zone.distance))
 
 
@@ -515,7 +518,7 @@ def _with_late_guides(geometry: _Geometry, before: np.ndarray, order: np.ndarray
                             geometry.decoded_points[kids]])
     kept = _Family(guides, family.parents[kids - g0], family.weights[kids - g0], family.respaced[kids - g0])
     return _Geometry(meta, geometry.cards, [base] + levels, world, geometry.choices, kept,
-                     geometry.child_miss[kids - g0], coding._replace(card_uvd=uvd, state=state))
+                     coding._replace(card_uvd=uvd, state=state))
 
 
 def _place_family(cmap: CardMap, step: float, strand_card: np.ndarray, guides_uvd: np.ndarray, family: _Family,

@@ -157,8 +157,8 @@ def encode_uvd(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.
                dead_zone: DeadZone | None = None, before: Coded | None = None, room: int = 0):
     """Residuals (base, levels) of scaled card coordinates ``y [S, P, 3]`` (``uvd * scale``) on the cards
     of ``cmap``, the world points ``[S, P, 3]`` the decoder will reconstruct and the :class:`Coded`
-    state. Every reconstructed
-    value is within 0.5 of ``y``, except samples where ``dead_zone`` (:class:`DeadZone`) lets a cheaper
+    state. Every reconstructed value is within 0.5 of ``y``, except samples where ``dead_zone``
+    (:class:`DeadZone`) lets a cheaper
     residual stand: the error stays bounded, the residuals it picks cost the least, and as the decoder
     predicts from what it reconstructs, later samples simply see that reconstruction. With
     ``plan.level_guide`` the levels come as stored: differences from each base segment's reference's.

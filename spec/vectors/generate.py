@@ -14,7 +14,6 @@ import numpy as np
 import cghair_format as cgh
 from cghair_format import container
 from cghair_format.examples import example_asset, with_interpolated_strands
-from cghair_format.streams import StreamReader, StreamWriter
 
 HERE = Path(__file__).resolve().parent
 
@@ -64,19 +63,6 @@ def _encode(asset, profile: str, guide: int, classes: int | None = None, level_g
     assert _quant(data)["base_guide"] == guide and _quant(data)["level_guide"] == level_guide
     assert classes is None or _quant(data)["neighbour_classes"] == classes
     return data
-
-
-def _bad_parent(chunk):
-    """CHLD with its first child's first parent moved past the last guide."""
-    r = StreamReader(chunk.payload, "CHLD")
-    first, others, weights = r.ints((None,), "first"), r.ints((None, 2), "others"), r.ints((None, 2), "weights")
-    respaced = r.array((None,), "respaced", ("|u1",))
-    first[0] += 1 << 20
-    w = StreamWriter()
-    for a in (first, others, weights):
-        w.ints(a)
-    w.array(respaced)
-    return container.Chunk("CHLD", w.getvalue())
 
 
 def _differs(data: bytes, change: dict) -> None:
@@ -174,7 +160,8 @@ def main() -> None:
     bad("reject_nonzero_padding", bytes(padded), "CghFormatError", "padding")
     bad("reject_children_without_chld", _rechunk(children, lambda c: [x for x in c if x.type != "CHLD"]),
         "InvalidContentError", "CHLD")
-    bad("reject_child_parent", _rechunk(children, lambda c: [_bad_parent(x) if x.type == "CHLD" else x for x in c]),
+    past = container.Chunk("CHLD", cgh.codec._family_payload(family._replace(parents=family.parents + (1 << 20))))
+    bad("reject_child_parent", _rechunk(children, lambda c: [past if x.type == "CHLD" else x for x in c]),
         "InvalidContentError", "parent")
     (HERE / "reject.json").write_text(json.dumps(reject, indent=2) + "\n")
 

@@ -11,7 +11,6 @@ from cghair_format import children, codec, container
 from cghair_format.errors import InvalidContentError
 from cghair_format.examples import example_asset, with_interpolated_strands
 from cghair_format.geometry import strand_points
-from cghair_format.streams import StreamReader, StreamWriter
 
 
 @pytest.fixture(scope="module")
@@ -91,24 +90,25 @@ def test_late_guides_decode_as_a_whole_coding_would(groom):
 
 
 def _chld(data: bytes, edit) -> bytes:
-    """``data`` with CHLD's arrays (first deltas, others, weights, flags) changed by ``edit``."""
+    """``data`` with its CHLD family changed by ``edit`` (re-sealed)."""
     _, infos, payloads = container.unpack(data, set(codec.KNOWN_CHUNKS))
-    r = StreamReader(payloads["CHLD"], "CHLD")
-    arrays = [r.ints((None,), "a"), r.ints((None, 2), "b"), r.ints((None, 2), "c"), r.array((None,), "d", ("|u1",))]
-    edit(arrays)
-    w = StreamWriter()
-    for a in arrays[:3]:
-        w.ints(a)
-    w.array(arrays[3])
-    payloads["CHLD"] = w.getvalue()
+    n = quant_of(data)["children"]
+    family = codec._read_family(payloads["CHLD"], cgh.read_info(data)["strands"] - n, n)
+    payloads["CHLD"] = codec._family_payload(edit(family))
     return container.pack([container.Chunk(i.type, payloads[i.type], i.required) for i in infos])
 
 
+def _at(a: np.ndarray, index, value) -> np.ndarray:
+    out = a.copy()
+    out[index] = value
+    return out
+
+
 @pytest.mark.parametrize("edit, message", [
-    (lambda a: a[0].__setitem__(0, a[0][0] + 10**6), "parent"),
-    (lambda a: a[1].__setitem__((0, 0), -10**6), "parent"),
-    (lambda a: a[2].__setitem__((0, 1), 9000), "weight"),
-    (lambda a: a[3].__setitem__(0, 2), "flag"),
+    (lambda f: f._replace(parents=f.parents + 10**6), "parent"),
+    (lambda f: f._replace(parents=_at(f.parents, (0, 1), f.parents[0, 0] - 10**6)), "parent"),
+    (lambda f: f._replace(weights=_at(f.weights, (0, 2), 9000)), "weight"),
+    (lambda f: f._replace(respaced=_at(f.respaced.astype(np.uint8), 0, 2)), "flag"),
 ])
 def test_a_bad_chld_is_refused(groom, edit, message):
     _, (data, _) = groom
