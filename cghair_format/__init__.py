@@ -11,7 +11,7 @@ except ImportError as exc:  # pragma: no cover - only a source tree that was nev
                       "(it needs a C compiler: gcc, clang or MSVC), or `make venv`") from exc
 
 from .asset import Appearance, Cards, HairAsset, MlpLayer
-from .codec import EncodeReport, decode, encode, read, read_info, write
+from .codec import EncodeReport, decode, encode, read, read_info, read_with_gaussians, write
 from .errors import AssetError, CghError, CghFormatError, MissingDependencyError
 from .gaussians import Gaussians, decode_gaussians, decode_points
 from .profiles import PROFILES, Profile
@@ -20,6 +20,6 @@ from .strands import Strands
 __all__ = [
     "PROFILES", "Appearance", "AssetError", "Cards", "CghError", "CghFormatError", "EncodeReport", "Gaussians",
     "HairAsset", "MissingDependencyError", "MlpLayer", "Profile", "Strands", "decode", "decode_gaussians",
-    "decode_points", "encode", "read", "read_info", "write",
+    "decode_points", "encode", "read", "read_info", "read_with_gaussians", "write",
 ]
 __version__ = "0.1.0"

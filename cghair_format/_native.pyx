@@ -348,6 +348,28 @@ def map_points(const double[:, ::1] frames, int segments, const i64[::1] card, c
             card_map(&frames[0, 0], segments, card[i], &uvd[i, 0], &out[i, 0], NULL, NULL, NULL)
 
 
+def map_strands(const double[:, ::1] frames, int segments, const i64[::1] strand_card, const float[:, :, ::1] uvd,
+                float[:, :, ::1] out):
+    """``out[s, i]`` = the world point of card coordinates ``uvd[s, i]`` on ``strand_card[s]``: float32 in
+    and out, mapped in float64 as :func:`map_points` does."""
+    cdef Py_ssize_t s, i, n = strand_card.shape[0], p = uvd.shape[1]
+    cdef int ch
+    cdef double c[3]
+    cdef double x[3]
+    if (frames.shape[1] != 18 or uvd.shape[0] != n or out.shape[0] != n or out.shape[1] != p or uvd.shape[2] != 3
+            or out.shape[2] != 3):
+        raise ValueError("map_strands: mismatched shapes")
+    check_cards(strand_card, frames.shape[0], segments)
+    with nogil:
+        for s in range(n):
+            for i in range(p):
+                for ch in range(3):
+                    c[ch] = uvd[s, i, ch]
+                card_map(&frames[0, 0], segments, strand_card[s], c, x, NULL, NULL, NULL)
+                for ch in range(3):
+                    out[s, i, ch] = <float> x[ch]
+
+
 def invert_points(const double[:, ::1] frames, int segments, const i64[::1] card, double[:, ::1] uvd,
                   const double[:, ::1] goal, int steps, double[::1] miss_out):
     """Card coordinates of world points, in place: from ``uvd[i]``, up to ``steps`` Newton steps on

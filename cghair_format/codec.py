@@ -16,7 +16,7 @@ from typing import BinaryIO, NamedTuple
 
 import numpy as np
 
-from . import container, rans
+from . import container, memory, rans
 from .asset import ACTIVATIONS, UP_AXES, WEIGHT_MODES, Appearance, Cards, HairAsset, MlpLayer
 from .children import (
     WEIGHT_ONE,
@@ -27,6 +27,7 @@ from .children import (
     place_children,
 )
 from .errors import AssetError, InvalidContentError, LimitError
+from .gaussians import Gaussians, decode_gaussians
 from .geometry import CardMap, angle_normals, card_scales, normal_angles, strand_points
 from .parallel import map_blocks, map_threads
 from .profiles import Profile, get_profile
@@ -212,6 +213,20 @@ def encode(asset: HairAsset, profile: str | Profile = "compact", keep_order: boo
 
 
 def decode(data: bytes) -> HairAsset:
+    return _decode(data, sh_ahead=False)[0]
+
+
+def read_with_gaussians(source: str | os.PathLike | bytes | bytearray | memoryview | BinaryIO
+                        ) -> tuple[HairAsset, Gaussians]:
+    """``read(source)`` and its ``decode_gaussians``, in one go and quicker: while a quantized file's
+    strands decode, the kernel faults in the memory for their SH (475 MB at the paper's scale)."""
+    asset, sh_out = _decode(_read_bytes(source), sh_ahead=True)
+    return asset, decode_gaussians(asset, sh_out)
+
+
+def _decode(data: bytes, sh_ahead: bool) -> tuple[HairAsset, np.ndarray | None]:
+    """The asset, and with ``sh_ahead`` a quantized file's memory for :func:`.gaussians.strand_sh` (its
+    ``out``), faulted in while the strands decode (else None)."""
     _, _, payloads = container.unpack(data, set(KNOWN_CHUNKS))
     for name in REQUIRED_CHUNKS:
         if name not in payloads:
@@ -222,11 +237,11 @@ def decode(data: bytes) -> HairAsset:
         raise InvalidContentError(f"chunk {FAMILY_CHUNK} must be present exactly when META quant.children is "
                                   f"above 0 (quantized files only)", chunk=FAMILY_CHUNK)
     try:
-        asset = _decode_chunks(meta, payloads)
+        asset, sh_out = _decode_chunks(meta, payloads, sh_ahead)
         asset.validate()
     except AssetError as exc:
         raise InvalidContentError(f"decoded contents are inconsistent: {exc}") from None
-    return asset
+    return asset, sh_out
 
 
 # --- META ----------------------------------------------------------------------------------------
@@ -901,7 +916,7 @@ def _uvd_scale(su: np.ndarray, sv: np.ndarray, strand_card: np.ndarray, step: fl
     return np.stack([su[strand_card], sv[strand_card], np.ones(len(strand_card))], axis=-1) / step
 
 
-def _decode_chunks(meta: dict, payloads: dict[str, bytes]) -> HairAsset:
+def _decode_chunks(meta: dict, payloads: dict[str, bytes], sh_ahead: bool) -> tuple[HairAsset, np.ndarray | None]:
     s, p, c, m, nt, k, d = (meta[key] for key in ("strands", "points", "cards", "segments", "groups", "k",
                                                     "latent_dim"))
     q = meta["quant"]
@@ -910,40 +925,54 @@ def _decode_chunks(meta: dict, payloads: dict[str, bytes]) -> HairAsset:
     if strand_card.min() < 0 or strand_card.max() >= c:
         raise InvalidContentError(f"strand_card refers to cards outside [0, {c})", chunk="STRD")
     widths = [d] + [layer["out"] for layer in meta["mlp"]]
+    sh_out = None
     if q["lossless"]:
         f4 = ("<f4",)
         cards = Cards(rd["CARD"].array((c, m + 1, 3), "spine", f4), rd["CARD"].array((c, m + 1, 3), "normal", f4),
-                      rd["CARD"].array((c, m + 1), "half_width", f4), np.zeros(c, np.int32))
+                      rd["CARD"].array((c, m + 1), "half_width", f4), _read_groups(rd["CARD"], c))
         uvd = rd["STRD"].array((s, p, 3), "uvd", f4)
         opacity = rd["OPAC"].array((s, p - 1), "opacity", f4)
-        logits = rd["LOGT"].array((s, k), "logits", f4)
-        codebooks = rd["CBKS"].array((nt, k, d), "codebooks", f4)
-        mlp = [MlpLayer(rd["MLPW"].array((o, i), f"mlp[{j}].weight", f4), rd["MLPW"].array((o,), f"mlp[{j}].bias", f4),
-                        layer["activation"])
-               for j, (i, o, layer) in enumerate(zip(widths[:-1], widths[1:], meta["mlp"], strict=True))]
+        appearance = _appearance(meta, rd["LOGT"].array((s, k), "logits", f4),
+                                 rd["CBKS"].array((nt, k, d), "codebooks", f4),
+                                 [MlpLayer(rd["MLPW"].array((o, i), f"mlp[{j}].weight", f4),
+                                           rd["MLPW"].array((o,), f"mlp[{j}].bias", f4), layer["activation"])
+                                  for j, (i, o, layer) in enumerate(zip(widths[:-1], widths[1:], meta["mlp"],
+                                                                        strict=True))])
     else:
         cards = _decode_cards(rd["CARD"], c, m + 1, q)
-        # the strand points (whose rANS decoder runs on one core) while the appearance streams decode;
-        # a fault in STRD is raised first, as it comes first in the file
+        cards.group = _read_groups(rd["CARD"], c)
+        # the strand points (whose rANS decoder runs on one core) while the appearance streams decode and,
+        # sh_ahead, the SH's memory faults in; a fault in STRD is raised first, as it comes first in the file
         with ThreadPoolExecutor(max_workers=1) as background:
             points = background.submit(_decode_strand_points, rd["STRD"], cards, strand_card, p, q,
                                        payloads.get(FAMILY_CHUNK))
             try:
-                opacity, logits, codebooks, mlp = _decode_quantized_appearance(rd, meta, s, p, q)
+                opacity, *model = _decode_quantized_appearance(rd, meta, s, p, q)
+                appearance = _appearance(meta, *model)
+                if sh_ahead:  # filled once the strands are done, on every core
+                    appearance.validate(s, p - 1)
+                    sh_out = memory.empty((s, (p - 1) * appearance.sh_coeffs * 3), np.float32)
             except Exception:
                 points.result()
                 raise
             uvd = points.result()
-    cards.group = rd["CARD"].array((c,), "group", ("<u2", "<u4")).astype(np.int32)
     for reader in rd.values():
         reader.finish()
-    appearance = Appearance(np.asarray(logits, np.float32), np.asarray(codebooks, np.float32), mlp,
-                            meta["sh_degree"], meta["weight_mode"], float(meta["temperature"]))
     asset = HairAsset(cards, strand_card.astype(np.int32), uvd, opacity.astype(np.float32), appearance,
                       float(meta["thickness"]), float(meta["meters_per_unit"]), meta["up_axis"], meta["generator"],
                       meta["attribution"])
     _decode_optional(asset, payloads, s, p)
-    return asset
+    return asset, sh_out
+
+
+def _read_groups(r: StreamReader, c: int) -> np.ndarray:
+    """Each card's codebook group, CARD's last array."""
+    return r.array((c,), "group", ("<u2", "<u4")).astype(np.int32)
+
+
+def _appearance(meta: dict, logits: np.ndarray, codebooks: np.ndarray, mlp: list[MlpLayer]) -> Appearance:
+    return Appearance(np.asarray(logits, np.float32), np.asarray(codebooks, np.float32), mlp, meta["sh_degree"],
+                      meta["weight_mode"], float(meta["temperature"]))
 
 
 def _decode_strand_points(r: StreamReader, cards: Cards, strand_card: np.ndarray, p: int, q: dict,

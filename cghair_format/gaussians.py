@@ -90,28 +90,30 @@ def strand_latents(appearance: Appearance, strand_group: np.ndarray) -> np.ndarr
     return latents
 
 
-def run_mlp(appearance: Appearance, latents: np.ndarray) -> np.ndarray:
+def run_mlp(appearance: Appearance, latents: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """The global MLP applied to latents ``[S, D]``, in float32; ``[S, out]``. Each layer is one matrix
     product over all strands, its bias included (a column of ones on the input: the paper-scale
     model's last layer writes its 475 MB output once, in :func:`.memory.empty`); BLAS runs it on every
     core, measured steadier than our threads calling BLAS on blocks. A ReLU then runs in place, by
-    blocks of strands on every core."""
+    blocks of strands on every core. ``out``: the last layer's output ``[S, out]``, where made already."""
     h = latents.astype(np.float32)
-    for layer in appearance.mlp:
+    for i, layer in enumerate(appearance.mlp):
         x = np.concatenate([h, np.ones((len(h), 1), np.float32)], axis=1)
         w = np.concatenate([layer.weight.astype(np.float32).T, layer.bias.astype(np.float32)[None, :]])
-        h = np.matmul(x, w, out=memory.empty((len(h), w.shape[1]), np.float32))
+        last = out is not None and i == len(appearance.mlp) - 1
+        h = np.matmul(x, w, out=out if last else memory.empty((len(h), w.shape[1]), np.float32))
         if layer.activation == "relu":
             map_blocks(lambda b, h=h: np.maximum(h[b], 0, out=h[b]), len(h))
     return h
 
 
-def strand_sh(asset: HairAsset) -> np.ndarray:
-    """SH coefficients ``[S, P-1, (deg+1)^2, 3]`` of every Gaussian, from the appearance model."""
+def strand_sh(asset: HairAsset, out: np.ndarray | None = None) -> np.ndarray:
+    """SH coefficients ``[S, P-1, (deg+1)^2, 3]`` of every Gaussian, from the appearance model; written
+    into ``out`` (float32 ``[S, (P-1) (deg+1)^2 3]``) where given."""
     app = asset.appearance
     group = asset.cards.group.astype(np.int64)[asset.strand_card]
-    out = run_mlp(app, strand_latents(app, group))
-    return out.reshape(asset.n_strands, asset.points_per_strand - 1, app.sh_coeffs, 3)
+    sh = run_mlp(app, strand_latents(app, group), out)
+    return sh.reshape(asset.n_strands, asset.points_per_strand - 1, app.sh_coeffs, 3)
 
 
 def decode_points(asset: HairAsset) -> np.ndarray:
@@ -119,12 +121,11 @@ def decode_points(asset: HairAsset) -> np.ndarray:
     return strand_points(asset.cards, asset.strand_card, asset.uvd)
 
 
-def decode_gaussians(asset: HairAsset, points: np.ndarray | None = None) -> Gaussians:
-    """All Gaussians of the asset, strand-major then segment order, with SH from the MLP."""
-    if points is None:
-        points = decode_points(asset)
-    means, rotations, scales = segment_frames(points, asset.thickness)
-    sh = strand_sh(asset).reshape(asset.n_gaussians, asset.appearance.sh_coeffs, 3)
+def decode_gaussians(asset: HairAsset, sh_out: np.ndarray | None = None) -> Gaussians:
+    """All Gaussians of the asset, strand-major then segment order, with SH from the MLP (written into
+    ``sh_out`` where given: see :func:`strand_sh`)."""
+    sh = strand_sh(asset, sh_out).reshape(asset.n_gaussians, asset.appearance.sh_coeffs, 3)
+    means, rotations, scales = segment_frames(decode_points(asset), asset.thickness)
     return Gaussians(means, rotations, scales, asset.opacity.reshape(-1).astype(np.float32), sh)
 
 

@@ -181,6 +181,18 @@ class CardMap:
         map_blocks(block, s)
         return out
 
+    def strand_points(self, strand_card: np.ndarray, uvd: np.ndarray) -> np.ndarray:
+        """:meth:`strands` in float32 (``uvd`` float32 too), by blocks of strands on every core."""
+        uvd = np.ascontiguousarray(uvd, np.float32)
+        card = np.ascontiguousarray(strand_card, np.int64)
+        out = np.empty(uvd.shape, np.float32)
+
+        def block(b: slice) -> None:
+            _native.map_strands(self.frames, self.segments, card[b], uvd[b], out[b])
+
+        map_blocks(block, len(card))
+        return out
+
     def invert(self, card: np.ndarray, uvd: np.ndarray, points: np.ndarray, steps: int = 4
                ) -> tuple[np.ndarray, np.ndarray]:
         """Card coordinates ``[N, 3]`` (float64) that map to ``points [N, 3]`` on cards ``card [N]``,
@@ -198,4 +210,4 @@ def strand_points(cards: Cards, strand_card: np.ndarray, uvd: np.ndarray) -> np.
 
     ``x = sum_j beta_j V_j + delta * normalize(sum_j beta_j N_j)`` over the point's card triangle.
     """
-    return CardMap(cards).strands(strand_card, uvd).astype(np.float32)
+    return CardMap(cards).strand_points(strand_card, uvd)

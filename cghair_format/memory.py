@@ -1,23 +1,33 @@
-"""Large output arrays, mapped and faulted in by the kernel in one go.
+"""Large output arrays, mapped and faulted in by the kernel ahead of the writes.
 
 A fresh array of hundreds of MB costs more to fault in than to fill: decoding the paper-scale asset
 to Gaussians writes 475 MB of SH, a matrix product of about 0.1 s. numpy's own allocation asks for
 transparent huge pages, which are quick once the process has freed some, but the first such array
 of a process (and, now and then, a later one) stalls while the kernel finds them: 1.05 s, then
 0.05-0.22 s, for 475 MB on this project's 2-core machine (COMPRESSION.md, "Decode time, earlier
-runs"). An anonymous mapping that the kernel populates at once (``MAP_POPULATE``, Linux) takes
-0.13-0.20 s every time, page by page faulting 0.27-0.33 s.
+runs"). An anonymous mapping that the kernel populates ahead takes 0.13-0.20 s every time, page by
+page faulting 0.27-0.33 s.
+
+On Linux 5.14 and later the kernel populates it a chunk at a time (``madvise(MADV_POPULATE_WRITE)``,
+called through ctypes, which lets go of the GIL), so that other threads go on meanwhile:
+:func:`.codec.read_with_gaussians` faults the SH in while its strands decode on another thread.
+``mmap``'s own ``MAP_POPULATE`` or ``madvise`` keep the GIL, and one populate of the whole mapping
+holds the process's memory-map lock throughout, so that a thread that maps memory waits for it; each
+cost that decode 0.05-0.09 s a round (COMPRESSION.md, "Decode time"). Older kernels get
+``MAP_POPULATE``; other systems a plain mapping.
 """
 
 from __future__ import annotations
 
+import ctypes
 import mmap
+import sys
 
 import numpy as np
 
 LARGE_BYTES = 64 << 20  # smaller arrays come from numpy as usual
-_FLAGS = {"flags": mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS | getattr(mmap, "MAP_POPULATE", 0)} \
-    if hasattr(mmap, "MAP_ANONYMOUS") else {}
+POPULATE_CHUNK = 8 << 20
+MADV_POPULATE_WRITE = 23  # linux/mman.h; Python's mmap module names it from 3.13 on
 
 
 def empty(shape: tuple[int, ...], dtype) -> np.ndarray:
@@ -27,4 +37,41 @@ def empty(shape: tuple[int, ...], dtype) -> np.ndarray:
     size = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
     if size < LARGE_BYTES:
         return np.empty(shape, dtype)
-    return np.frombuffer(mmap.mmap(-1, size, **_FLAGS), dtype).reshape(shape)
+    return np.frombuffer(_populated(size), dtype).reshape(shape)
+
+
+def _libc_madvise():
+    """libc's ``madvise``, which ctypes calls without the GIL; None where there is none to call."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        fn = ctypes.CDLL(None, use_errno=True).madvise
+    except (OSError, AttributeError):
+        return None
+    fn.argtypes, fn.restype = (ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int), ctypes.c_int
+    return fn
+
+
+_MADVISE = _libc_madvise()
+
+
+def _populated(size: int) -> mmap.mmap:
+    if not hasattr(mmap, "MAP_POPULATE"):
+        return mmap.mmap(-1, size)
+    flags = mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS
+    m = mmap.mmap(-1, size, flags=flags)
+    if _populate_by_chunks(m, size):
+        return m
+    m.close()  # a kernel before 5.14
+    return mmap.mmap(-1, size, flags=flags | mmap.MAP_POPULATE)
+
+
+def _populate_by_chunks(m: mmap.mmap, size: int) -> bool:
+    """Fault ``m`` in, POPULATE_CHUNK bytes a call; False if the kernel cannot (nothing faulted then)."""
+    if _MADVISE is None:
+        return False
+    address = np.frombuffer(m, np.uint8).ctypes.data  # the view goes with this call: m can close
+    for start in range(0, size, POPULATE_CHUNK):
+        if _MADVISE(address + start, min(POPULATE_CHUNK, size - start), MADV_POPULATE_WRITE) != 0:
+            return start > 0  # short of memory midway: the rest faults in as it is written
+    return True

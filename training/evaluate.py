@@ -95,14 +95,13 @@ def evaluate(cgh: str | Path | HairAsset, dataset: str | Path | Dataset, out_dir
              device: str = "cpu") -> EvalResult:
     """Render a .cgh (decoded exactly as stored) at the dataset's ``split`` views on the torch
     ``device`` and compare."""
-    from cghair_format import decode_gaussians, read
+    from cghair_format import decode_gaussians, read_with_gaussians
 
     from .splatter import render_gaussians, torch_device
 
     device = torch_device(device)
-    asset = cgh if isinstance(cgh, HairAsset) else read(cgh)
+    g = decode_gaussians(cgh) if isinstance(cgh, HairAsset) else read_with_gaussians(cgh)[1]
     ds = dataset if isinstance(dataset, Dataset) else read_dataset(dataset)
-    g = decode_gaussians(asset)
     result = evaluate_renders(lambda v: render_gaussians(g, v.camera, tuple(background), device)["rgb"],
                               ds.split(split), out_dir, background, use_lpips)
     if out_dir is not None:

@@ -27,7 +27,7 @@ def _step(title: str) -> float:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .. import CghError, decode_gaussians, read, read_info
+    from .. import CghError, read_info, read_with_gaussians
     from ..exchange import export_usd, save_strands, write_3dgs_ply
     from ..synth import synthesize
     from .info import format_info
@@ -60,8 +60,8 @@ def run(args: argparse.Namespace) -> int:
     t = _step("4. the file (cgh info) and the same Gaussians as a 3DGS PLY")
     info = read_info(out / "hair.cgh")
     print(format_info(str(out / "hair.cgh"), info))
-    asset = read(out / "hair.cgh")
-    write_3dgs_ply(decode_gaussians(asset), out / "hair_3dgs.ply")
+    asset, gaussians = read_with_gaussians(out / "hair.cgh")
+    write_3dgs_ply(gaussians, out / "hair_3dgs.ply")
     ply = (out / "hair_3dgs.ply").stat().st_size
     print(f"   3DGS PLY of the same {info['gaussians']:,} Gaussians: {ply:,} bytes; "
           f".cgh: {info['file_bytes']:,} bytes ({ply / info['file_bytes']:.0f} x smaller)")

@@ -42,9 +42,7 @@ def run(args: argparse.Namespace) -> int:
     if args.all:
         args.curves = args.cards = args.gaussians = True
     if src.suffix.lower() == ".cgh":
-        from ..codec import read
-
-        return _export_asset(read(src), out, args)
+        return _export_asset(src, out, args)
     if src.suffix.lower() == ".ply" and _is_3dgs_ply(str(src)):
         return _export_splats(src, out, args)
     if ext == ".ply":
@@ -61,17 +59,19 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _export_asset(asset, out: Path, args: argparse.Namespace) -> int:
+def _export_asset(src: Path, out: Path, args: argparse.Namespace) -> int:
     if out.suffix.lower() == ".ply":
+        from ..codec import read_with_gaussians
         from ..exchange.ply_3dgs import write_3dgs_ply
-        from ..gaussians import decode_gaussians
 
-        g = decode_gaussians(asset)
+        g = read_with_gaussians(src)[1]
         write_3dgs_ply(g, out)
         print(f"{out}: {g.count:,} Gaussians as a 3DGS PLY (SH degree {g.sh_degree}, written as degree 3)")
         return 0
+    from ..codec import read
     from ..exchange.usd_export import export_usd
 
+    asset = read(src)
     export_usd(out, asset=asset, curves=args.curves, cards=args.cards, gaussians=args.gaussians, groom=args.groom)
     parts = [name for name, on in (("curves", args.curves), ("cards", args.cards), ("gaussians", args.gaussians))
              if on]

@@ -1,5 +1,6 @@
 """The .cgh benchmark at the paper's scale (``make bench``): size per profile, bits per Gaussian,
-encode and decode times, and the same decoded Gaussians as a standard 3DGS PLY, in one table.
+encode and decode times (to the asset, and from the file to Gaussians), and the same decoded Gaussians
+as a standard 3DGS PLY, in one table.
 
 Figures are printed (and kept in pytest-benchmark's JSON); nothing here asserts a time.
 """
@@ -45,7 +46,7 @@ def test_format_table(model, request, tmp_path, benchmark):
     for profile in ("lossless", "high", "compact"):
         (data, report), t_enc = _timed(lambda p=profile: cgh.encode(asset, p))
         decoded, t_dec = _timed(lambda d=data: cgh.decode(d), repeat=2)
-        _, t_gauss = _timed(lambda a=decoded: cgh.decode_gaussians(a))
+        _, t_gauss = _timed(lambda d=data: cgh.read_with_gaussians(d))
         same = report.in_file_order(asset)  # the quantized profiles store strands card by card
         err = float(np.linalg.norm(cgh.decode_points(decoded) - report.strands_in_file_order(points), axis=-1).max()
                     ) / diag
@@ -56,7 +57,7 @@ def test_format_table(model, request, tmp_path, benchmark):
     compact = cgh.encode(asset, "compact")[0]
 
     def decode_to_gaussians() -> None:  # returns nothing: pytest-benchmark would keep each round's 0.6 GB
-        cgh.decode_gaussians(cgh.decode(compact))  # alive through the next round, unlike one decode
+        cgh.read_with_gaussians(compact)  # alive through the next round, unlike one decode
 
     benchmark.pedantic(decode_to_gaussians, rounds=5, iterations=1, warmup_rounds=1)
     lines = [f"\n.cgh at the paper's scale from {model}: {asset.n_strands:,} strands x {asset.points_per_strand} "
@@ -64,10 +65,10 @@ def test_format_table(model, request, tmp_path, benchmark):
              f"groups, K={asset.appearance.k}, D={asset.appearance.latent_dim}, SH degree "
              f"{asset.appearance.sh_degree} (stand-in appearance: see tests/bench/paper_scale.py)",
              f"3DGS PLY of the same Gaussians (SH 3, INRIA layout): {ply_bytes:,} bytes",
-             "profile   bytes        bits/G  encode s  decode s  +Gaussians s  max pt err/diag  max opac err"
+             "profile   bytes        bits/G  encode s  decode s  Gaussians s  max pt err/diag  max opac err"
              "  max weight err  PLY ratio"]
     for r in rows:
-        lines.append(f"{r[0]:<9} {r[1]:>11,}  {r[2]:6.2f}  {r[3]:8.2f}  {r[4]:8.2f}  {r[5]:12.2f}  {r[6]:15.2e}  "
+        lines.append(f"{r[0]:<9} {r[1]:>11,}  {r[2]:6.2f}  {r[3]:8.2f}  {r[4]:8.2f}  {r[5]:11.2f}  {r[6]:15.2e}  "
                      f"{r[7]:12.5f}  {r[10]:14.5f}  {r[8]:9.0f}x")
     for r in rows:
         lines.append(f"  {r[0]} chunks: " + ", ".join(f"{k} {v:,}" for k, v in r[9].items()))

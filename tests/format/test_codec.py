@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 import cghair_format as cgh
 from cghair_format import memory
 from cghair_format.errors import AssetError
-from cghair_format.examples import example_asset
+from cghair_format.examples import example_asset, with_interpolated_strands
 from cghair_format.gaussians import run_mlp, strand_latents, strand_weights
 from cghair_format.quantize import weight_steps
 
@@ -104,6 +104,49 @@ def test_latents_and_mlp_follow_the_spec_and_large_outputs_live_in_their_own_map
         h = h @ layer.weight.astype(np.float64).T + layer.bias
         h = np.maximum(h, 0) if layer.activation == "relu" else h
     np.testing.assert_allclose(small, h, rtol=1e-5, atol=1e-5)
+
+
+@pytest.mark.parametrize("profile, children", [("lossless", False), ("high", False), ("compact", False),
+                                               ("compact", True)])
+def test_read_with_gaussians_gives_what_read_and_decode_gaussians_give(profile, children, monkeypatch):
+    asset = example_asset(5, sh_degree=3)
+    data = cgh.encode(with_interpolated_strands(asset, seed=1) if children else asset, profile)[0]
+    assert (cgh.read_info(data)["quant"].get("children", 0) > 0) == children
+    monkeypatch.setattr(memory, "LARGE_BYTES", 1)  # the SH faulted in ahead, in their own mapping
+    got_asset, got = cgh.read_with_gaussians(io.BytesIO(data))
+    want_asset = cgh.read(data)
+    want = cgh.decode_gaussians(want_asset)
+    for name in ("means", "rotations", "scales", "opacities", "sh"):
+        assert np.array_equal(getattr(got, name), getattr(want, name)), name
+    assert np.array_equal(got_asset.uvd, want_asset.uvd)
+    assert np.array_equal(got_asset.appearance.logits, want_asset.appearance.logits)
+
+
+@pytest.mark.parametrize("works", [True, False])
+def test_large_arrays_are_faulted_in_by_chunks_or_else_at_once(works, monkeypatch):
+    calls = []
+
+    def madvise(address, length, advice):
+        calls.append((length, advice))
+        return 0 if works else -1
+
+    monkeypatch.setattr(memory, "_MADVISE", madvise)
+    monkeypatch.setattr(memory, "LARGE_BYTES", 1)
+    a = memory.empty((5, memory.POPULATE_CHUNK // 8 + 1), np.float32)  # 2.5 chunks
+    a[:] = 1.5
+    assert a.sum() == 1.5 * a.size and isinstance(a.base.base, memoryview)
+    if works:
+        assert calls == [(memory.POPULATE_CHUNK, memory.MADV_POPULATE_WRITE)] * 2 + [(a.nbytes - 2 * memory
+                                                                                         .POPULATE_CHUNK, 23)]
+    else:  # a kernel before 5.14: MAP_POPULATE, after one try
+        assert len(calls) == 1
+
+
+@pytest.mark.skipif(memory._MADVISE is None, reason="Linux only")
+def test_libc_madvise_populates_a_mapping():
+    m = mmap.mmap(-1, 3 * mmap.PAGESIZE, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
+    assert memory._populate_by_chunks(m, len(m))  # Linux 5.14+: this project's machines have 6.x
+    m.close()  # no view of it is left behind
 
 
 @pytest.mark.parametrize("profile", ["high", "compact"])

@@ -7,6 +7,7 @@ re-sealed after their payloads were changed get past the checksums; the decoders
 (or decode them to a valid asset) on their own.
 """
 
+import re
 import time
 
 import numpy as np
@@ -90,7 +91,7 @@ def test_mutated_files_never_return_an_asset_with_bad_values(small_file):
 def test_resealed_garbage_is_refused_or_decodes(small_file, chunk):
     """Checksums catch accidents; a file re-sealed after a chunk's payload was changed (valid CRCs)
     reaches the decoders themselves (the rANS coder for STRD), which must answer with CghFormatError
-    or a valid asset, fast, without a warning."""
+    or a valid asset, fast, without a warning; and decoding straight to Gaussians the same."""
     from cghair_format import codec, container
 
     _, infos = container.read_table(small_file)
@@ -106,8 +107,12 @@ def test_resealed_garbage_is_refused_or_decodes(small_file, chunk):
         start = time.perf_counter()
         try:
             cgh.decode(data).validate()
-        except cgh.CghFormatError:
+        except cgh.CghFormatError as exc:
             refused += 1
+            with pytest.raises(type(exc), match=re.escape(str(exc))):
+                cgh.read_with_gaussians(data)
+        else:
+            cgh.read_with_gaussians(data)
         assert time.perf_counter() - start < MAX_SECONDS
     if chunk in ("STRD", "META"):
         assert refused > 100  # most garbage there is caught by the decoder's own checks
