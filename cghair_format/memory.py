@@ -11,10 +11,11 @@ page faulting 0.27-0.33 s.
 On Linux 5.14 and later the kernel populates it a chunk at a time (``madvise(MADV_POPULATE_WRITE)``,
 called through ctypes, which lets go of the GIL), so that other threads go on meanwhile:
 :func:`.codec.read_with_gaussians` faults the SH in while its strands decode on another thread.
-``mmap``'s own ``MAP_POPULATE`` or ``madvise`` keep the GIL, and one populate of the whole mapping
-holds the process's memory-map lock throughout, so that a thread that maps memory waits for it; each
-cost that decode 0.05-0.09 s a round (COMPRESSION.md, "Decode time"). Older kernels get
-``MAP_POPULATE``; other systems a plain mapping.
+``mmap.madvise`` keeps the GIL (so does the ``mmap`` call itself in some Python versions), and one
+populate of the whole mapping (``MAP_POPULATE``) holds the process's memory-map lock throughout, so
+that a thread that maps memory meanwhile waits; either cost that decode 0.06-0.10 s a round
+(COMPRESSION.md, "Decode straight to Gaussians"). Older kernels get ``MAP_POPULATE``; other systems a
+plain mapping.
 """
 
 from __future__ import annotations
