@@ -154,8 +154,13 @@ def encode(asset: HairAsset, profile: str | Profile = "compact", keep_order: boo
     and strands that blend others last, as children of those (4.5), which codes smaller:
     ``report.strand_order`` maps them back to the input's (the asset's optional per-strand data travel
     with their strands). ``keep_order`` keeps the input's order instead, and stores no children, at a
-    cost; the lossless profile always keeps it."""
-    prof = get_profile(profile)
+    cost; the lossless profile always keeps it. The encoder's arrays, short-lived, do without huge pages
+    (:func:`.memory.without_huge_pages`)."""
+    with memory.without_huge_pages():
+        return _encode(asset, get_profile(profile), keep_order)
+
+
+def _encode(asset: HairAsset, prof: Profile, keep_order: bool) -> tuple[bytes, EncodeReport]:
     asset.validate()
     points = strand_points(asset.cards, asset.strand_card, asset.uvd).astype(np.float64)
     diag = float(np.linalg.norm(points.reshape(-1, 3).max(0) - points.reshape(-1, 3).min(0)))

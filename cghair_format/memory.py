@@ -23,8 +23,19 @@ from __future__ import annotations
 import ctypes
 import mmap
 import sys
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import numpy as np
+
+try:  # numpy's switch for asking the kernel for huge pages for its arrays of 4 MB and more
+    from numpy._core.multiarray import _set_madvise_hugepage
+except ImportError:  # numpy 1.x
+    try:
+        from numpy.core.multiarray import _set_madvise_hugepage
+    except ImportError:
+        _set_madvise_hugepage = None
 
 LARGE_BYTES = 64 << 20  # smaller arrays come from numpy as usual
 POPULATE_CHUNK = 8 << 20
@@ -76,3 +87,37 @@ def _populate_by_chunks(m: mmap.mmap, size: int) -> bool:
         if _MADVISE(address + start, min(POPULATE_CHUNK, size - start), MADV_POPULATE_WRITE) != 0:
             return start > 0  # short of memory midway: the rest faults in as it is written
     return True
+
+
+_HUGE_PAGES_OFF = threading.Lock()
+_huge_pages_users = 0
+_huge_pages_were = True
+
+
+@contextmanager
+def without_huge_pages() -> Iterator[None]:
+    """numpy's arrays in 4 KB pages while inside (in every thread; nested and concurrent uses are
+    counted, and the last to leave restores numpy's setting).
+
+    numpy asks the kernel for transparent huge pages for its arrays of 4 MB and more. Where the kernel
+    compacts memory to find them (``defrag=madvise``, a common default), a process's first fresh GB
+    stalls: harolongo's first high encode in a process took 4.59-5.50 s with them and 4.22-4.72 s
+    without; a second one, with the pages the first freed at hand, 3.74-4.55 s and 4.28-4.57 s (seven
+    fresh processes each; COMPRESSION.md, "Encode time"). The encoder does without, for the first
+    encode (the command line's only one) and the slowest; a decode keeps them (0.67-0.69 s a round
+    against 0.70-0.74 s without)."""
+    global _huge_pages_users, _huge_pages_were
+    if _set_madvise_hugepage is None:
+        yield
+        return
+    with _HUGE_PAGES_OFF:
+        if _huge_pages_users == 0:
+            _huge_pages_were = _set_madvise_hugepage(False)
+        _huge_pages_users += 1
+    try:
+        yield
+    finally:
+        with _HUGE_PAGES_OFF:
+            _huge_pages_users -= 1
+            if _huge_pages_users == 0:
+                _set_madvise_hugepage(_huge_pages_were)

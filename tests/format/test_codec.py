@@ -4,6 +4,7 @@ import dataclasses
 import io
 import mmap
 import os
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pytest
@@ -12,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import cghair_format as cgh
-from cghair_format import memory
+from cghair_format import codec, memory
 from cghair_format.errors import AssetError
 from cghair_format.examples import example_asset, with_interpolated_strands
 from cghair_format.gaussians import run_mlp, strand_latents, strand_weights
@@ -140,6 +141,38 @@ def test_large_arrays_are_faulted_in_by_chunks_or_else_at_once(works, monkeypatc
                                                                                          .POPULATE_CHUNK, 23)]
     else:  # a kernel before 5.14: MAP_POPULATE, after one try
         assert len(calls) == 1
+
+
+def test_encoding_turns_numpys_huge_pages_off_and_back_for_every_thread(monkeypatch):
+    state = {"on": True}
+    calls = []
+
+    def switch(on):
+        calls.append(on)
+        was, state["on"] = state["on"], on
+        return was
+
+    monkeypatch.setattr(memory, "_set_madvise_hugepage", switch)
+    seen = []
+    encode = codec._encode
+    monkeypatch.setattr(codec, "_encode", lambda *a: (seen.append(state["on"]), encode(*a))[1])
+    asset = example_asset(2)
+    cgh.encode(asset, "compact")
+    assert seen == [False] and state["on"] is True and calls == [False, True]
+    calls.clear()
+    with memory.without_huge_pages():
+        assert state["on"] is False
+        with ThreadPoolExecutor(2) as pool:  # concurrent encodes: the last to finish turns them back on
+            list(pool.map(lambda p: cgh.encode(asset, p), ["high", "compact", "lossless"]))
+        assert state["on"] is False
+    assert state["on"] is True and calls == [False, True]
+    state["on"] = False  # a user's own setting (NUMPY_MADVISE_HUGEPAGE=0) is kept
+    cgh.encode(asset, "compact")
+    assert state["on"] is False
+
+
+def test_numpy_has_the_huge_page_switch():
+    assert memory._set_madvise_hugepage is not None  # numpy 1.20 to 2.x; without it, encoding just keeps them
 
 
 @pytest.mark.skipif(memory._MADVISE is None, reason="Linux only")
