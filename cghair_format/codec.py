@@ -28,7 +28,15 @@ from .children import (
 )
 from .errors import AssetError, InvalidContentError, LimitError
 from .gaussians import Gaussians, decode_gaussians
-from .geometry import CardMap, angle_normals, card_scales, normal_angles, strand_points
+from .geometry import (
+    CardMap,
+    angle_normals,
+    bounding_diagonal,
+    card_scales,
+    lengths,
+    normal_angles,
+    strand_points,
+)
 from .parallel import map_blocks, map_threads
 from .profiles import Profile, get_profile
 from .quantize import (
@@ -162,8 +170,9 @@ def encode(asset: HairAsset, profile: str | Profile = "compact", keep_order: boo
 
 def _encode(asset: HairAsset, prof: Profile, keep_order: bool) -> tuple[bytes, EncodeReport]:
     asset.validate()
-    points = strand_points(asset.cards, asset.strand_card, asset.uvd).astype(np.float64)
-    diag = float(np.linalg.norm(points.reshape(-1, 3).max(0) - points.reshape(-1, 3).min(0)))
+    points = strand_points(asset.cards, asset.strand_card, asset.uvd)
+    diag = bounding_diagonal(points)
+    points = points.astype(np.float64)
     tol = prof.position_tolerance * max(diag, 1e-12)
     reorder = not prof.lossless and not keep_order
     input_asset, input_points = asset, points
@@ -254,7 +263,7 @@ def _decode(data: bytes, sh_ahead: bool) -> tuple[HairAsset, np.ndarray | None]:
 def _distances(geometry: _Geometry, points: np.ndarray) -> np.ndarray:
     """How far each point a decoder gets lies from the input's ``points`` (``[S, P]``; lossless: 0)."""
     decoded = geometry.decoded_points
-    return np.zeros((1, 1)) if decoded is None else np.linalg.norm(decoded - points, axis=-1)
+    return np.zeros((1, 1)) if decoded is None else lengths(decoded - points)
 
 
 def _meta(asset: HairAsset, prof: Profile, step: float | None, diag: float) -> dict:

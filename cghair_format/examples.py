@@ -50,7 +50,7 @@ def with_interpolated_strands(asset: HairAsset, seed: int = 0) -> HairAsset:
     summing to 1, every other blend resampled at even arc length) placed on that card as a decoder
     places an interpolated strand (spec 4.5): a groom of guides and children."""
     from . import children
-    from .geometry import CardMap, strand_points
+    from .geometry import CardMap, bounding_diagonal, strand_points
 
     rng = np.random.default_rng(seed)
     s = asset.n_strands
@@ -59,7 +59,7 @@ def with_interpolated_strands(asset: HairAsset, seed: int = 0) -> HairAsset:
     parents = np.array([[f, *rng.choice(np.flatnonzero(asset.strand_card == asset.strand_card[f]), 2)]
                         for f in first], np.int64)
     weights = children.quantize_weights(rng.dirichlet(np.ones(3), s))
-    diag = float(np.linalg.norm(world.reshape(-1, 3).max(0) - world.reshape(-1, 3).min(0)))
+    diag = bounding_diagonal(world)
     grown = asset.take_strands(np.r_[np.arange(s), first])
     grown.uvd[s:] = children.place_children(CardMap(asset.cards), 1e-6 * diag, world, parents, weights,
                                             np.arange(s) % 2 == 0, asset.strand_card[first])

@@ -14,8 +14,8 @@ import numpy as np
 
 def zigzag(x: np.ndarray) -> np.ndarray:
     """Signed to unsigned: 0, -1, 1, -2, 2 ... -> 0, 1, 2, 3, 4 ..."""
-    x = x.astype(np.int64)
-    return ((x << 1) ^ (x >> 63)).astype(np.uint64)
+    x = np.asarray(x, np.int64)
+    return ((x << 1) ^ (x >> 63)).view(np.uint64)
 
 
 def unzigzag(u: np.ndarray) -> np.ndarray:

@@ -46,7 +46,7 @@ def tokens(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Tokens and extra values of unsigned integers ``u`` (uint64); :func:`token_widths` gives each
     token's number of extra bits."""
     u = np.asarray(u, np.uint64)
-    sym = np.where(u < DIRECT, u, 0).astype(np.uint8)
+    sym = u.astype(np.uint8)  # right below DIRECT; the others are set below
     extra = np.zeros(u.shape, np.uint64)
     big = np.flatnonzero(u.ravel() >= DIRECT)  # few: the work below is on them alone
     ub = u.ravel()[big]
@@ -62,8 +62,8 @@ def token_widths(sym: np.ndarray) -> np.ndarray:
 
 def pack_bits(width: np.ndarray, value: np.ndarray) -> np.ndarray:
     """Concatenate each value's ``width`` low bits, MSB first, into bytes (zero padded; compiled)."""
-    width = np.ascontiguousarray(width.ravel(), np.uint8)
-    value = np.ascontiguousarray(value.ravel(), np.uint64)
+    width = np.ascontiguousarray(width, np.uint8).ravel()
+    value = np.ascontiguousarray(value, np.uint64).ravel()
     out = np.zeros((int(width.sum(dtype=np.int64)) + 7) // 8, np.uint8)
     _native.pack_bits(width, value, out)
     return out
