@@ -902,17 +902,17 @@ def _encode_cards(cards: Cards, q: dict, w: StreamWriter) -> Cards:
     # the normals' angles about the spine as the decoder will have it
     _put_hier(w, normal_angles(cards.normal, spine.reshape(c, 3, m1).transpose(0, 2, 1) * cq, q["normal_bits"]), s)
     _put_hier(w, cards.half_width / cq, s)
-    return _decode_cards(StreamReader(w.getvalue(), "CARD"), c, m1, q, np.zeros(c, np.int32))
+    return _decode_cards(StreamReader(w.getvalue(), "CARD"), c, m1, q)
 
 
-def _decode_cards(r: StreamReader, c: int, m1: int, q: dict, group: np.ndarray | None = None) -> Cards:
+def _decode_cards(r: StreamReader, c: int, m1: int, q: dict) -> Cards:
+    """The quantized cards' geometry; their groups (CARD's last array, :func:`_read_groups`) are left 0."""
     cq, s = q["card_step"], q["base_stride"]
     spine = _get_hier(r, c * 3, m1, s, "spine").reshape(c, 3, m1).transpose(0, 2, 1) * cq
     normal = angle_normals(_get_hier(r, c, m1, s, "normal angle"), spine, q["normal_bits"])
     half_width = np.maximum(_get_hier(r, c, m1, s, "half_width") * cq, 0.0)
     return Cards(_float32(spine, "card spines", "CARD"), normal.astype(np.float32),
-                 _float32(half_width, "card half-widths", "CARD"),
-                 group if group is not None else np.zeros(c, np.int32))
+                 _float32(half_width, "card half-widths", "CARD"), np.zeros(c, np.int32))
 
 
 def _float32(a: np.ndarray, what: str, chunk: str) -> np.ndarray:

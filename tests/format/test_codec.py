@@ -137,8 +137,8 @@ def test_large_arrays_are_faulted_in_by_chunks_or_else_at_once(works, monkeypatc
     a[:] = 1.5
     assert a.sum() == 1.5 * a.size and isinstance(a.base.base, memoryview)
     if works:
-        assert calls == [(memory.POPULATE_CHUNK, memory.MADV_POPULATE_WRITE)] * 2 + [(a.nbytes - 2 * memory
-                                                                                         .POPULATE_CHUNK, 23)]
+        chunk, advice = memory.POPULATE_CHUNK, memory.MADV_POPULATE_WRITE
+        assert calls == [(chunk, advice)] * 2 + [(a.nbytes - 2 * chunk, advice)]
     else:  # a kernel before 5.14: MAP_POPULATE, after one try
         assert len(calls) == 1
 
