@@ -5,7 +5,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 TORCH  ?= torch==2.13.0
 
-.PHONY: demo test bench lint clean venv blender
+.PHONY: demo test check bench lint clean venv blender
 
 venv: $(VENV)/.installed
 
@@ -33,6 +33,10 @@ demo: venv
 
 test: venv blender
 	$(PY) -m pytest -q
+
+# The fast tier for the edit-test loop (see CONTRIBUTING.md); `make test` runs every tier, as CI does.
+check: venv
+	$(PY) -m pytest -q -m "not slow and not gl and not blender and not bench"
 
 bench: venv
 	$(PY) -m pytest -q -m bench --benchmark-enable --benchmark-only tests/bench
