@@ -38,8 +38,11 @@ test: venv blender
 check: venv
 	$(PY) -m pytest -q -m "not slow and not gl and not blender and not bench"
 
+# Figures go to .benchmarks/bench.json and, as tables, to docs/benchmarks.md (tools/bench_tables.py).
 bench: venv
-	$(PY) -m pytest -q -m bench --benchmark-enable --benchmark-only tests/bench
+	mkdir -p .benchmarks
+	$(PY) -m pytest -q -s -m bench --benchmark-enable --benchmark-only --benchmark-json=.benchmarks/bench.json tests/bench
+	$(PY) tools/bench_tables.py .benchmarks/bench.json -o docs/benchmarks.md
 
 lint: venv
 	$(VENV)/bin/ruff check .

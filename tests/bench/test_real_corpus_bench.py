@@ -1,0 +1,88 @@
+"""Geometry size on real, un-interpolated hair against the simplest credible coder (``make bench``).
+
+Every model in ../shared/data/hair at its own point count (when every strand has the same count: the
+format stores a fixed count per file) and resampled to 100 points, never densified. For each, the
+compact profile's geometry chunks (CARD + STRD + CHLD) next to :mod:`baseline_coder` (quantize at the
+bound, per-strand deltas, zstd -19) at the same bound (2e-4 of the diagonal) on the same points, and
+the largest point error of each against the points the card builder was given *and* against the
+user's own points (the card builder re-spaces points along each strand).
+
+Figures are printed and kept in pytest-benchmark's JSON; nothing is asserted about sizes or times.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hairdata import load_hair
+
+import cghair_format as cgh
+from cghair_format.strands import Strands, resample
+
+from . import baseline_coder
+
+pytestmark = pytest.mark.bench
+
+BOUND = 2e-4  # of the bounding-box diagonal: the compact profile's strand-point bound
+GEOMETRY_CHUNKS = ("CARD", "STRD", "CHLD")
+# one copy of each model: the .data and PLY twins of Bangs_100.hair hold the same strands
+MODELS = ["straight.hair", "harolongo.data", "ruby_long_hair_16_guide.tfx", "Ratboy_mohawk.tfx",
+          "Bangs_100.hair", "Curly_100.ply"]
+
+
+def _diagonal(points: np.ndarray) -> float:
+    return float(np.linalg.norm(points.max(0) - points.min(0)))
+
+
+def _ours(strands: Strands, user: np.ndarray | None) -> dict:
+    from cghair_format.cards import build_cards
+
+    points = int(strands.point_counts[0])
+    n_cards = int(np.clip(strands.count // 30, 1, 800))
+    build = build_cards(strands, n_cards=n_cards, n_groups=min(64, n_cards), points=points, seed=0,
+                        progress=False)
+    data, report = cgh.encode(build.asset, "compact")
+    decoded = cgh.decode_points(cgh.decode(data))
+    given = report.strands_in_file_order(cgh.decode_points(build.asset))
+    diag = _diagonal(strands.points)
+    row = {"geometry_bytes": sum(report.chunk_sizes.get(c, 0) for c in GEOMETRY_CHUNKS),
+           "file_bytes": len(data),
+           "err_vs_given": float(np.linalg.norm(decoded - given, axis=-1).max()) / diag}
+    if user is not None:
+        mine = report.strands_in_file_order(user.reshape(strands.count, points, 3))
+        row["err_vs_user"] = float(np.linalg.norm(decoded - mine, axis=-1).max()) / diag
+    return row
+
+
+def _baseline(strands: Strands) -> dict:
+    diag = _diagonal(strands.points)
+    size, decoded = baseline_coder.encode(strands.points, strands.offsets, BOUND * diag)
+    return {"bytes": size, "err": float(np.linalg.norm(decoded - strands.points, axis=-1).max()) / diag}
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_real_corpus(model, benchmark):
+    strands = load_hair(model)
+    counts = strands.point_counts
+    cases = [("100 points", resample(strands, 100), False)]
+    if (counts == counts[0]).all():
+        cases.insert(0, (f"native {counts[0]} points", strands, True))
+    lines = [f"\n{model}: {strands.count:,} strands, {int(counts.min())}-{int(counts.max())} points"
+             + ("" if (counts == counts[0]).all() else " (variable counts: the format needs one count per file)")]
+    rows = []
+    for name, s, native in cases:
+        base = _baseline(s)
+        ours = _ours(s, s.points if native else None)
+        ratio = ours["geometry_bytes"] / base["bytes"]
+        user = f", vs the user's points {ours['err_vs_user']:.2e}" if "err_vs_user" in ours else ""
+        lines.append(f"  {name}: geometry {ours['geometry_bytes']:,} B (file {ours['file_bytes']:,}), baseline "
+                     f"{base['bytes']:,} B, ratio {ratio:.2f}; max error/diag: ours vs the builder's points "
+                     f"{ours['err_vs_given']:.2e}{user}, baseline {base['err']:.2e}")
+        rows.append({"model": model, "points": name, "strands": s.count, "geometry B": ours["geometry_bytes"],
+                     "file B": ours["file_bytes"], "baseline B": base["bytes"], "ratio": round(ratio, 3),
+                     "max err / diag (given)": ours["err_vs_given"],
+                     "max err / diag (user)": ours.get("err_vs_user", "resampled"),
+                     "baseline max err / diag": base["err"]})
+    benchmark.pedantic(lambda: None, rounds=1, iterations=1)  # a table, not a timing: one empty round
+    benchmark.extra_info.update({"rows": rows, "table": lines})
+    print("\n".join(lines))
