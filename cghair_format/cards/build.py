@@ -61,6 +61,22 @@ class ReconstructionError:
                 f"max {self.max_abs:.3g} ({self.max_rel:.2e})")
 
 
+@dataclass(frozen=True)
+class Resampling:
+    """How the card builder changed the input's points: from ``min_points``-``max_points`` a strand
+    to ``points``, moving input points up to ``shape_error`` (of the bbox diagonal) off the shape."""
+
+    min_points: int
+    max_points: int
+    points: int
+    shape_error: float  # max distance of an input point from its resampled polyline / bbox diagonal
+
+    def line(self) -> str:
+        given = str(self.min_points) if self.min_points == self.max_points else f"{self.min_points}-{self.max_points}"
+        return (f"strands resampled from {given} to {self.points} points along their arc length: input points lie "
+                f"up to {self.shape_error:.2e} of the bbox diagonal off the resampled shape")
+
+
 @dataclass
 class CardBuild:
     """The result of :func:`build_cards`."""
@@ -68,13 +84,14 @@ class CardBuild:
     asset: HairAsset  # validated, with the default appearance
     timings: dict[str, float]  # seconds per stage, in STAGES order
     error: ReconstructionError  # decoded (float, before quantization) vs resampled input
-    points: np.ndarray  # [S, P, 3] float32, the resampled input the error refers to
+    points: np.ndarray  # [S, P, 3] float32, the input (or its resampling) the error refers to
     textures: np.ndarray  # [C, T, T] float32 strand coverage images, rows along u
     colors: np.ndarray | None = None  # [S, P, 3] float32 resampled input colours, if the input has them
     strip_rounds: int = 0  # widen / extend rounds used by the inverse UV mapping
     unsolved_points: int = 0  # points without an exact card solution (kept at nearest-spine coords)
     outside_strip: int = 0  # points with v outside [0, 1] (beyond the tolerance)
     info: dict = field(default_factory=dict)
+    resampling: Resampling | None = None  # None: the input's own points were kept
 
     def quantized_error(self, profile: str = "compact") -> tuple[ReconstructionError, int]:
         """Error after encoding with ``profile`` and decoding, and the encoded size in bytes."""
@@ -114,25 +131,67 @@ def _check_options(strands: Strands, n_cards: int, n_groups: int, segments: int,
 
 
 def resample(strands: Strands, points: int) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
-    """Points ``[S, P, 3]`` (float64), colours ``[S, P, 3]`` and widths ``[S, P]`` (or None),
-    every strand resampled to ``points`` points evenly spaced along its arc length."""
-    out = resample_strands(strands, points)
+    """Points ``[S, P, 3]`` (float64), colours ``[S, P, 3]`` and widths ``[S, P]`` (or None): the
+    input's own points when every strand has ``points`` of them, else every strand resampled to
+    ``points`` points evenly spaced along its arc length."""
+    out = strands if (strands.point_counts == points).all() else resample_strands(strands, points)
     s = out.count
     colors = None if out.colors is None else out.colors.reshape(s, points, 3).astype(np.float64).clip(0, 1)
     widths = None if out.widths is None else out.widths.reshape(s, points).astype(np.float64)
     return out.to_array().astype(np.float64), colors, widths
 
 
+def shape_error(strands: Strands, resampled: np.ndarray) -> float:
+    """Largest distance from an input point to its strand's resampled polyline ``[S, P, 3]``: how far
+    resampling moved the shape the user gave (0 when the points were kept)."""
+    worst = 0.0
+    a, b = resampled[:, :-1], resampled[:, 1:]  # [S, P-1, 3] segments
+    counts = strands.point_counts
+    for start in range(0, strands.count, 512):  # bounded memory: 512 strands at a time
+        stop = min(strands.count, start + 512)
+        owner = np.repeat(np.arange(start, stop), counts[start:stop])
+        pts = strands.points[strands.offsets[start]:strands.offsets[stop]].astype(np.float64)
+        seg_a, seg_d = a[owner], b[owner] - a[owner]  # [n, P-1, 3]
+        t = np.einsum("nkc,nkc->nk", pts[:, None] - seg_a, seg_d) / np.maximum(
+            np.einsum("nkc,nkc->nk", seg_d, seg_d), 1e-300)
+        near = seg_a + np.clip(t, 0, 1)[..., None] * seg_d
+        worst = max(worst, float(np.sqrt(((near - pts[:, None]) ** 2).sum(-1).min(1).max())))
+    return worst
+
+
+def _carry_by_arc_length(s_even: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Spine parameters ``[S, P]`` of points ``pts [S, P, 3]`` from those ``s_even`` of the same strands'
+    evenly spaced points, interpolated at each point's fraction of its strand's arc length."""
+    seg = np.sqrt((np.diff(pts, axis=1) ** 2).sum(-1))
+    arc = np.concatenate([np.zeros((len(pts), 1)), np.cumsum(seg, 1)], 1)
+    pos = arc / np.maximum(arc[:, -1:], 1e-300) * (pts.shape[1] - 1)  # in units of the even spacing
+    lo = np.clip(np.floor(pos).astype(np.int64), 0, pts.shape[1] - 2)
+    w = pos - lo
+    rows = np.arange(len(pts))[:, None]
+    return s_even[rows, lo] * (1 - w) + s_even[rows, lo + 1] * w
+
+
+def default_points(strands: Strands) -> int:
+    """The point count the builder keeps: the input's own when every strand has the same count
+    (no resampling), else the largest count (the format stores one count per file)."""
+    return int(strands.point_counts.max())
+
+
 def build_cards(strands: Strands, n_cards: int = 800, n_groups: int = 64, segments: int = DEFAULT_SEGMENTS,
-                points: int = 100, seed: int = 0, progress: bool = True, *, sh_degree: int = 3,
+                points: int | None = None, seed: int = 0, progress: bool = True, *, sh_degree: int = 3,
                 log=None) -> CardBuild:
     """Build the cards of ``strands`` and return a :class:`CardBuild` (asset, timings, error).
 
-    ``n_cards`` and ``n_groups`` are capped at the strand and card counts. The result depends only
-    on the inputs and ``seed``. ``log`` (a text stream, default stderr when ``progress``) receives
-    one line per finished stage.
+    ``points`` (default: :func:`default_points`) is the point count every strand is stored with: the
+    input's own points are kept when they already have it, else strands are resampled along their
+    arc length and ``CardBuild.resampling`` says how far that moved them. ``n_cards`` and
+    ``n_groups`` are capped at the strand and card counts. The result depends only on the inputs and
+    ``seed``. ``log`` (a text stream, default stderr when ``progress``) receives one line per
+    finished stage.
     """
-    _check_options(strands, n_cards, n_groups, segments, points, sh_degree)
+    if isinstance(strands, Strands) and points is None and strands.count:
+        points = default_points(strands)
+    _check_options(strands, n_cards, n_groups, segments, 4 if points is None else points, sh_degree)
     threadpoolctl = require("threadpoolctl", "cards", "the card builder")
     with threadpoolctl.threadpool_limits(limits=BUILD_THREADS):
         return _build(strands, n_cards, n_groups, segments, points, seed, progress, sh_degree, log)
@@ -148,21 +207,33 @@ def _build(strands: Strands, n_cards: int, n_groups: int, segments: int, points:
             print(f"cards: {stage:<11}{timings[stage]:8.2f} s", file=log, flush=True)
 
     with timed(timings, "resample"):
-        pts, colors, widths = resample(strands, points)
+        pts, colors, widths = resample(strands, points)  # the points stored: the input's own where they fit
         s_count = len(pts)
         flat = pts.reshape(-1, 3)
         diag = float(np.linalg.norm(flat.max(0) - flat.min(0)))
         if not diag > 0:
             raise CardBuildError("all strand points coincide: nothing to build cards from")
+        resampling = None
+        if (strands.point_counts == points).all():
+            # k-means and the guides compare strands point by point, so they see evenly spaced points;
+            # the normals, widths and stored points are the user's own
+            shape = resample_strands(strands, points).to_array().astype(np.float64)
+        else:
+            shape = pts
+            counts = strands.point_counts
+            resampling = Resampling(int(counts.min()), int(counts.max()), int(points),
+                                    shape_error(strands, pts) / diag)
     done("resample")
 
     with timed(timings, "cluster"):
-        labels = cluster_strands(pts, n_cards, seed)
+        labels = cluster_strands(shape, n_cards, seed)
         c = int(labels.max()) + 1
     done("cluster")
 
     with timed(timings, "guide"):
-        spine, s = guide_spines(pts, labels, c, segments, show_progress=progress)
+        spine, s = guide_spines(shape, labels, c, segments, show_progress=progress)
+        if shape is not pts:
+            s = _carry_by_arc_length(s.reshape(s_count, points), pts).ravel()
     done("guide")
 
     point_card = np.repeat(labels, points)
@@ -206,5 +277,5 @@ def _build(strands: Strands, n_cards: int, n_groups: int, segments: int, points:
     return CardBuild(asset=asset, timings=timings, error=error, points=pts.astype(np.float32),
                      textures=textures, colors=None if colors is None else colors.astype(np.float32),
                      strip_rounds=rounds, unsolved_points=int((~solved).sum()),
-                     outside_strip=outside,
+                     outside_strip=outside, resampling=resampling,
                      info={"cards": c, "groups": n_t, "strands": s_count, "points": points})

@@ -22,8 +22,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--groups", type=int_at_least(1), default=64,
                    help="number of card groups N_T sharing a codebook (default: 64; capped at the card count)")
     p.add_argument("--segments", type=int_at_least(1), default=32, help="segments M per card (default: 32)")
-    p.add_argument("--points", type=int_at_least(4), default=100,
-                   help="points P per strand; strands are resampled to it (default: 100)")
+    p.add_argument("--points", type=int_at_least(4), default=None,
+                   help="points P per strand (default: the input's own points when every strand has the same "
+                        "count, else the largest count); strands with another count are resampled, and the shape "
+                        "error that costs is printed")
     p.add_argument("--sh-degree", type=int, choices=(0, 1, 2, 3), default=3, help="SH degree (default: 3)")
     p.add_argument("--seed", type=int, default=0, help="random seed of the k-means stages (default: 0)")
     p.add_argument("--profile", choices=PROFILE_NAMES, default="compact",
@@ -47,6 +49,7 @@ def run(args: argparse.Namespace) -> int:
     from ..codec import read, write
     from ..exchange import load_strands
     from ..gaussians import decode_points
+    from ..profiles import PROFILES
 
     out = Path(args.output)
     if out.suffix.lower() != ".cgh":
@@ -69,6 +72,12 @@ def run(args: argparse.Namespace) -> int:
     print(f"{out}: {info['strands']:,} strands x {info['points']} points on {info['cards']:,} cards of "
           f"{args.segments} segments, {info['groups']} groups; {out.stat().st_size:,} bytes ({args.profile})")
     print(build.timing_table(), end="")
+    if build.resampling is not None:
+        print(build.resampling.line())
+        bound = PROFILES[args.profile].position_tolerance
+        if build.resampling.shape_error > bound:
+            print(f"note: that is more than the {args.profile} profile's bound ({bound:.0e}); the errors below are "
+                  "measured against the resampled points (the format stores one point count per file)")
     print(build.error.line("point error before quantization"))
     print(after.line(f"point error after quantization ({args.profile})"))
     if build.unsolved_points or build.outside_strip:

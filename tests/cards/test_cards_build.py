@@ -123,3 +123,51 @@ def test_every_style_at_2000_strands(style):
     b = build_cards(synth(style, 2000, 64, seed=1), n_cards=200, n_groups=16, progress=False)
     _check_geometry(b)
     assert b.unsolved_points == 0 and b.outside_strip == 0
+
+
+def _unevenly_spaced(strands: Strands, power: float = 2.0) -> Strands:
+    """The same curves with points bunched towards the root (spacing growing along the strand)."""
+    from cghair_format.strands import resample
+
+    dense = resample(strands, 400).to_array().astype(np.float64)  # the curve, finely
+    p = strands.point_counts[0]
+    t = np.linspace(0, 1, p) ** power * 399
+    lo = np.minimum(np.floor(t).astype(int), 398)
+    w = (t - lo)[None, :, None]
+    return Strands.from_array((dense[:, lo] * (1 - w) + dense[:, lo + 1] * w).astype(np.float32))
+
+
+def test_the_users_points_are_kept_when_their_count_fits():
+    strands = _unevenly_spaced(synth("wavy", 120, 24, seed=3))
+    b = build_cards(strands, n_cards=12, n_groups=3, segments=8, progress=False)
+    assert b.resampling is None and b.info["points"] == 24
+    diag = b.error.bbox_diagonal
+    err = np.linalg.norm(decode_points(b.asset).astype(np.float64) - strands.to_array(), axis=-1).max()
+    assert err <= 1e-6 * diag  # the stored points are the user's, not re-spaced ones
+    assert b.error.max_rel <= MAX_TARGET
+
+
+def test_resampling_is_reported_with_its_shape_error():
+    corner = Strands.from_array(np.array([[[0, 0, 0], [1, 0, 0], [1, 1, 0]]] * 4, np.float32)
+                                + np.arange(4, dtype=np.float32)[:, None, None] * [0, 0, 0.1])
+    b = build_cards(corner, n_cards=1, n_groups=1, segments=2, points=4, progress=False)
+    assert (b.resampling.min_points, b.resampling.max_points, b.resampling.points) == (3, 3, 4)
+    # 4 points evenly along the 2-long path: (0,0), (2/3,0), (1,1/3), (1,1); the corner (1,0) lies
+    # sqrt(2)/6 from the chord between the middle two
+    assert b.resampling.shape_error * b.error.bbox_diagonal == pytest.approx(np.sqrt(2) / 6, rel=1e-6)
+    assert "resampled from 3 to 4 points" in b.resampling.line()
+
+
+def test_the_cli_reports_resampling_beyond_the_profiles_bound(tmp_path, capsys):
+    from cghair_format.cli import main
+    from cghair_format.exchange import save_strands
+
+    src = tmp_path / "s.npz"
+    save_strands(_unevenly_spaced(synth("wavy", 120, 24, seed=3)), src)
+    assert main(["cards", str(src), "-o", str(tmp_path / "kept.cgh"), "--cards", "12", "--groups", "3",
+                 "--no-progress"]) == 0
+    assert "resampled" not in capsys.readouterr().out
+    assert main(["cards", str(src), "-o", str(tmp_path / "r.cgh"), "--cards", "12", "--groups", "3",
+                 "--points", "12", "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "strands resampled from 24 to 12 points" in out and "more than the compact profile's bound" in out

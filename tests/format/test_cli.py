@@ -63,6 +63,16 @@ def test_encode_changes_profile(asset_file, tmp_path, capsys):
     assert cgh.read_info(out)["profile"] == "lossless"
 
 
+def test_encode_of_a_quantized_file_says_what_its_error_is_measured_against(asset_file, tmp_path, capsys):
+    assert main(["encode", str(asset_file), "-o", str(tmp_path / "h.cgh"), "--profile", "high"]) == 0
+    out = capsys.readouterr().out
+    assert "is a compact file" in out and "2e-04 of the bbox diagonal from the strands it was made from" in out
+    lossless = tmp_path / "l.cgh"
+    cgh.write(example_asset(1), lossless, "lossless")
+    assert main(["encode", str(lossless), "-o", str(tmp_path / "c.cgh")]) == 0
+    assert "note:" not in capsys.readouterr().out
+
+
 def test_encode_keeps_the_strand_order_when_asked(tmp_path, capsys):
     source = tmp_path / "src.cgh"
     asset = example_asset(4, strands=30, cards=4)  # its strands come card by card: shuffle them
