@@ -206,3 +206,25 @@ def test_cli_reads_a_capture_and_refuses_strands_elsewhere(scene, tmp_path, caps
     assert main(["train", str(tmp_path / "cap"), "--strands", str(tmp_path / "cm.npz"), *common]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("cgh train: error: only ") and "not in the same frame" in err and "\n" not in err
+
+
+@pytest.mark.parametrize("case,message", [
+    ("distorted", "uses the OPENCV model, which needs undistortion"),
+    ("no images", "the COLMAP model has no registered images"),
+    ("missing image", "a.png is missing (image 'a.png' of the COLMAP model"),
+    ("mask size", "masks must match their images"),
+])
+def test_bad_captures_are_one_line_cli_errors(tmp_path, strands, case, message, capsys):
+    from PIL import Image
+
+    cameras = "1 OPENCV 64 64 50 50 32 32 0.1 0 0 0\n" if case == "distorted" else "1 PINHOLE 64 64 50 50 32 32\n"
+    _text_model(tmp_path / "cap", cameras, "" if case == "no images" else "1 1 0 0 0 0 0 3 1 a.png\n\n")
+    if case == "mask size":
+        Image.new("RGB", (64, 64)).save(tmp_path / "cap" / "images" / "a.png")
+        (tmp_path / "cap" / "masks").mkdir()
+        Image.new("L", (48, 64)).save(tmp_path / "cap" / "masks" / "a.png")
+    save_strands(strands, tmp_path / "s.npz")
+    assert main(["train", str(tmp_path / "cap"), "--strands", str(tmp_path / "s.npz"), "-o", str(tmp_path / "h.cgh"),
+                 "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("cgh train: error: ") and message in err and err.count("\n") == 1, err
