@@ -66,6 +66,7 @@ def _tiny_config() -> TrainConfig:
                        log_every=10, checkpoint_every=1000)
 
 
+@pytest.mark.slow
 @pycolmap_needed
 def test_capture_trains_to_the_same_psnr(scene, tmp_path):
     root, strands = scene
@@ -93,6 +94,28 @@ def test_frame_check(scene):
             check_strands_in_views(moved, views)
     behind = fraction_in_masks(pts, views[:1])
     assert behind.shape == (1,) and 0.9 < behind[0] <= 1.0
+
+
+@pycolmap_needed
+def test_real_hair_capture(tmp_path):
+    """A subset of Ratboy mohawk (318 strands x 32 points), splat-rendered, as NeRF and as COLMAP."""
+    from hairdata import hair_path
+
+    from cghair_format.exchange import load_strands
+    from cghair_format.strands import Strands
+
+    full = load_strands(hair_path("Ratboy_mohawk.tfx"))
+    strands = Strands.from_array(full.to_array()[::7])
+    render_dataset(strands, tmp_path / "nerf", views=12, res=64, engine="splat")
+    nerf_to_colmap(tmp_path / "nerf", tmp_path / "colmap")
+    nerf, capture = read_dataset(tmp_path / "nerf"), read_dataset(tmp_path / "colmap")
+    _same_views(nerf, capture)
+    pts = strands.points.astype(np.float64)
+    assert check_strands_in_views(pts, capture.train) > 0.95
+    height = np.ptp(pts[:, 1])
+    for moved in (pts * 100.0, pts + [0.0, height, 0.0]):  # centimetres; a head's height off
+        with pytest.raises(DatasetError, match="not in the same frame"):
+            check_strands_in_views(moved, capture.train)
 
 
 # --- bad input --------------------------------------------------------------------------------------
