@@ -8,7 +8,7 @@ import argparse
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("file", metavar="FILE.cgh", help="trained .cgh file")
-    p.add_argument("dataset", metavar="DIR", help="NeRF-synthetic dataset folder")
+    p.add_argument("dataset", metavar="DIR", help="dataset folder: NeRF-synthetic, COLMAP or GaussianHaircut layout")
     p.add_argument("--split", choices=("test", "train"), default="test", help="views to evaluate (default: test)")
     p.add_argument("--out", default=None, help="folder for side-by-side PNGs and metrics.json "
                    "(default: FILE.eval next to the file)")
@@ -20,6 +20,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
+    from .capture import detect_layout
     from .evaluate import evaluate
 
     if args.threads:
@@ -28,6 +29,7 @@ def run(args: argparse.Namespace) -> int:
         torch.set_num_threads(args.threads)
     out = Path(args.out) if args.out else Path(args.file).with_suffix(".eval")
     result = evaluate(args.file, args.dataset, out, split=args.split, use_lpips=not args.no_lpips, device=args.device)
+    print(f"read {args.dataset}: {detect_layout(args.dataset).describe()}")
     print(f"{args.file} on {args.dataset} ({args.split}): {result.summary()}")
     for rec in result.per_view:
         print(f"  {rec['view']}: PSNR {rec['psnr']:.2f} dB, SSIM {rec['ssim']:.4f}")

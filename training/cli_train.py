@@ -18,7 +18,8 @@ FROZEN_FRACTION = 7_000 / 30_000
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("dataset", metavar="DIR", help="NeRF-synthetic dataset folder (cgh render-dataset)")
+    p.add_argument("dataset", metavar="DIR", help="dataset folder: NeRF-synthetic (cgh render-dataset), COLMAP "
+                   "or GaussianHaircut layout, told apart by the files present")
     src = p.add_mutually_exclusive_group()
     src.add_argument("--strands", help="strands to build cards from (any format cgh convert reads)")
     src.add_argument("--cards", help="a .cgh whose cards and strand coordinates to start from")
@@ -71,11 +72,13 @@ def _config(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
+    from .capture import detect_layout
     from .train import TrainError, train
 
     if not (args.strands or args.cards or args.resume):
         raise TrainError("give --strands (to build cards) or --cards (a .cgh), or --resume a checkpoint")
     cfg = _config(args)
+    print(f"reading {args.dataset}: {detect_layout(args.dataset).describe()}")
     result = train(args.dataset, strands=args.strands, cards=args.cards, out=args.output, config=cfg,
                    resume=args.resume, profile=args.profile, progress=not args.no_progress,
                    threads=args.threads, device=args.device)

@@ -1,4 +1,5 @@
-"""Multi-view datasets in the NeRF-synthetic layout, and rendering them from strands.
+"""Multi-view datasets in the NeRF-synthetic layout, and rendering them from strands; real captures
+(COLMAP, GaussianHaircut) are read by :mod:`training.capture`.
 
 Layout (read and written): ``transforms_train.json`` and ``transforms_test.json``, each with
 ``camera_angle_x`` and ``frames: [{file_path: "./train/r_000", transform_matrix: 4x4}]``
@@ -160,10 +161,15 @@ def read_split(root: str | Path, split: str) -> list[View]:
 
 
 def read_dataset(root: str | Path) -> Dataset:
-    """Read both splits (a missing test split is an error: evaluation needs held-out views)."""
+    """Read a dataset in any layout :func:`training.capture.detect_layout` knows: NeRF-synthetic
+    (both splits; a missing test split is an error, evaluation needs held-out views), COLMAP or
+    GaussianHaircut (:mod:`training.capture`)."""
+    from .capture import detect_layout, read_capture
+
+    layout = detect_layout(root)
+    if layout.name != "NeRF-synthetic":
+        return read_capture(layout)
     root = Path(root)
-    if not root.is_dir():
-        raise DatasetError(f"dataset folder {root} does not exist")
     meta_path = root / "dataset.json"
     meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
     return Dataset(read_split(root, "train"), read_split(root, "test"), meta)

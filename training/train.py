@@ -198,6 +198,11 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
     else:
         config = (config or TrainConfig()).validate()
         base = base_asset(config, strands, cards, progress)
+    from cghair_format.gaussians import decode_points
+
+    from .capture import check_strands_in_views
+
+    check_strands_in_views(decode_points(base), ds.train)  # strands in another frame: refuse now, not after hours
     torch.manual_seed(config.seed)
     model = HairModel(base, config, mean_hair_colour(ds.train)).to(device)
     optimizer = torch.optim.Adam(model.param_groups(config, _scene_scale(base)), eps=1e-15)

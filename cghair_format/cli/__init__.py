@@ -9,6 +9,7 @@ import argparse
 import importlib
 import os
 import sys
+import warnings
 
 from ..errors import CghError
 
@@ -44,6 +45,15 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def format_warning(message: Warning | str) -> str:
+    """A warning as the CLI prints it: one line, no category, source file or source line."""
+    return "cgh: warning: " + " ".join(str(message).split())
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    print(format_warning(message), file=file if file is not None else sys.stderr)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -54,7 +64,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"cgh {args.verb}: unavailable: {args._unavailable}", file=sys.stderr)
         return 2
     try:
-        return int(importlib.import_module(args._module).run(args) or 0)
+        with warnings.catch_warnings():  # restores the default hook when main returns (tests call it in-process)
+            warnings.showwarning = _show_warning
+            return int(importlib.import_module(args._module).run(args) or 0)
     except CghError as exc:
         print(f"cgh {args.verb}: error: {exc}", file=sys.stderr)
         return 1 if args.verb == "validate" else 2

@@ -3,11 +3,17 @@
 hapPLY (CT2Hair, hairutil): ``vertex`` (x, y, z, optional red/green/blue, optional thickness),
 ``strand`` (``nsegs`` per strand: the strand has ``nsegs + 1`` consecutive vertices) and ``edge``
 (vertex1, vertex2; redundant with ``strand``). Files with only ``edge`` are split where
-consecutive vertices are not joined by an edge. Vertex-only files (GaussianHaircut) hold strands
-of one fixed point count: given by ``points_per_strand``, else a ``comment points_per_strand N``
-header line, else 100 when it divides the vertex count (GaussianHaircut's
-``src/preprocessing/export_curves.py`` writes ``L = 100`` points per strand as float
-``x y z nx ny nz`` with zero normals).
+consecutive vertices are not joined by an edge. Vertex-only files come in two kinds:
+- strands of one fixed point count (GaussianHaircut's ``src/preprocessing/export_curves.py`` writes
+  ``L = 100`` points per strand as float ``x y z nx ny nz`` with zero normals): the count is
+  ``points_per_strand``, else a ``comment points_per_strand N`` header line, else 100 when it
+  divides the vertex count;
+- strands told apart by their colour (one colour per strand, the layout some reconstruction tools
+  write; CT2Hair's files have such colours too): a strand ends where the colour changes.
+Colours delimit strands when every run of one colour has at least 2 vertices (otherwise they are
+per-vertex colours). When a fixed count also applies, it is used if every colour change falls on a
+multiple of it (it also separates neighbours that happen to share a colour); a count that was
+stated (argument or header) and disagrees with the colours is refused, an assumed 100 gives way.
 PLY names no units or up axis.
 """
 
@@ -70,19 +76,40 @@ def _strand_counts(path, ply, v, n: int, points_per_strand: int | None) -> np.nd
         joined[a[ok]] = True
         breaks = np.flatnonzero(~joined) + 1
         return np.diff(np.concatenate([[0], breaks, [n]]))
-    p = points_per_strand
-    if p is None:
+    stated = points_per_strand
+    if stated is None:
         for c in ply.comments:
             parts = c.split()
             if len(parts) == 2 and parts[0] in ("points_per_strand", "strand_points"):
-                p = int(parts[1])
-    if p is None and n % DEFAULT_FIXED_COUNT == 0:
-        p = DEFAULT_FIXED_COUNT
+                stated = int(parts[1])
+    p = stated if stated is not None else (DEFAULT_FIXED_COUNT if n % DEFAULT_FIXED_COUNT == 0 else None)
+    runs = _colour_runs(v, n)
+    if runs is not None:
+        changes = np.cumsum(runs)[:-1]
+        if p is not None and p >= 2 and n % p == 0 and not (changes % p).any():
+            return np.full(n // p, p, np.int64)
+        if stated is not None:
+            raise StrandFileError(path, f"vertex-only strand PLY: its per-strand colours split {n} vertices into "
+                                        f"{len(runs)} strands of {runs.min()}..{runs.max()} points, which disagrees "
+                                        f"with {stated} points per strand; drop the count to split by colour")
+        return runs
     if p is None or p < 2 or n % p:
         raise StrandFileError(path, f"vertex-only strand PLY: cannot split {n} vertices into strands of "
                                     f"{p or DEFAULT_FIXED_COUNT} points; give the count with "
                                     "--points-per-strand (points_per_strand=)")
     return np.full(n // p, p, np.int64)
+
+
+def _colour_runs(v: dict, n: int) -> np.ndarray | None:
+    """Lengths of the runs of consecutive vertices of one colour, when colours delimit strands (every
+    run at least 2 vertices long, more than one run); else None."""
+    for names in (("red", "green", "blue"), ("r", "g", "b")):
+        if all(k in v for k in names):
+            c = np.stack([np.asarray(v[k]) for k in names], 1)
+            changes = np.flatnonzero((c[1:] != c[:-1]).any(1)) + 1
+            runs = np.diff(np.concatenate([[0], changes, [n]]))
+            return runs if len(runs) > 1 and runs.min() >= 2 else None
+    return None
 
 
 def _colors(v: dict) -> np.ndarray | None:

@@ -49,7 +49,7 @@ def test_split_indices():
 def test_bad_folders(tmp_path):
     with pytest.raises(DatasetError, match="does not exist"):
         read_dataset(tmp_path / "nope")
-    with pytest.raises(DatasetError, match="transforms_train.json is missing"):
+    with pytest.raises(DatasetError, match="expected transforms_train.json"):
         read_dataset(tmp_path)
     write_dataset(tmp_path, Dataset(_views(2), _views(1)))
     (tmp_path / "train" / "r_001.png").unlink()
