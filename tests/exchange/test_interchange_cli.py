@@ -37,7 +37,8 @@ def test_export_verbs(tmp_path):
     from pxr import Usd
 
     stage = Usd.Stage.Open(str(usda))
-    assert [p.GetName() for p in stage.GetDefaultPrim().GetChildren()] == ["Strands", "Cards", "Gaussians"]
+    assert [p.GetName() for p in stage.GetDefaultPrim().GetChildren()] == ["Strands", "Materials", "Cards", "Gaussians",
+                                                                              "GaussianPoints"]
     ply = tmp_path / "g.ply"
     assert main(["export", str(cgh), "-o", str(ply)]) == 0
     g = read_3dgs_ply(ply)
