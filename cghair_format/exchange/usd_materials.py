@@ -24,15 +24,16 @@ def card_atlas(asset: HairAsset, size: int | None = None) -> tuple[np.ndarray, n
     """The cards' texture atlas ``[H, W, 4]`` uint8 (sRGB colour, linear alpha = strand coverage)
     and each card vertex's atlas coordinate ``st`` ``[C * 2(M+1), 2]`` (origin bottom left)."""
     from ..cards.textures import TEXTURE_SIZE, strand_textures
+    from ._common import linear_to_srgb, srgb_to_linear
     from .cgh_strands import strand_colors
 
     size = size or TEXTURE_SIZE
     c, m1 = asset.cards.count, asset.cards.spine.shape[1]
     coverage = strand_textures(asset.uvd[..., :2], asset.strand_card, c, size)  # [C, size, size]: rows along u
-    strand_rgb = strand_colors(asset).mean(axis=1)  # [S, 3] sRGB
+    strand_rgb = srgb_to_linear(strand_colors(asset)).mean(axis=1)  # [S, 3], averaged in linear light
     n = np.bincount(asset.strand_card, minlength=c).astype(np.float64)
     card_rgb = np.stack([np.bincount(asset.strand_card, strand_rgb[:, i], c) for i in range(3)], 1)
-    card_rgb = np.where(n[:, None] > 0, card_rgb / np.maximum(n, 1)[:, None], 0.5)
+    card_rgb = linear_to_srgb(np.where(n[:, None] > 0, card_rgb / np.maximum(n, 1)[:, None], 0.2))
     tile = size + 2 * TILE_BORDER
     cols = int(np.ceil(np.sqrt(c)))
     rows = -(-c // cols)

@@ -22,10 +22,11 @@ KEEPS = {
     ".usdc": {"colors": 1e-6, "widths": True, "units": True},  # stored linear, float32
     ".usdz": {"colors": 1e-6, "widths": True, "units": True},  # stored linear, float32
 }
+THROUGH_BLENDER = {".abc"}  # round-tripped in test_blender_import.py (metres, y up)
 
 
 def test_every_writable_format_is_covered():
-    assert set(writable_extensions()) == set(KEEPS)
+    assert set(writable_extensions()) == set(KEEPS) | THROUGH_BLENDER
 
 
 @pytest.mark.parametrize("ext", sorted(KEEPS))

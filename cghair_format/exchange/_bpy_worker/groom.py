@@ -1,6 +1,7 @@
-"""Blender worker: ``python groom.py OP SRC DST``, converting a groom through Blender (bpy 5.0).
+"""Blender worker: ``python groom.py OP SRC DST [SCALE]``, converting a groom through Blender (bpy 5.0).
 
-- ``usd_to_abc``: import our USD stage (curves, and cards and points where present), write Alembic.
+- ``usd_to_abc``: import our USD stage (curves, and cards and points where present; Blender
+  converts it to metres), write Alembic with coordinates multiplied by SCALE.
 - ``abc_to_usd``: import an Alembic file, write a y-up USD stage (read back by :mod:`..usd_curves`).
 - ``usd_to_blend``: import our USD stage, give the curves Blender's Principled Hair BSDF (colour
   from the ``displayColor`` attribute) and save a .blend file.
@@ -30,7 +31,7 @@ def hair_material(bpy):
     return mat
 
 
-def main(op: str, src: str, dst: str) -> None:
+def main(op: str, src: str, dst: str, scale: str = "1") -> None:
     import bpy
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -45,8 +46,14 @@ def main(op: str, src: str, dst: str) -> None:
     else:
         raise SystemExit(f"unknown operation {op!r}")
     if op == "usd_to_abc":
+        for obj in bpy.data.objects:  # global_scale moves the points but leaves the widths
+            if obj.type == "CURVES" and "radius" in obj.data.attributes:
+                radius = obj.data.attributes["radius"].data
+                values = [0.0] * len(radius)
+                radius.foreach_get("value", values)
+                radius.foreach_set("value", [v * float(scale) for v in values])
         result = bpy.ops.wm.alembic_export(filepath=dst, selected=False, uvs=True, normals=True,
-                                           export_custom_properties=True)
+                                           export_custom_properties=True, global_scale=float(scale))
     elif op == "abc_to_usd":
         result = bpy.ops.wm.usd_export(filepath=dst, convert_orientation=True, export_global_up_selection="Y",
                                        export_global_forward_selection="NEGATIVE_Z", export_materials=False)
@@ -56,6 +63,7 @@ def main(op: str, src: str, dst: str) -> None:
             if obj.type == "CURVES":
                 obj.data.materials.clear()
                 obj.data.materials.append(material)
+        bpy.ops.file.pack_all()  # the card texture lives in a temporary folder
         result = bpy.ops.wm.save_as_mainfile(filepath=dst, compress=True)
     if result != {"FINISHED"}:
         raise SystemExit(f"Blender could not write {dst}")
@@ -63,4 +71,4 @@ def main(op: str, src: str, dst: str) -> None:
 
 
 if __name__ == "__main__":
-    main(*sys.argv[1:4])
+    main(*sys.argv[1:5])
