@@ -5,7 +5,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 TORCH  ?= torch==2.13.0
 
-.PHONY: demo test bench lint clean venv blender
+.PHONY: demo test bench lint clean venv blender splat-transform
 
 venv: $(VENV)/.installed
 
@@ -27,6 +27,16 @@ $(BLENDER_VENV)/.installed: $(VENV)/.installed
 	$(PYTHON) -m venv $(BLENDER_VENV)
 	$(BLENDER_VENV)/bin/python -m pip install -q "bpy==5.0.*"
 	touch $@
+
+# PlayCanvas splat-transform (npm; needs Node.js and npm), the 3DGS client the PLY tests convert with.
+# The tests run this target themselves when the CLI is missing, so `make test` needs only node and npm.
+SPLAT_TRANSFORM_VERSION := 3.7.0
+NODE_DIR := $(VENV)/node
+
+splat-transform: $(NODE_DIR)/node_modules/.bin/splat-transform
+
+$(NODE_DIR)/node_modules/.bin/splat-transform:
+	npm install --silent --no-audit --no-fund --prefix $(NODE_DIR) @playcanvas/splat-transform@$(SPLAT_TRANSFORM_VERSION)
 
 demo: venv
 	$(VENV)/bin/cgh demo -o demo_out
