@@ -127,3 +127,17 @@ def test_orientation_turns_means_rotations_and_sh_together(tmp_path, source_up, 
     np.testing.assert_allclose(eval_sh(out.sh, d @ r.T), eval_sh(g.sh, d), atol=1e-5)
     back = read_3dgs_ply(path, up=source_up)  # the up comment turns it back
     np.testing.assert_allclose(back.means, 100 * g.means, rtol=1e-5, atol=1e-5)
+
+
+def test_default_ply_is_upright_in_the_colmap_convention(tmp_path):
+    """3DGS viewers take y down: the written scalp (roots, up in our y-up asset) has the lowest y."""
+    from cghair_format.gaussians import decode_points
+
+    asset = example_asset(seed=1)
+    pts = decode_points(asset)
+    assert asset.up_axis == "Y" and pts[:, 0, 1].mean() > pts[:, -1, 1].mean()  # roots above tips
+    path = tmp_path / "g.ply"
+    write_3dgs_ply(decode_gaussians(asset), path)
+    means = read_3dgs_ply(path).means.reshape(asset.n_strands, -1, 3)
+    assert means[:, 0, 1].mean() < means[:, -1, 1].mean()
+    assert "up -y" in read_ply(path).comments
