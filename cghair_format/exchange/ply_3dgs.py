@@ -90,7 +90,12 @@ def orient_gaussians(g: Gaussians, r: np.ndarray, scale: float = 1.0) -> Gaussia
     if np.allclose(r, np.eye(3)) and scale == 1.0:
         return g
     q = _quat_mul(_quat(r), g.rotations.astype(np.float64))
-    sh = np.einsum("ij,gjc->gic", sh_rotation(r, g.sh_degree), g.sh.astype(np.float64))
+    k = g.sh.shape[1]
+    m = sh_rotation(r, g.sh_degree).astype(np.float32)
+    if np.array_equal(m, np.diag(np.diag(m))):  # a half turn: signs only
+        sh = g.sh * np.diag(m)[None, :, None]
+    else:  # one matrix product over all Gaussians and channels
+        sh = (m @ g.sh.transpose(1, 0, 2).reshape(k, -1)).reshape(k, g.count, 3).transpose(1, 0, 2)
     return Gaussians(means=(g.means.astype(np.float64) @ r.T * scale).astype(np.float32),
                      rotations=q.astype(np.float32), scales=(g.scales * np.float32(scale)).astype(np.float32),
                      opacities=g.opacities, sh=sh.astype(np.float32))
