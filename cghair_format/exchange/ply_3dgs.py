@@ -102,10 +102,11 @@ def orient_gaussians(g: Gaussians, r: np.ndarray, scale: float = 1.0) -> Gaussia
 
 
 def write_3dgs_ply(gaussians: Gaussians, path: str | Path, pad_to_degree: int = 3, *, source_up: str = "Y",
-                   up: str = DEFAULT_UP, scale: float = 1.0, meters_per_unit: float = 1.0) -> None:
+                   up: str = DEFAULT_UP, scale: float = 1.0, meters_per_unit: float | None = None) -> None:
     """Write ``gaussians`` (in a ``source_up`` frame of ``meters_per_unit``) turned to ``up`` and
     multiplied by ``scale``; SH bands missing up to ``pad_to_degree`` are written as zeros
-    (viewers commonly expect the 45 ``f_rest`` of degree 3)."""
+    (viewers commonly expect the 45 ``f_rest`` of degree 3). The units comment is written where
+    ``meters_per_unit`` is known."""
     scale = check_scale(scale)
     g = orient_gaussians(gaussians, orientation(source_up, up), scale)
     deg = max(g.sh_degree, pad_to_degree)
@@ -130,7 +131,7 @@ def write_3dgs_ply(gaussians: Gaussians, path: str | Path, pad_to_degree: int = 
     for i in range(4):
         cols[f"rot_{i}"] = g.rotations[:, i].astype(f32)
     comments = ["3D Gaussian splats written by cghair", f"{UP_COMMENT}{up}",
-                f"units {meters_per_unit / scale:g} m", AA_COMMENT]
+                *([f"units {meters_per_unit / scale:g} m"] if meters_per_unit else []), AA_COMMENT]
     write_ply(path, [("vertex", cols)], comments=comments)
 
 
