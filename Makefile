@@ -5,7 +5,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 TORCH  ?= torch==2.13.0
 
-.PHONY: demo test check bench lint clean venv blender
+.PHONY: demo test check bench lint clean venv blender splat-transform
 
 venv: $(VENV)/.installed
 
@@ -28,10 +28,20 @@ $(BLENDER_VENV)/.installed: $(VENV)/.installed
 	$(BLENDER_VENV)/bin/python -m pip install -q "bpy==5.0.*"
 	touch $@
 
+# PlayCanvas splat-transform (npm; needs Node.js and npm), the 3DGS client the PLY tests convert with.
+# `make test` builds it; the tests also run this target themselves when the CLI is missing.
+SPLAT_TRANSFORM_VERSION := 3.7.0
+NODE_DIR := $(VENV)/node
+
+splat-transform: $(NODE_DIR)/node_modules/.bin/splat-transform
+
+$(NODE_DIR)/node_modules/.bin/splat-transform:
+	npm install --silent --no-audit --no-fund --prefix $(NODE_DIR) @playcanvas/splat-transform@$(SPLAT_TRANSFORM_VERSION)
+
 demo: venv
 	$(VENV)/bin/cgh demo -o demo_out
 
-test: venv blender
+test: venv blender splat-transform
 	$(PY) -m pytest -q
 
 # The fast tier for the edit-test loop (see CONTRIBUTING.md); `make test` runs every tier, as CI does.

@@ -19,6 +19,7 @@ class Strands:
     widths: np.ndarray | None = None  # [N] float32, optional, scene units
     meters_per_unit: float = 1.0
     up_axis: str = "Y"
+    root_uv: np.ndarray | None = None  # [S, 2] float32, optional scalp (root) UV of each strand
 
     @property
     def count(self) -> int:
@@ -50,6 +51,8 @@ class Strands:
             a = getattr(self, name)
             if a is not None and len(a) != len(self.points):
                 raise AssetError(f"strand {name} must have one entry per point")
+        if self.root_uv is not None and self.root_uv.shape != (self.count, 2):
+            raise AssetError(f"strand root_uv must be [S, 2] = [{self.count}, 2], got {self.root_uv.shape}")
         return self
 
     def bbox_diagonal(self) -> float:
@@ -133,7 +136,7 @@ def resample(strands: Strands, n_points: int, method: str = "arclength") -> Stra
         pts, off, attrs = _bspline_dense(strands)
     out, (colors, widths) = _arclength_resample(pts, off, n_points, attrs)
     return Strands(out, np.arange(strands.count + 1, dtype=np.int64) * n_points, colors, widths,
-                   strands.meters_per_unit, strands.up_axis)
+                   strands.meters_per_unit, strands.up_axis, strands.root_uv)
 
 
 BSPLINE_OVERSAMPLE = 8

@@ -2,13 +2,15 @@
 
 Optional processing on the way: ``--points N`` resamples every strand to N points
 (``--method arclength|bspline``), ``--densify N`` adds interpolated strands up to N strands,
-``--units`` / ``--up`` override the metres per unit and up axis.
+``--units`` / ``--up`` override the metres per unit and up axis of the input; ``--scale`` multiplies
+the output's coordinates and widths (its units shrink alike).
 """
 
 from __future__ import annotations
 
 import argparse
 
+from .argtypes import positive_float
 from .synth import _at_least_two, _positive
 
 
@@ -23,12 +25,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0, help="random seed for --densify (default: 0)")
     p.add_argument("--units", type=float, metavar="M", help="metres per unit of the input (overrides the file)")
     p.add_argument("--up", choices=("Y", "Z", "y", "z"), help="up axis of the input (overrides the file)")
+    p.add_argument("--scale", type=positive_float, default=1.0, metavar="S",
+                   help="multiply output coordinates and widths by S; the units shrink alike (100: metres to cm)")
     p.add_argument("--points-per-strand", type=_at_least_two, metavar="P",
                    help="point count of vertex-only strand PLY input (GaussianHaircut layout)")
 
 
 def run(args: argparse.Namespace) -> int:
     from ..exchange import load_strands, save_strands
+    from ..exchange._common import scale_strands
     from ..strands import densify, resample
 
     strands = load_strands(args.input, units=args.units, up=args.up, points_per_strand=args.points_per_strand)
@@ -37,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
         strands = resample(strands, args.points, args.method)
     if args.densify:
         strands = densify(strands, args.densify, seed=args.seed, n_points=args.points)
-    save_strands(strands, args.output)
+    save_strands(scale_strands(strands, args.scale), args.output)
     counts = strands.point_counts
     pts = f"{counts.min()}" if counts.min() == counts.max() else f"{counts.min()}..{counts.max()}"
     print(f"{args.input} -> {args.output}: {n_in:,} -> {strands.count:,} strands x {pts} points")

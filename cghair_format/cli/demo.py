@@ -61,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
     info = read_info(out / "hair.cgh")
     print(format_info(str(out / "hair.cgh"), info))
     asset, gaussians = read_with_gaussians(out / "hair.cgh")
-    write_3dgs_ply(gaussians, out / "hair_3dgs.ply")
+    write_3dgs_ply(gaussians, out / "hair_3dgs.ply", source_up=asset.up_axis, meters_per_unit=asset.meters_per_unit)
     ply = (out / "hair_3dgs.ply").stat().st_size
     print(f"   3DGS PLY of the same {info['gaussians']:,} Gaussians: {ply:,} bytes; "
           f".cgh: {info['file_bytes']:,} bytes ({ply / info['file_bytes']:.0f} x smaller)")

@@ -1,8 +1,11 @@
-"""``cgh export FILE -o OUT``: a .cgh asset (or strands, or a 3DGS PLY) to USD or to a 3DGS PLY.
+"""``cgh export FILE -o OUT``: a .cgh asset (or strands, or a 3DGS PLY) to USD, a 3DGS PLY, Alembic
+or a Blender scene.
 
 USD (``.usd .usda .usdc .usdz``): strands as curves (default), ``--cards`` card meshes,
-``--gaussians`` the Gaussians as a ParticleField3DGaussianSplat; ``--all`` for everything.
-PLY (``.ply``): the decoded Gaussians as a standard 3DGS PLY.
+``--gaussians`` the Gaussians (a ParticleField3DGaussianSplat and Points); ``--all`` for everything.
+PLY (``.ply``): the decoded Gaussians as a standard 3DGS PLY, y down unless ``--up`` says otherwise.
+Alembic (``.abc``) and Blender (``.blend``): curves (and ``--cards``) through Blender (bpy).
+``--scale`` multiplies every coordinate and width (output units per input unit).
 """
 
 from __future__ import annotations
@@ -10,20 +13,30 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from .argtypes import positive_float
+
 USD_EXTS = (".usd", ".usda", ".usdc", ".usdz")
+BLENDER_EXTS = (".abc", ".blend")
+PLY_UPS = ("-y", "y", "z")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("file", help="a .cgh asset, a strand file, or a 3DGS .ply")
-    p.add_argument("-o", "--output", required=True, help="out.usda | .usdc | .usdz | .usd, or out.ply (3DGS)")
+    p.add_argument("-o", "--output", required=True,
+                   help="out.usda | .usdc | .usdz | .usd, out.ply (3DGS), out.abc (Alembic) or out.blend")
     p.add_argument("--no-curves", dest="curves", action="store_false", help="leave the strand curves out")
-    p.add_argument("--cards", action="store_true", help="add the hair cards as a Mesh with UVs (.cgh only)")
-    p.add_argument("--gaussians", action="store_true", help="add the Gaussians as a 3DGS particle field (.cgh only)")
+    p.add_argument("--cards", action="store_true", help="add the hair cards as a textured Mesh (.cgh only)")
+    p.add_argument("--gaussians", action="store_true",
+                   help="add the Gaussians as a 3DGS particle field and as points (.cgh only)")
     p.add_argument("--all", action="store_true", help="curves, cards and Gaussians")
     p.add_argument("--no-groom", dest="groom", action="store_false",
                    help="omit Unreal's GroomAPI schema and groom_* primvars")
+    p.add_argument("--scale", type=positive_float, default=1.0, metavar="S",
+                   help="multiply coordinates and widths by S; the units shrink alike (100: metres to cm)")
+    p.add_argument("--up", choices=PLY_UPS, default=None,
+                   help="up axis of a 3DGS .ply (default -y: the INRIA/COLMAP convention 3DGS viewers expect)")
     p.add_argument("--units", type=float, metavar="M", help="metres per unit of strand input (overrides the file)")
-    p.add_argument("--up", choices=("Y", "Z", "y", "z"), help="up axis of strand input (overrides the file)")
+    p.add_argument("--input-up", choices=("Y", "Z", "y", "z"), help="up axis of strand input (overrides the file)")
 
 
 def _is_3dgs_ply(path: str) -> bool:
@@ -37,8 +50,11 @@ def run(args: argparse.Namespace) -> int:
 
     src, out = Path(args.file), Path(args.output)
     ext = out.suffix.lower()
-    if ext not in USD_EXTS + (".ply",):
-        raise CghError(f"{out}: export writes {', '.join(USD_EXTS)} or .ply (3DGS), not {ext or 'no extension'}")
+    if ext not in USD_EXTS + BLENDER_EXTS + (".ply",):
+        raise CghError(f"{out}: export writes {', '.join(USD_EXTS + BLENDER_EXTS)} or .ply (3DGS), "
+                       f"not {ext or 'no extension'}")
+    if args.up is not None and ext != ".ply":
+        raise CghError(f"--up chooses a 3DGS PLY's up axis; {ext} states its own (y up)")
     if args.all:
         args.curves = args.cards = args.gaussians = True
     if src.suffix.lower() == ".cgh":
@@ -51,28 +67,48 @@ def run(args: argparse.Namespace) -> int:
         raise CghError(f"{src}: card meshes and Gaussians exist only in a .cgh asset; plain strands export "
                        "as curves only")
     from ..exchange import load_strands
-    from ..exchange.usd_export import export_usd
 
-    strands = load_strands(src, units=args.units, up=args.up)
-    export_usd(out, strands=strands, groom=args.groom)
-    print(f"{out}: {strands.count:,} strands as linear BasisCurves")
+    strands = load_strands(src, units=args.units, up=args.input_up)
+    if ext in BLENDER_EXTS:
+        from ..exchange.alembic import export_blender
+
+        export_blender(out, strands=strands, scale=args.scale)
+    else:
+        from ..exchange.usd_export import export_usd
+
+        export_usd(out, strands=strands, groom=args.groom, scale=args.scale)
+    print(f"{out}: {strands.count:,} strands as curves")
     return 0
 
 
 def _export_asset(src: Path, out: Path, args: argparse.Namespace) -> int:
-    if out.suffix.lower() == ".ply":
+    ext = out.suffix.lower()
+    if ext == ".ply":
         from ..codec import read_with_gaussians
-        from ..exchange.ply_3dgs import write_3dgs_ply
+        from ..exchange.ply_3dgs import DEFAULT_UP, write_3dgs_ply
 
-        g = read_with_gaussians(src)[1]
-        write_3dgs_ply(g, out)
-        print(f"{out}: {g.count:,} Gaussians as a 3DGS PLY (SH degree {g.sh_degree}, written as degree 3)")
+        asset, g = read_with_gaussians(src)
+        up = args.up or DEFAULT_UP
+        write_3dgs_ply(g, out, source_up=asset.up_axis, up=up, scale=args.scale,
+                       meters_per_unit=asset.meters_per_unit)
+        print(f"{out}: {g.count:,} Gaussians as a 3DGS PLY (SH degree {g.sh_degree}, written as degree 3), "
+              f"up {up}")
         return 0
     from ..codec import read
-    from ..exchange.usd_export import export_usd
 
     asset = read(src)
-    export_usd(out, asset=asset, curves=args.curves, cards=args.cards, gaussians=args.gaussians, groom=args.groom)
+    if ext in BLENDER_EXTS:
+        from ..errors import CghError
+        from ..exchange.alembic import export_blender
+
+        if args.gaussians or not args.curves:
+            raise CghError(f"{out}: {ext} export writes the curves (and --cards); Gaussians go to USD or .ply")
+        export_blender(out, asset=asset, cards=args.cards, scale=args.scale)
+    else:
+        from ..exchange.usd_export import export_usd
+
+        export_usd(out, asset=asset, curves=args.curves, cards=args.cards, gaussians=args.gaussians,
+                   groom=args.groom, scale=args.scale)
     parts = [name for name, on in (("curves", args.curves), ("cards", args.cards), ("gaussians", args.gaussians))
              if on]
     print(f"{out}: {asset.n_strands:,} strands, {asset.cards.count:,} cards, {asset.n_gaussians:,} Gaussians; "
@@ -82,16 +118,19 @@ def _export_asset(src: Path, out: Path, args: argparse.Namespace) -> int:
 
 def _export_splats(src: Path, out: Path, args: argparse.Namespace) -> int:
     from ..errors import CghError
-    from ..exchange.ply_3dgs import read_3dgs_ply, write_3dgs_ply
+    from ..exchange.ply_3dgs import DEFAULT_UP, read_3dgs_ply, write_3dgs_ply
 
-    g = read_3dgs_ply(src)
-    if out.suffix.lower() == ".ply":
-        write_3dgs_ply(g, out)
+    g = read_3dgs_ply(src, up="Y")  # from the file's stated up axis (else y down) to y up
+    ext = out.suffix.lower()
+    if ext == ".ply":
+        write_3dgs_ply(g, out, up=args.up or DEFAULT_UP, scale=args.scale)
+    elif ext in BLENDER_EXTS:
+        raise CghError(f"{src}: a 3DGS PLY has no curves for {ext}; export it to USD or .ply")
     else:
         if args.cards:
             raise CghError(f"{src}: a 3DGS PLY has no hair cards")
         from ..exchange.usd_export import export_gaussians_usd
 
-        export_gaussians_usd(out, g)
+        export_gaussians_usd(out, g, scale=args.scale)
     print(f"{out}: {g.count:,} Gaussians from the 3DGS PLY {src}")
     return 0

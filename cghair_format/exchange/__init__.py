@@ -29,6 +29,7 @@ FORMATS: dict[str, str] = {
     ".usdz": "usd_curves",
     ".npz": "npz",
     ".cgh": "cgh_strands",
+    ".abc": "alembic",  # through Blender (bpy) in a subprocess
 }
 # formats a loader accepts but that cannot be written
 READ_ONLY: set[str] = {".cgh"}
@@ -59,7 +60,7 @@ def writable_extensions() -> list[str]:
 
 def load_strands(path: str | Path, *, units: float | None = None, up: str | None = None,
                  points_per_strand: int | None = None) -> Strands:
-    """Load strands from any registered format (``.hair .data .tfx .ply .usd* .npz .cgh``).
+    """Load strands from any registered format (``.hair .data .tfx .ply .usd* .npz .cgh .abc``).
 
     ``units`` (metres per unit) and ``up`` ("Y" or "Z") override what the file says or the
     defaults; ``points_per_strand`` splits vertex-only strand PLY files.

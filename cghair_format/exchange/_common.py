@@ -49,3 +49,41 @@ def offsets_from_counts(counts: np.ndarray) -> np.ndarray:
     off = np.zeros(len(counts) + 1, np.int64)
     np.cumsum(counts, out=off[1:])
     return off
+
+
+def srgb_to_linear(c: np.ndarray) -> np.ndarray:
+    """sRGB display values in [0, 1] to linear (the IEC 61966-2-1 transfer function)."""
+    c = np.clip(np.asarray(c, np.float64), 0.0, 1.0)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4).astype(np.float32)
+
+
+def linear_to_srgb(c: np.ndarray) -> np.ndarray:
+    """Linear values in [0, 1] to sRGB display values (inverse of :func:`srgb_to_linear`)."""
+    c = np.clip(np.asarray(c, np.float64), 0.0, 1.0)
+    return np.where(c <= 0.0031308, c * 12.92, 1.055 * c ** (1 / 2.4) - 0.055).astype(np.float32)
+
+
+def check_scale(scale: float) -> float:
+    """An export scale (output units per input unit) must be a positive finite number."""
+    if not (np.isfinite(scale) and scale > 0):
+        raise UnsupportedFormatError(f"export scale must be a positive number, got {scale}")
+    return float(scale)
+
+
+def scale_strands(strands: Strands, scale: float) -> Strands:
+    """``strands`` with coordinates and widths multiplied by ``scale`` and the metres per unit
+    divided by it, so the hair keeps its real size (``scale=100`` on metres gives centimetres)."""
+    scale = check_scale(scale)
+    if scale == 1.0:
+        return strands
+    widths = None if strands.widths is None else (strands.widths * scale).astype(np.float32)
+    return Strands((strands.points * scale).astype(np.float32), strands.offsets, strands.colors, widths,
+                   meters_per_unit=strands.meters_per_unit / scale, up_axis=strands.up_axis,
+                   root_uv=strands.root_uv)
+
+
+def warn(message: str) -> None:
+    """One clean line on stderr (``cgh: warning: ...``), not a Python warning with a source line."""
+    import sys
+
+    print(f"cgh: warning: {message}", file=sys.stderr)

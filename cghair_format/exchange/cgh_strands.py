@@ -31,7 +31,8 @@ def strands_from_asset(asset: HairAsset, colors: bool = True) -> Strands:
     from ..gaussians import decode_points
 
     pts = decode_points(asset)
-    s = Strands.from_array(pts, meters_per_unit=asset.meters_per_unit, up_axis=asset.up_axis)
+    s = Strands.from_array(pts, meters_per_unit=asset.meters_per_unit, up_axis=asset.up_axis,
+                           root_uv=asset.root_uv)
     s.widths = np.full(len(s.points), 2 * asset.thickness, np.float32)
     if colors:
         s.colors = strand_colors(asset).reshape(-1, 3)

@@ -11,13 +11,12 @@ TressFX assets are y-up (game-engine convention); the format names no units.
 from __future__ import annotations
 
 import struct
-import warnings
 from pathlib import Path
 
 import numpy as np
 
 from ..strands import Strands
-from ._common import StrandFileError, finish, need, offsets_from_counts, read_bytes
+from ._common import StrandFileError, finish, need, offsets_from_counts, read_bytes, warn
 
 HEADER = struct.Struct("<fIIIIIII32I")  # 160 bytes
 SUPPORTED_MAJOR = (3, 4)
@@ -33,7 +32,7 @@ def load(path: str | Path) -> Strands:
 
 def _load_binary(path: str | Path, data: bytes) -> Strands:
     need(path, data, HEADER.size, "the 160-byte TressFX header")
-    version, n_strands, n_per, off_pos, *_ = HEADER.unpack_from(data)
+    version, n_strands, n_per, off_pos, off_uv, *_ = HEADER.unpack_from(data)
     if not np.isfinite(version) or int(version) not in SUPPORTED_MAJOR:
         raise StrandFileError(path, f"not a TressFX 3/4 binary file: version field reads {version!r} "
                                     "(TressFX 2 files are ASCII and start with 'version')")
@@ -45,7 +44,13 @@ def _load_binary(path: str | Path, data: bytes) -> Strands:
     need(path, data, off_pos + 16 * n, f"the positions of {n_strands} strands x {n_per} points")
     xyzw = np.frombuffer(data, "<f4", 4 * n, off_pos).reshape(-1, 4)
     points = np.ascontiguousarray(xyzw[:, :3], np.float32)
-    return finish(path, Strands(points, np.arange(n_strands + 1, dtype=np.int64) * n_per, up_axis="Y"))
+    root_uv = None
+    if off_uv >= HEADER.size and off_uv + 8 * n_strands <= len(data):
+        root_uv = np.frombuffer(data, "<f4", 2 * n_strands, off_uv).reshape(-1, 2).astype(np.float32)
+        if not root_uv.any():  # writers that have no UVs fill zeros
+            root_uv = None
+    return finish(path, Strands(points, np.arange(n_strands + 1, dtype=np.int64) * n_per, up_axis="Y",
+                                root_uv=root_uv))
 
 
 def _load_ascii(path: str | Path, data: bytes) -> Strands:
@@ -68,8 +73,8 @@ def _load_ascii(path: str | Path, data: bytes) -> Strands:
     except (KeyError, IndexError, ValueError) as exc:
         raise StrandFileError(path, f"TressFX ASCII header is missing or garbles {exc}") from exc
     if any(rotation):
-        warnings.warn(f"{path}: TressFX header rotation {rotation} is ignored", stacklevel=3)
-    counts, blocks = [], []
+        warn(f"{path}: TressFX header rotation {rotation} is ignored")
+    counts, blocks, uvs = [], [], []
     while i < len(lines):
         parts = lines[i].split()
         if not parts:
@@ -94,17 +99,24 @@ def _load_ascii(path: str | Path, data: bytes) -> Strands:
             raise StrandFileError(path, f"lines {i + 2}..{i + 1 + c}: point lines must hold 3 numbers")
         counts.append(c)
         blocks.append(block.reshape(-1, 3))
+        try:
+            uvs.append((float(parts[5]), float(parts[6])) if parts[4:5] == ["texcoord"] else (0.0, 0.0))
+        except (IndexError, ValueError):
+            raise StrandFileError(path, f"line {i + 1}: 'texcoord' needs two numbers, got {lines[i][:60]!r}") from None
         i += 1 + c
     if len(counts) != declared:
         raise StrandFileError(path, f"header declares {declared} strands, the file holds {len(counts)} "
                                     "(truncated?)")
     points = np.concatenate(blocks) * scale + translation
     offsets = offsets_from_counts(np.array(counts))
-    return finish(path, Strands(points.astype(np.float32), offsets, up_axis="Y"))
+    root_uv = np.array(uvs, np.float32).reshape(-1, 2)
+    return finish(path, Strands(points.astype(np.float32), offsets, up_axis="Y",
+                                root_uv=root_uv if root_uv.any() else None))
 
 
 def save(strands: Strands, path: str | Path) -> None:
-    """Write a TressFX 4 binary file; every strand must have the same point count."""
+    """Write a TressFX 4 binary file; every strand must have the same point count. The strand UVs
+    are the strands' root UVs where they have them, else zeros."""
     counts = strands.point_counts
     if strands.count == 0 or (counts != counts[0]).any():
         raise StrandFileError(path, "TressFX needs the same point count in every strand: resample first "
@@ -113,8 +125,8 @@ def save(strands: Strands, path: str | Path) -> None:
     if not 2 <= n_per <= MAX_POINTS:
         raise StrandFileError(path, f"TressFX strands need 2..{MAX_POINTS} points, got {n_per}")
     if n_per < 4 or n_per > 64 or n_per & (n_per - 1):
-        warnings.warn(f"{path}: TressFX runtimes expect 4, 8, 16, 32 or 64 points per strand, writing {n_per}; "
-                      "resample with cgh convert --points", stacklevel=3)
+        warn(f"{path}: TressFX runtimes expect 4, 8, 16, 32 or 64 points per strand, writing {n_per}; "
+             "resample with cgh convert --points")
     xyzw = np.ones((len(strands.points), 4), "<f4")
     xyzw[:, :3] = strands.points
     xyzw.reshape(strands.count, n_per, 4)[:, :2, 3] = 0.0  # roots are immovable (zero inverse mass)
@@ -124,4 +136,5 @@ def save(strands: Strands, path: str | Path) -> None:
     with open(path, "wb") as f:
         f.write(header)
         f.write(xyzw.tobytes())
-        f.write(np.zeros((strands.count, 2), "<f4").tobytes())
+        uv = np.zeros((strands.count, 2), "<f4") if strands.root_uv is None else strands.root_uv.astype("<f4")
+        f.write(uv.tobytes())

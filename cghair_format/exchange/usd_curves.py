@@ -18,7 +18,7 @@ import numpy as np
 
 from ..errors import require
 from ..strands import Strands
-from ._common import StrandFileError, finish, offsets_from_counts
+from ._common import StrandFileError, finish, linear_to_srgb, offsets_from_counts
 
 CUBIC_SAMPLES = 4
 BASIS = {
@@ -110,6 +110,8 @@ def _curves(path, curves, time):
         raw = raw.reshape(len(raw), -1)[:, :3]  # color3f, or color4f (Blender writes groom_color as RGBA)
         colors = _per_point(path, prim_path, raw, color_pv.GetInterpolation(), cnt, plan, ctype)
         colors = np.clip(colors, 0, 1).astype(np.float32)
+        if not color_pv.GetAttr().GetColorSpace().startswith("srgb"):
+            colors = linear_to_srgb(colors)
     widths = None
     wattr = curves.GetWidthsAttr()
     w = wattr.Get(time)

@@ -4,17 +4,27 @@ Layout (``/Hair`` is the default prim, an Xform with Unreal's ``GroomAPI`` appli
 ``groom=True``):
 
 - ``/Hair/Strands``: linear BasisCurves with ``widths``, ``primvars:displayColor`` (the
-  view-independent colour: SH band 0) and ``primvars:displayOpacity`` per vertex, plus the groom
-  primvars Unreal's groom importer reads: per vertex ``groom_color``, ``groom_width``; per curve
-  ``groom_group_id``, ``groom_guide`` (0: rendered strand), and ``groom_id`` / ``groom_root_uv``
-  where the asset has strand ids / root UVs; constant ``groom_version_major/minor`` (1, 5). The
-  names follow Unreal's groom attribute schema (documented for Alembic grooms).
-- ``/Hair/Cards``: the card strips as a triangle Mesh with normals and ``primvars:st`` UVs.
+  view-independent colour: SH band 0, converted to linear Rec.709) and
+  ``primvars:displayOpacity`` per vertex, plus the groom primvars Unreal's groom importer reads:
+  per vertex ``groom_color`` (linear), ``groom_width``; per curve ``groom_group_id``,
+  ``groom_guide`` (0: rendered strand), and ``groom_id`` / ``groom_root_uv`` where the asset has
+  strand ids / root UVs; constant ``groom_version_major/minor`` (1, 5). The names follow Unreal's
+  groom attribute schema (documented for Alembic grooms). Bound to ``StrandMaterial``.
+- ``/Hair/Cards``: the card strips as a triangle Mesh, wound counter-clockwise about their stored
+  normals, with ``primvars:st`` into the card texture atlas (``<name>_cards.png`` beside the
+  file) bound through ``CardMaterial`` as colour and opacity.
 - ``/Hair/Gaussians``: ``UsdVol.ParticleField3DGaussianSplat`` (usd-core >= 26): positions,
   orientations, scales (standard deviations), opacities in [0, 1] and SH coefficients
   (particle-major, 3DGS real-SH convention) with their degree.
+- ``/Hair/GaussianPoints``: the same Gaussians as ``UsdGeom.Points`` (positions, widths: twice
+  the smallest standard deviation, linear displayColor, displayOpacity), for importers that drop
+  the splat field (Blender 5.0 does).
+- ``/Hair/Materials``: the preview-surface materials (:mod:`.usd_materials`).
 
-The stage's ``metersPerUnit`` and ``upAxis`` come from the asset or strands.
+Colours are linear Rec.709: the colour attributes say so (``colorSpace = lin_rec709_scene``) and
+``/Hair`` carries ``ColorSpaceAPI`` with the same name where usd-core has it. The stage's
+``metersPerUnit`` and ``upAxis`` come from the asset or strands; ``scale`` multiplies every
+coordinate and width and divides ``metersPerUnit``, so the hair keeps its real size.
 """
 
 from __future__ import annotations
@@ -29,16 +39,23 @@ import numpy as np
 from ..asset import HairAsset
 from ..errors import CghError, require
 from ..strands import Strands
+from ._common import check_scale, scale_strands, srgb_to_linear, warn
 
 EXTENSIONS = (".usd", ".usda", ".usdc", ".usdz")
 ROOT = "/Hair"
 GROOM_VERSION = (1, 5)  # Unreal's groom attribute schema version (groom_version_major/minor)
+LINEAR = "lin_rec709_scene"  # Gf.ColorSpaceNames.LinearRec709
+DROPPED = ("Blender 5.0's USD importer drops {g} (ParticleField3DGaussianSplat) and shows {p} "
+           "(points: positions, widths, colours; no orientation or SH); splat-aware importers show both")
 
 
 def export_usd(path: str | Path, *, asset: HairAsset | None = None, strands: Strands | None = None,
-               curves: bool = True, cards: bool = False, gaussians: bool = False, groom: bool = True) -> None:
-    """Write ``asset`` (or plain ``strands``) to a USD file; ``cards``/``gaussians`` need an asset."""
+               curves: bool = True, cards: bool = False, gaussians: bool = False, groom: bool = True,
+               scale: float = 1.0) -> None:
+    """Write ``asset`` (or plain ``strands``) to a USD file; ``cards``/``gaussians`` need an asset.
+    ``scale`` multiplies coordinates and widths (output units per input unit)."""
     path = Path(path)
+    scale = check_scale(scale)
     if (asset is None) == (strands is None):
         raise CghError("export_usd needs exactly one of asset= or strands=")
     if asset is None and (cards or gaussians):
@@ -47,7 +64,7 @@ def export_usd(path: str | Path, *, asset: HairAsset | None = None, strands: Str
         raise CghError("nothing to export: enable curves, cards or gaussians")
     src = asset if asset is not None else strands
 
-    def build(stage, root) -> None:
+    def build(stage, root, out: Path) -> None:
         if groom:
             root.AddAppliedSchema("GroomAPI")
         if asset is not None:
@@ -64,28 +81,44 @@ def export_usd(path: str | Path, *, asset: HairAsset | None = None, strands: Str
                 group = asset.cards.group.astype(np.int32)[asset.strand_card]
                 root_uv, ids = asset.root_uv, asset.strand_ids
             else:
-                s, opacity, group, root_uv, ids = strands, None, None, None, None
-            write_curves(stage, f"{ROOT}/Strands", s, opacity=opacity, group=group, root_uv=root_uv,
-                         strand_ids=ids, groom=groom)
+                s, opacity, group, root_uv, ids = strands, None, None, strands.root_uv, None
+            curves_prim = write_curves(stage, f"{ROOT}/Strands", scale_strands(s, scale), opacity=opacity,
+                                       group=group, root_uv=root_uv, strand_ids=ids, groom=groom).GetPrim()
+            from .usd_materials import bind_curve_material
+
+            bind_curve_material(stage, curves_prim, opacity is not None)
         if cards:
-            write_cards(stage, f"{ROOT}/Cards", asset)
+            write_cards(stage, f"{ROOT}/Cards", asset, out, scale)
         if gaussians:
             from ..gaussians import decode_gaussians
 
-            write_gaussians(stage, f"{ROOT}/Gaussians", decode_gaussians(asset))
+            write_gaussian_prims(stage, decode_gaussians(asset), scale)
 
-    write_stage(path, build, src.meters_per_unit, src.up_axis)
+    write_stage(path, build, src.meters_per_unit / scale, src.up_axis)
 
 
-def export_gaussians_usd(path: str | Path, gaussians, meters_per_unit: float = 1.0, up_axis: str = "Y") -> None:
-    """Write bare Gaussians (e.g. read from a 3DGS PLY) as ``/Hair/Gaussians``."""
-    write_stage(Path(path), lambda stage, root: write_gaussians(stage, f"{ROOT}/Gaussians", gaussians),
-                meters_per_unit, up_axis)
+def export_gaussians_usd(path: str | Path, gaussians, meters_per_unit: float = 1.0, up_axis: str = "Y",
+                         scale: float = 1.0) -> None:
+    """Write bare Gaussians (e.g. read from a 3DGS PLY) as ``/Hair/Gaussians`` and ``/Hair/GaussianPoints``."""
+    scale = check_scale(scale)
+    write_stage(Path(path), lambda stage, root, out: write_gaussian_prims(stage, gaussians, scale),
+                meters_per_unit / scale, up_axis)
+
+
+def write_gaussian_prims(stage, g, scale: float = 1.0) -> None:
+    """The Gaussians as a splat field and as points, warning (one line) what Blender drops."""
+    if scale != 1.0:
+        from ..gaussians import Gaussians
+
+        g = Gaussians(g.means * np.float32(scale), g.rotations, g.scales * np.float32(scale), g.opacities, g.sh)
+    write_gaussians(stage, f"{ROOT}/Gaussians", g)
+    write_gaussian_points(stage, f"{ROOT}/GaussianPoints", g)
+    warn(DROPPED.format(g=f"{ROOT}/Gaussians", p=f"{ROOT}/GaussianPoints"))
 
 
 def write_stage(path: Path, build: Callable, meters_per_unit: float, up_axis: str) -> None:
     """Create a stage at ``path`` (a .usdz is packaged from a temporary .usdc) with units, up axis
-    and the ``/Hair`` default prim, let ``build(stage, root_prim)`` fill it, and save it."""
+    and the ``/Hair`` default prim, let ``build(stage, root_prim, path)`` fill it, and save it."""
     ext = path.suffix.lower()
     if ext not in EXTENSIONS:
         raise CghError(f"{path}: USD export writes {', '.join(EXTENSIONS)}, not {ext or 'no extension'}")
@@ -106,7 +139,9 @@ def write_stage(path: Path, build: Callable, meters_per_unit: float, up_axis: st
     UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y if up_axis == "Y" else UsdGeom.Tokens.z)
     root = UsdGeom.Xform.Define(stage, ROOT).GetPrim()
     stage.SetDefaultPrim(root)
-    build(stage, root)
+    if hasattr(Usd, "ColorSpaceAPI"):  # usd-core >= 25.11
+        Usd.ColorSpaceAPI.Apply(root).CreateColorSpaceNameAttr(LINEAR)
+    build(stage, root, path)
     stage.GetRootLayer().Save()
 
 
@@ -138,10 +173,11 @@ def write_curves(stage, prim_path: str, strands: Strands, *, opacity: np.ndarray
     api = UsdGeom.PrimvarsAPI(curves.GetPrim())
     vertex, uniform, constant = UsdGeom.Tokens.vertex, UsdGeom.Tokens.uniform, UsdGeom.Tokens.constant
     if strands.colors is not None:
-        rgb = Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(strands.colors, np.float32))
-        api.CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray, vertex).Set(rgb)
-        if groom:
-            api.CreatePrimvar("groom_color", Sdf.ValueTypeNames.Color3fArray, vertex).Set(rgb)
+        rgb = Vt.Vec3fArray.FromNumpy(srgb_to_linear(strands.colors))
+        for name in ("displayColor", "groom_color") if groom else ("displayColor",):
+            pv = api.CreatePrimvar(name, Sdf.ValueTypeNames.Color3fArray, vertex)
+            pv.Set(rgb)
+            pv.GetAttr().SetColorSpace(LINEAR)
     if opacity is not None:
         api.CreatePrimvar("displayOpacity", Sdf.ValueTypeNames.FloatArray, vertex).Set(
             Vt.FloatArray.FromNumpy(np.ascontiguousarray(opacity, np.float32)))
@@ -164,25 +200,39 @@ def write_curves(stage, prim_path: str, strands: Strands, *, opacity: np.ndarray
     return curves
 
 
-def write_cards(stage, prim_path: str, asset: HairAsset):
-    """The card strips as one triangle Mesh with per-vertex normals and ``st`` UVs."""
+def card_faces(triangles: np.ndarray) -> np.ndarray:
+    """:func:`~cghair_format.geometry.card_mesh`'s triangles wound counter-clockwise about the
+    stored normals, as renderers expect: its ``(L_k, R_k, L_k+1)`` order faces along
+    ``b x t = -n`` (the bitangent is ``n x t``), so two corners swap."""
+    return np.ascontiguousarray(triangles[:, [0, 2, 1]])
+
+
+def write_cards(stage, prim_path: str, asset: HairAsset, usd_path: Path, scale: float = 1.0):
+    """The card strips as one triangle Mesh with per-vertex normals, ``st`` into the card texture
+    atlas (written as ``<stem>_cards.png`` beside ``usd_path``) and the card material bound."""
     from pxr import Sdf, UsdGeom, Vt
 
     from ..geometry import card_mesh
+    from .usd_materials import bind_card_material, card_atlas, write_png
 
     m = card_mesh(asset.cards)
+    vertices = np.ascontiguousarray(m.vertices * np.float32(scale), np.float32)
     mesh = UsdGeom.Mesh.Define(stage, prim_path)
-    mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(m.vertices, np.float32)))
+    mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(vertices))
     mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(m.triangles), 3, np.int32)))
-    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(m.triangles.astype(np.int32).reshape(-1)))
+    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(card_faces(m.triangles).astype(np.int32).reshape(-1)))
     mesh.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(m.normals, np.float32)))
     mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
     mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
     mesh.CreateDoubleSidedAttr(True)
-    mesh.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(np.stack([m.vertices.min(0), m.vertices.max(0)])))
+    mesh.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(np.stack([vertices.min(0), vertices.max(0)])))
+    atlas, st_atlas = card_atlas(asset)
     st = UsdGeom.PrimvarsAPI(mesh.GetPrim()).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray,
                                                            UsdGeom.Tokens.vertex)
-    st.Set(Vt.Vec2fArray.FromNumpy(np.ascontiguousarray(m.uvs, np.float32)))
+    st.Set(Vt.Vec2fArray.FromNumpy(st_atlas))
+    png = usd_path.with_name(f"{usd_path.stem}_cards.png")
+    write_png(png, atlas)
+    bind_card_material(stage, mesh.GetPrim(), png, usd_path)
     return mesh
 
 
@@ -193,8 +243,6 @@ def write_gaussians(stage, prim_path: str, g):
     if not hasattr(UsdVol, "ParticleField3DGaussianSplat"):
         raise CghError("Gaussian export needs usd-core >= 26 (UsdVol.ParticleField3DGaussianSplat); "
                        "upgrade with: pip install -U usd-core")
-    from ..gaussians import SH_C0
-
     splat = UsdVol.ParticleField3DGaussianSplat.Define(stage, prim_path)
     prim = splat.GetPrim()
     means = np.ascontiguousarray(g.means, np.float32)
@@ -207,7 +255,35 @@ def write_gaussians(stage, prim_path: str, g):
     prim.GetAttribute("radiance:sphericalHarmonicsCoefficients").Set(
         Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(g.sh, np.float32).reshape(-1, 3)))
     prim.GetAttribute("extent").Set(Vt.Vec3fArray.FromNumpy(np.stack([means.min(0), means.max(0)])))
-    rgb = np.clip(SH_C0 * np.asarray(g.sh, np.float32)[:, 0] + 0.5, 0, 1).astype(np.float32)
-    UsdGeom.PrimvarsAPI(prim).CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray,
-                                           UsdGeom.Tokens.vertex).Set(Vt.Vec3fArray.FromNumpy(rgb))
+    pv = UsdGeom.PrimvarsAPI(prim).CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray,
+                                                 UsdGeom.Tokens.vertex)
+    pv.Set(Vt.Vec3fArray.FromNumpy(_linear_band0(g)))
+    pv.GetAttr().SetColorSpace(LINEAR)
     return splat
+
+
+def _linear_band0(g) -> np.ndarray:
+    """The view-independent colour of each Gaussian (SH band 0), linear."""
+    from ..gaussians import SH_C0
+
+    return srgb_to_linear(np.clip(SH_C0 * np.asarray(g.sh, np.float32)[:, 0] + 0.5, 0, 1))
+
+
+def write_gaussian_points(stage, prim_path: str, g):
+    """``g`` as ``UsdGeom.Points``: positions, widths (twice the smallest standard deviation),
+    linear displayColor and displayOpacity: the form Blender 5.0 imports (as a point cloud)."""
+    from pxr import Sdf, UsdGeom, Vt
+
+    points = UsdGeom.Points.Define(stage, prim_path)
+    means = np.ascontiguousarray(g.means, np.float32)
+    points.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(means))
+    points.CreateWidthsAttr(Vt.FloatArray.FromNumpy((2 * np.asarray(g.scales, np.float32).min(1)).astype(np.float32)))
+    points.SetWidthsInterpolation(UsdGeom.Tokens.vertex)
+    points.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(np.stack([means.min(0), means.max(0)])))
+    api = UsdGeom.PrimvarsAPI(points.GetPrim())
+    pv = api.CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray, UsdGeom.Tokens.vertex)
+    pv.Set(Vt.Vec3fArray.FromNumpy(_linear_band0(g)))
+    pv.GetAttr().SetColorSpace(LINEAR)
+    api.CreatePrimvar("displayOpacity", Sdf.ValueTypeNames.FloatArray, UsdGeom.Tokens.vertex).Set(
+        Vt.FloatArray.FromNumpy(np.ascontiguousarray(g.opacities, np.float32)))
+    return points

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from cghair_format.examples import example_asset
+from cghair_format.exchange._common import srgb_to_linear
 from cghair_format.exchange.blender import BlenderNotFoundError, find_blender_python
 from cghair_format.exchange.cgh_strands import strand_colors
 from cghair_format.exchange.usd_export import export_usd
@@ -109,7 +110,7 @@ def test_blender_imports_exported_usd(tmp_path):
         world = got["position"] @ got["world"][:3, :3].T + got["world"][:3, 3]
         np.testing.assert_allclose(world, points @ Y_UP_TO_Z_UP.T, rtol=0, atol=RTOL * scale)
         assert entry["attributes"]["displayColor"] == ["POINT", "FLOAT_COLOR"]
-        np.testing.assert_allclose(got["displayColor"], colors, atol=1e-6)
+        np.testing.assert_allclose(got["displayColor"], srgb_to_linear(colors), atol=1e-6)  # USD colours are linear
     # USD widths are diameters, Blender radii are half of them
     np.testing.assert_allclose(np.load(jobs[0][1])["radius"], asset.thickness, rtol=1e-6)
     # the cards arrive as a mesh with their UVs
@@ -181,3 +182,27 @@ def test_missing_blender_is_a_clear_error(monkeypatch, tmp_path):
     monkeypatch.setenv("CGH_BLENDER_PYTHON", str(tmp_path / "no-python"))
     with pytest.raises(BlenderNotFoundError, match="does not exist"):
         find_blender_python()
+
+
+@pytest.mark.blender
+def test_alembic_round_trip_through_cli(tmp_path, capsys):
+    """`cgh export X.cgh -o X.abc` and `cgh convert X.abc Y` (Blender both ways): the strands come
+    back in metres, y up, scaled by --scale, with their widths; Blender's Alembic drops colours."""
+    import cghair_format
+    from cghair_format.cli import main
+    from cghair_format.exchange import load_strands
+    from cghair_format.exchange.cgh_strands import strands_from_asset
+
+    asset = example_asset(seed=5, strands=40, points=10)
+    cgh = tmp_path / "a.cgh"
+    cghair_format.write(asset, cgh)
+    abc, back = tmp_path / "a.abc", tmp_path / "back.npz"
+    assert main(["export", str(cgh), "-o", str(abc), "--scale", "100"]) == 0
+    assert "cgh: warning: " in capsys.readouterr().err
+    assert main(["convert", str(abc), str(back)]) == 0
+    src, got = strands_from_asset(cghair_format.read(cgh)), load_strands(back)
+    assert got.count == src.count and list(got.point_counts) == list(src.point_counts)
+    assert got.up_axis == "Y" and src.up_axis == "Y"
+    expect = src.points * 100 * src.meters_per_unit  # Blender keeps metres
+    np.testing.assert_allclose(got.points, expect, rtol=0, atol=RTOL * np.ptp(expect, 0).max())
+    np.testing.assert_allclose(got.widths, src.widths * 100 * src.meters_per_unit, rtol=1e-5)

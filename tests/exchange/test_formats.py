@@ -34,14 +34,16 @@ def test_tressfx_ascii_and_binary_agree(tmp_path):
     np.testing.assert_array_equal(back.points, ascii_strands.points)
 
 
-def test_tressfx_version_3_binary(tmp_path, small_strands):
+def test_tressfx_version_3_binary(tmp_path, small_strands, capsys):
     from cghair_format.strands import resample
 
     s = resample(small_strands, 4)
     path = tmp_path / "v3.tfx"
     save_strands(s, path)
-    with pytest.warns(UserWarning, match="4, 8, 16, 32 or 64"):
-        save_strands(resample(small_strands, 5), tmp_path / "odd.tfx")
+    capsys.readouterr()
+    save_strands(resample(small_strands, 5), tmp_path / "odd.tfx")
+    err = capsys.readouterr().err
+    assert err.startswith("cgh: warning: ") and "4, 8, 16, 32 or 64" in err and err.count("\n") == 1
     raw = bytearray(path.read_bytes())
     raw[0:4] = struct.pack("<f", 3.0)
     path.write_bytes(bytes(raw))
@@ -139,3 +141,19 @@ def test_strand_ply_opens_in_an_independent_reader(tmp_path, small_strands):
     raw = loaded.metadata["_ply_raw"]
     np.testing.assert_array_equal(raw["strand"]["data"]["nsegs"], small_strands.point_counts - 1)
     assert len(raw["edge"]["data"]) == len(small_strands.points) - small_strands.count
+
+
+def test_tressfx_keeps_root_uvs(tmp_path):
+    """Ratboy_mohawk.tfx stores real strand UVs: they load, and write back instead of zeros."""
+    from hairdata import hair_path
+
+    s = load_strands(hair_path("Ratboy_mohawk.tfx"))
+    assert s.root_uv is not None and s.root_uv.shape == (s.count, 2)
+    assert 0 < s.root_uv.min() and s.root_uv.max() < 1 and len(np.unique(s.root_uv, axis=0)) > s.count // 2
+    path = tmp_path / "r.tfx"
+    save_strands(s, path)
+    np.testing.assert_array_equal(load_strands(path).root_uv, s.root_uv)
+    text = ("version 2.0\nnumStrands 2\nstrand 0 numVerts 2 texcoord 0.25 0.5\n0 0 0\n0 1 0\n"
+            "strand 1 numVerts 2 texcoord 0.75 0.125\n1 1 1\n1 2 1\n")
+    (tmp_path / "a.tfx").write_text(text)
+    np.testing.assert_array_equal(load_strands(tmp_path / "a.tfx").root_uv, [[0.25, 0.5], [0.75, 0.125]])

@@ -37,7 +37,8 @@ def test_export_verbs(tmp_path):
     from pxr import Usd
 
     stage = Usd.Stage.Open(str(usda))
-    assert [p.GetName() for p in stage.GetDefaultPrim().GetChildren()] == ["Strands", "Cards", "Gaussians"]
+    assert [p.GetName() for p in stage.GetDefaultPrim().GetChildren()] == ["Strands", "Materials", "Cards", "Gaussians",
+                                                                              "GaussianPoints"]
     ply = tmp_path / "g.ply"
     assert main(["export", str(cgh), "-o", str(ply)]) == 0
     g = read_3dgs_ply(ply)
@@ -59,6 +60,8 @@ def test_export_verbs(tmp_path):
     (["export", "{d}/in.npz", "-o", "{d}/x.usda", "--cards"], "exist only in a .cgh asset"),
     (["export", "{d}/in.npz", "-o", "{d}/x.ply"], "3DGS PLY needs Gaussians"),
     (["export", "{d}/in.npz", "-o", "{d}/x.obj"], "export writes"),
+    (["export", "{d}/in.npz", "-o", "{d}/x.usda", "--up", "z"], "--up chooses a 3DGS PLY's up axis"),
+    (["export", "{d}/in.npz", "-o", "{d}/x.blend", "--scale", "2"], "a .blend is in metres"),
 ])
 def test_cli_errors_are_messages(tmp_path, capsys, argv, message):
     main(["synth", "-o", str(tmp_path / "in.npz"), "--strands", "5", "--points", "4"])
@@ -74,3 +77,19 @@ def test_synth_rejects_bad_counts(capsys):
         main(["synth", "-o", "x.npz", "--points", "1"])
     assert info.value.code == 2
     assert "must be at least 2" in capsys.readouterr().err
+
+
+def test_scale_on_strand_exporters(tmp_path):
+    """--scale multiplies points and widths and divides the metres per unit, for every strand format."""
+    src = tmp_path / "in.npz"
+    assert main(["synth", "-o", str(src), "--strands", "20", "--points", "8", "--seed", "3"]) == 0
+    s = load_strands(src)
+    for ext in (".npz", ".hair", ".usda", ".ply"):
+        out = tmp_path / f"cm{ext}"
+        assert main(["convert", str(src), str(out), "--scale", "100"]) == 0
+        back = load_strands(out)
+        np.testing.assert_allclose(back.points, 100 * s.points, rtol=1e-6)
+        if back.widths is not None:
+            np.testing.assert_allclose(back.widths, 100 * s.widths, rtol=1e-6)
+        if ext in (".npz", ".usda"):
+            assert back.meters_per_unit == pytest.approx(s.meters_per_unit / 100)

@@ -17,15 +17,16 @@ KEEPS = {
     ".tfx": {"colors": None, "widths": False, "units": False},
     ".ply": {"colors": 0.5 / 255, "widths": True, "units": False},
     ".npz": {"colors": 0.0, "widths": True, "units": True},
-    ".usd": {"colors": 0.0, "widths": True, "units": True},
-    ".usda": {"colors": 0.0, "widths": True, "units": True},
-    ".usdc": {"colors": 0.0, "widths": True, "units": True},
-    ".usdz": {"colors": 0.0, "widths": True, "units": True},
+    ".usd": {"colors": 1e-6, "widths": True, "units": True},  # stored linear, float32
+    ".usda": {"colors": 1e-6, "widths": True, "units": True},  # stored linear, float32
+    ".usdc": {"colors": 1e-6, "widths": True, "units": True},  # stored linear, float32
+    ".usdz": {"colors": 1e-6, "widths": True, "units": True},  # stored linear, float32
 }
+THROUGH_BLENDER = {".abc"}  # round-tripped in test_blender_import.py (metres, y up)
 
 
 def test_every_writable_format_is_covered():
-    assert set(writable_extensions()) == set(KEEPS)
+    assert set(writable_extensions()) == set(KEEPS) | THROUGH_BLENDER
 
 
 @pytest.mark.parametrize("ext", sorted(KEEPS))

@@ -9,6 +9,7 @@ pxr = pytest.importorskip("pxr", reason="usd-core is needed for the USD tests (p
 from pxr import Gf, Sdf, Usd, UsdGeom, Vt  # noqa: E402
 
 from cghair_format.exchange import StrandFileError, load_strands  # noqa: E402
+from cghair_format.exchange._common import linear_to_srgb  # noqa: E402
 from cghair_format.exchange.usd_curves import CUBIC_SAMPLES  # noqa: E402
 
 
@@ -97,7 +98,7 @@ def test_primvar_interpolations_linear(tmp_path, interp):
     s = load_strands(path)
     expect = {"constant": [0, 0, 0, 0, 0], "uniform": [0, 0, 1, 1, 1]}.get(interp, [0, 1, 2, 3, 4])
     np.testing.assert_allclose(s.widths, widths[expect])
-    np.testing.assert_allclose(s.colors, colors[expect], atol=1e-7)
+    np.testing.assert_allclose(s.colors, linear_to_srgb(colors[expect]), atol=1e-7)  # USD colours are linear
 
 
 def test_cubic_varying_and_vertex_primvars(tmp_path):
@@ -112,7 +113,7 @@ def test_cubic_varying_and_vertex_primvars(tmp_path):
     stage.Save()
     s = load_strands(path)
     np.testing.assert_allclose(s.widths, np.linspace(0, 5, 5 * CUBIC_SAMPLES + 1), atol=1e-6)
-    np.testing.assert_allclose(s.colors, 0.25, atol=1e-6)  # groom_color used when displayColor is absent
+    np.testing.assert_allclose(s.colors, linear_to_srgb(0.25), atol=1e-6)  # groom_color when displayColor is absent
 
 
 def test_wrong_primvar_size(tmp_path):

@@ -1,0 +1,74 @@
+"""Blender worker: ``python groom.py OP SRC DST [SCALE]``, converting a groom through Blender (bpy 5.0).
+
+- ``usd_to_abc``: import our USD stage (curves, and cards and points where present; Blender
+  converts it to metres), write Alembic with coordinates multiplied by SCALE.
+- ``abc_to_usd``: import an Alembic file, write a y-up USD stage (read back by :mod:`..usd_curves`).
+- ``usd_to_blend``: import our USD stage, give the curves Blender's Principled Hair BSDF (colour
+  from the ``displayColor`` attribute) and save a .blend file.
+
+Runs in its own process (see :mod:`cghair_format.exchange.alembic`); it imports only bpy. Prints
+``CGH_DONE`` on success; any failure exits non-zero with Blender's message.
+"""
+
+from __future__ import annotations
+
+import sys
+
+
+def hair_material(bpy):
+    """Principled Hair BSDF, coloured directly by the ``displayColor`` point attribute (linear)."""
+    mat = bpy.data.materials.new("StrandHair")
+    mat.use_nodes = True
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    nodes.clear()
+    out = nodes.new("ShaderNodeOutputMaterial")
+    bsdf = nodes.new("ShaderNodeBsdfHairPrincipled")
+    bsdf.parametrization = "COLOR"
+    attr = nodes.new("ShaderNodeAttribute")
+    attr.attribute_name = "displayColor"
+    links.new(attr.outputs["Color"], bsdf.inputs["Color"])
+    links.new(bsdf.outputs[0], out.inputs["Surface"])
+    return mat
+
+
+def main(op: str, src: str, dst: str, scale: str = "1") -> None:
+    import bpy
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    if op in ("usd_to_abc", "usd_to_blend"):
+        if bpy.ops.wm.usd_import(filepath=src) != {"FINISHED"}:
+            raise SystemExit(f"Blender could not import {src}")
+    elif op == "abc_to_usd":
+        if bpy.ops.wm.alembic_import(filepath=src) != {"FINISHED"}:
+            raise SystemExit(f"Blender could not import {src}")
+        if not any(o.type == "CURVES" for o in bpy.data.objects):
+            raise SystemExit(f"{src}: the Alembic file has no curves")
+    else:
+        raise SystemExit(f"unknown operation {op!r}")
+    if op == "usd_to_abc":
+        for obj in bpy.data.objects:  # global_scale moves the points but leaves the widths
+            if obj.type == "CURVES" and "radius" in obj.data.attributes:
+                radius = obj.data.attributes["radius"].data
+                values = [0.0] * len(radius)
+                radius.foreach_get("value", values)
+                radius.foreach_set("value", [v * float(scale) for v in values])
+        result = bpy.ops.wm.alembic_export(filepath=dst, selected=False, uvs=True, normals=True,
+                                           export_custom_properties=True, global_scale=float(scale))
+    elif op == "abc_to_usd":
+        result = bpy.ops.wm.usd_export(filepath=dst, convert_orientation=True, export_global_up_selection="Y",
+                                       export_global_forward_selection="NEGATIVE_Z", export_materials=False)
+    else:
+        material = hair_material(bpy)
+        for obj in bpy.data.objects:
+            if obj.type == "CURVES":
+                obj.data.materials.clear()
+                obj.data.materials.append(material)
+        bpy.ops.file.pack_all()  # the card texture lives in a temporary folder
+        result = bpy.ops.wm.save_as_mainfile(filepath=dst, compress=True)
+    if result != {"FINISHED"}:
+        raise SystemExit(f"Blender could not write {dst}")
+    print("CGH_DONE")
+
+
+if __name__ == "__main__":
+    main(*sys.argv[1:5])
