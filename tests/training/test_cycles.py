@@ -39,3 +39,23 @@ def test_cycles_renders_a_tiny_dataset(tmp_path, strands):
     splat = render_dataset(strands, tmp_path / "splat", views=3, res=24, engine="splat")
     overlap = np.minimum(ds.train[0].image[..., 3], splat.train[0].image[..., 3]).sum()
     assert overlap > 0.3 * splat.train[0].image[..., 3].sum()
+
+
+def _needs_bpy():
+    if not bpy_available():
+        pytest.skip("bpy (Blender as a Python module, the 'blender' extra) is not installed")
+
+
+@pytest.mark.blender
+@pytest.mark.slow
+def test_cycles_renders_the_strands_colours(tmp_path, strands):
+    from dataclasses import replace
+
+    _needs_bpy()
+    means = {}
+    for name, rgb in (("red", (0.8, 0.1, 0.1)), ("blue", (0.1, 0.1, 0.8))):
+        coloured = replace(strands, colors=np.tile(np.float32(rgb), (len(strands.points), 1)))
+        view = render_dataset(coloured, tmp_path / name, views=2, res=32, engine="cycles", samples=4).train[0]
+        means[name] = view.image[..., :3][view.image[..., 3] > 0.5].mean(0)
+    assert means["red"][0] > means["red"][2] + 0.1 and means["blue"][2] > means["blue"][0] + 0.1, means
+
