@@ -83,7 +83,10 @@ def main(job: Path) -> None:
     scene.cycles.device = "CPU"
     scene.cycles.samples = cfg["samples"]
     scene.cycles.seed = cfg["seed"]
-    scene.cycles.use_denoising = False
+    scene.cycles.use_denoising = bool(cfg.get("denoise"))
+    if scene.cycles.use_denoising:  # OpenImageDenoise on the CPU, guided by albedo and normals
+        scene.cycles.denoiser = "OPENIMAGEDENOISE"
+        scene.cycles.denoising_input_passes = "RGB_ALBEDO_NORMAL"
     scene.cycles_curves.shape = "THICK"
     scene.render.film_transparent = True
     scene.render.resolution_x, scene.render.resolution_y = cfg["width"], cfg["height"]
