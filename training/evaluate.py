@@ -29,7 +29,7 @@ class EvalResult:
     images: list[Path] = field(default_factory=list)
 
     def summary(self) -> str:
-        lp = f"{self.lpips:.4f}" if self.lpips is not None else f"skipped ({self.lpips_note})"
+        lp = f"{self.lpips:.4f} ({self.lpips_note})" if self.lpips is not None else f"skipped ({self.lpips_note})"
         return (f"{len(self.per_view)} views: PSNR {self.psnr:.2f} dB, SSIM {self.ssim:.4f}, LPIPS {lp}")
 
     def to_dict(self) -> dict:
