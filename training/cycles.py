@@ -49,8 +49,9 @@ def bpy_available() -> bool:
 
 
 def render_cycles(strands: Strands, cameras: list[Camera], *, thickness: float, preset: str = "brown",
-                  samples: int = 16, seed: int = 0, progress: bool = False) -> list[np.ndarray]:
-    """RGBA images ``[H, W, 4]`` (straight colour, alpha = coverage) of ``strands`` seen by ``cameras``."""
+                  samples: int = 16, seed: int = 0, progress: bool = False, denoise: bool = False) -> list[np.ndarray]:
+    """RGBA images ``[H, W, 4]`` (straight colour, alpha = coverage) of ``strands`` seen by ``cameras``;
+    ``denoise`` runs Cycles' OpenImageDenoise on each."""
     from .dataset import PRESETS
 
     python = blender_python()
@@ -74,7 +75,8 @@ def render_cycles(strands: Strands, cameras: list[Camera], *, thickness: float, 
         np.savez(job / "job.npz", **arrays)
         settings = {"width": width, "height": height, "fov_x": cameras[0].fov_x, "samples": int(samples),
                     "seed": int(seed), "melanin": PRESETS[preset]["melanin"],
-                    "redness": PRESETS[preset]["redness"], "up_axis": strands.up_axis, "progress": progress}
+                    "redness": PRESETS[preset]["redness"], "up_axis": strands.up_axis, "progress": progress,
+                    "denoise": bool(denoise)}
         (job / "job.json").write_text(json.dumps(settings))
         timeout = STARTUP_SECONDS + SECONDS_PER_VIEW_LIMIT * len(cameras)
         try:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +36,13 @@ PRESETS: dict[str, dict] = {
     "blonde": {"root": (0.55, 0.42, 0.25), "tip": (0.80, 0.66, 0.45), "melanin": 0.2, "redness": 0.3},
     "red": {"root": (0.35, 0.10, 0.04), "tip": (0.60, 0.22, 0.09), "melanin": 0.5, "redness": 0.95},
 }
+# the multi-tone case: tone i of n colours the i-th of n segments along every strand (root first), as
+# (eumelanin, pheomelanin) of cghair_format.synth's colour model: dark brown, copper, golden blonde,
+# platinum. (`cgh synth --multitone` is that model's dyed-ends look for its own hairstyles; this
+# colours any strands, real models included, in hard segments.)
+MULTITONE_MELANIN = ((4.0, 0.5), (1.2, 1.6), (0.45, 0.8), (0.12, 0.15))
+MULTITONE_JITTER = 0.35  # segment boundaries move by up to this fraction of a segment, per strand
+MULTITONE_BRIGHTNESS = 0.15  # per-strand brightness variation (standard deviation)
 
 
 class DatasetError(CghError, ValueError):
@@ -201,6 +208,38 @@ def strand_colours(strands: Strands, preset: str, seed: int) -> np.ndarray:
     return np.clip(rgb * scale[:, None], 0, 1)
 
 
+def multitone_colours(strands: Strands, tones: int, seed: int = 0) -> np.ndarray:
+    """Per-point RGB ``[N, 3]`` of the multi-tone case: every strand in ``tones`` segments along its
+    length with hard boundaries jittered per strand, each segment one palette tone."""
+    from cghair_format.synth import melanin_rgb
+
+    if not 2 <= tones <= len(MULTITONE_MELANIN):
+        raise DatasetError(f"multi-tone needs 2 to {len(MULTITONE_MELANIN)} tones, got {tones}")
+    counts = strands.point_counts
+    owner = np.repeat(np.arange(strands.count), counts)
+    start = np.repeat(strands.offsets[:-1], counts)
+    t = (np.arange(len(owner)) - start) / np.maximum(np.repeat(counts, counts) - 1, 1)
+    rng = np.random.default_rng(seed)
+    bounds = (np.arange(1, tones) + MULTITONE_JITTER * rng.uniform(-1, 1, (strands.count, tones - 1))) / tones
+    tone = (t[:, None] >= bounds[owner]).sum(1)
+    scale = (1 + MULTITONE_BRIGHTNESS * rng.standard_normal(strands.count)).clip(0.6, 1.4)[owner]
+    palette = melanin_rgb(*np.asarray(MULTITONE_MELANIN[:tones]).T)
+    return np.clip(palette[tone] * scale[:, None], 0, 1)
+
+
+def prepare_strands(strands: Strands, points: int | None = None, count: int | None = None,
+                    seed: int = 0) -> Strands:
+    """The strands resampled (cubic B-spline) to ``points`` points each, then densified (or
+    subsampled) to ``count`` strands: the paper's 100 points x 25,000 strands from a real model."""
+    from cghair_format.strands import densify, resample
+
+    if points is not None:
+        strands = resample(strands, points, method="bspline")
+    if count is not None:
+        strands = densify(strands, count, seed=seed)
+    return strands
+
+
 def reference_gaussians(strands: Strands, thickness: float, preset: str = "brown", seed: int = 0,
                         sh_degree: int = 1) -> Gaussians:
     """The splat engine's ground truth: one Gaussian per strand segment (as in the .cgh model), the
@@ -234,12 +273,15 @@ def default_thickness(strands: Strands) -> float:
 
 def render_dataset(strands: Strands, out_dir: str | Path, views: int = 32, res: int = 128,
                    engine: str = "splat", preset: str = "brown", seed: int = 0, samples: int = 16,
-                   thickness: float | None = None, progress: bool = False, device: str = "cpu") -> Dataset:
+                   thickness: float | None = None, progress: bool = False, device: str = "cpu",
+                   multitone: int = 0, denoise: bool = False) -> Dataset:
     """Render ``views`` orbit views of ``strands`` at ``res`` x ``res`` and write the dataset.
 
     ``engine="splat"`` renders the strands' segment Gaussians with the reference splatter on the torch
     ``device`` (fast, known appearance); ``engine="cycles"`` renders curves with Blender Cycles and the
-    Principled Hair BSDF (needs bpy). Every 8th view goes to the test split.
+    Principled Hair BSDF (needs bpy), ``denoise`` with its OpenImageDenoise pass. ``multitone`` > 0
+    colours every strand in that many segments (:func:`multitone_colours`) instead of its own
+    colours or the preset. Every 8th view goes to the test split.
     """
     if engine not in ENGINES:
         raise DatasetError(f"unknown engine {engine!r}; choose {' or '.join(ENGINES)}")
@@ -252,6 +294,8 @@ def render_dataset(strands: Strands, out_dir: str | Path, views: int = 32, res: 
         raise DatasetError("the strands are empty")
     if thickness is None:
         thickness = default_thickness(strands)
+    if multitone:
+        strands = replace(strands, colors=multitone_colours(strands, multitone, seed).astype(np.float32))
     cams = orbit_cameras(strands.points.astype(np.float64), views, res, strands.up_axis)
     if engine == "splat":
         from .splatter import render_gaussians, torch_device
@@ -268,11 +312,12 @@ def render_dataset(strands: Strands, out_dir: str | Path, views: int = 32, res: 
         from .cycles import render_cycles
 
         images = render_cycles(strands, cams, thickness=thickness, preset=preset, samples=samples,
-                               seed=seed, progress=progress)
+                               seed=seed, progress=progress, denoise=denoise)
     train_idx, test_idx = split_indices(views)
     meta = {"engine": engine, "views": views, "res": res, "preset": preset, "seed": seed,
             "thickness": thickness, "strands": strands.count, "samples": samples if engine == "cycles" else None,
-            "up_axis": strands.up_axis}
+            "up_axis": strands.up_axis, "points": int(strands.point_counts.max()), "multitone": multitone,
+            "denoise": denoise if engine == "cycles" else None}
     ds = Dataset([View(cams[i], images[i], f"r_{i:03d}") for i in train_idx],
                  [View(cams[i], images[i], f"r_{i:03d}") for i in test_idx], meta)
     write_dataset(out_dir, ds)

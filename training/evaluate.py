@@ -1,5 +1,5 @@
-"""Evaluation on held-out views: PSNR, SSIM, LPIPS when its weights are available offline, and
-side-by-side images (ground truth | render | 4 x absolute difference)."""
+"""Evaluation on held-out views: PSNR, SSIM, LPIPS (:mod:`training.lpips`, AlexNet by default), and
+full-size side-by-side images (ground truth | render | 4 x absolute difference) per view."""
 
 from __future__ import annotations
 
@@ -29,7 +29,7 @@ class EvalResult:
     images: list[Path] = field(default_factory=list)
 
     def summary(self) -> str:
-        lp = f"{self.lpips:.4f}" if self.lpips is not None else f"skipped ({self.lpips_note})"
+        lp = f"{self.lpips:.4f} ({self.lpips_note})" if self.lpips is not None else f"skipped ({self.lpips_note})"
         return (f"{len(self.per_view)} views: PSNR {self.psnr:.2f} dB, SSIM {self.ssim:.4f}, LPIPS {lp}")
 
     def to_dict(self) -> dict:
@@ -37,19 +37,15 @@ class EvalResult:
                 "per_view": self.per_view, "images": [str(p) for p in self.images]}
 
 
-def _lpips_model() -> tuple[Callable | None, str]:
-    """An LPIPS network if the ``lpips`` package and its weights can be loaded without a download."""
-    try:
-        import lpips  # noqa: F401
-    except ImportError:
-        return None, "the 'lpips' package is not installed"
-    try:
-        import lpips
+def _lpips_model(net: str, size: int) -> tuple[Callable | None, str]:
+    """Our LPIPS network (:mod:`training.lpips`), or None and why when the images are too small
+    for it. Missing weights raise :class:`training.lpips.LpipsWeightsError`, saying how to get them."""
+    from .lpips import Lpips
 
-        net = lpips.LPIPS(net="alex", verbose=False, pretrained=True)
-    except Exception as exc:  # no network: torchvision cannot fetch the backbone weights
-        return None, f"its weights cannot be loaded offline ({type(exc).__name__})"
-    return net, "alex"
+    model = Lpips(net)
+    if size < model.min_size:
+        return None, f"{net} needs views of at least {model.min_size} px, these have {size}"
+    return model, net
 
 
 def _side_by_side(gt: np.ndarray, pred: np.ndarray) -> np.ndarray:
@@ -58,11 +54,13 @@ def _side_by_side(gt: np.ndarray, pred: np.ndarray) -> np.ndarray:
 
 
 def evaluate_renders(render_fn: Callable[[View], np.ndarray], views: list[View], out_dir: str | Path | None = None,
-                     background=(0.0, 0.0, 0.0), use_lpips: bool = True) -> EvalResult:
-    """Metrics of ``render_fn(view) -> rgb [H, W, 3]`` against each view composited on ``background``."""
+                     background=(0.0, 0.0, 0.0), use_lpips: bool = True, lpips_net: str = "alex") -> EvalResult:
+    """Metrics of ``render_fn(view) -> rgb [H, W, 3]`` against each view composited on ``background``;
+    LPIPS with the ``lpips_net`` backbone (alex or vgg)."""
     from PIL import Image
 
-    net, note = _lpips_model() if use_lpips else (None, "disabled")
+    size = min(min(v.image.shape[:2]) for v in views) if views else 0
+    net, note = _lpips_model(lpips_net, size) if use_lpips else (None, "disabled")
     out = Path(out_dir) if out_dir is not None else None
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
@@ -75,9 +73,7 @@ def evaluate_renders(render_fn: Callable[[View], np.ndarray], views: list[View],
                "ssim": float(losses.ssim(a.clamp(0, 1), b))}
         if net is not None:
             with torch.no_grad():
-                x = a.clamp(0, 1).permute(2, 0, 1)[None] * 2 - 1
-                y = b.permute(2, 0, 1)[None] * 2 - 1
-                rec["lpips"] = float(net(x, y))
+                rec["lpips"] = float(net(a.clamp(0, 1).permute(2, 0, 1)[None], b.permute(2, 0, 1)[None]))
         per_view.append(rec)
         if out is not None:
             path = out / f"{view.name or f'view_{i:03d}'}_gt_render_diff.png"
@@ -92,7 +88,7 @@ def evaluate_renders(render_fn: Callable[[View], np.ndarray], views: list[View],
 
 def evaluate(cgh: str | Path | HairAsset, dataset: str | Path | Dataset, out_dir: str | Path | None = None,
              split: str = "test", background=(0.0, 0.0, 0.0), use_lpips: bool = True,
-             device: str = "cpu") -> EvalResult:
+             device: str = "cpu", lpips_net: str = "alex") -> EvalResult:
     """Render a .cgh (decoded exactly as stored) at the dataset's ``split`` views on the torch
     ``device`` and compare."""
     from cghair_format import decode_gaussians, read_with_gaussians
@@ -103,14 +99,14 @@ def evaluate(cgh: str | Path | HairAsset, dataset: str | Path | Dataset, out_dir
     g = decode_gaussians(cgh) if isinstance(cgh, HairAsset) else read_with_gaussians(cgh)[1]
     ds = dataset if isinstance(dataset, Dataset) else read_dataset(dataset)
     result = evaluate_renders(lambda v: render_gaussians(g, v.camera, tuple(background), device)["rgb"],
-                              ds.split(split), out_dir, background, use_lpips)
+                              ds.split(split), out_dir, background, use_lpips, lpips_net)
     if out_dir is not None:
         (Path(out_dir) / "metrics.json").write_text(json.dumps(result.to_dict(), indent=2) + "\n")
     return result
 
 
 def evaluate_model(model, views: list[View], mode: str = "soft", tau: float = 0.1, background=(0.0, 0.0, 0.0),
-                   out_dir: str | Path | None = None, use_lpips: bool = False) -> EvalResult:
+                   out_dir: str | Path | None = None, use_lpips: bool = False, lpips_net: str = "alex") -> EvalResult:
     """Metrics of a torch :class:`training.model.HairModel` (for variants without a .cgh encoding)."""
     from .splatter import render
 
@@ -123,4 +119,4 @@ def evaluate_model(model, views: list[View], mode: str = "soft", tau: float = 0.
         with torch.no_grad():
             return render(*gauss, view.camera, tuple(background)).rgb.cpu().numpy()
 
-    return evaluate_renders(fn, views, out_dir, background, use_lpips)
+    return evaluate_renders(fn, views, out_dir, background, use_lpips, lpips_net)

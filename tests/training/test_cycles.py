@@ -39,3 +39,43 @@ def test_cycles_renders_a_tiny_dataset(tmp_path, strands):
     splat = render_dataset(strands, tmp_path / "splat", views=3, res=24, engine="splat")
     overlap = np.minimum(ds.train[0].image[..., 3], splat.train[0].image[..., 3]).sum()
     assert overlap > 0.3 * splat.train[0].image[..., 3].sum()
+
+
+def _needs_bpy():
+    if not bpy_available():
+        pytest.skip("bpy (Blender as a Python module, the 'blender' extra) is not installed")
+
+
+@pytest.mark.blender
+@pytest.mark.slow
+def test_cycles_renders_the_strands_colours(tmp_path, strands):
+    from dataclasses import replace
+
+    _needs_bpy()
+    means = {}
+    for name, rgb in (("red", (0.8, 0.1, 0.1)), ("blue", (0.1, 0.1, 0.8))):
+        coloured = replace(strands, colors=np.tile(np.float32(rgb), (len(strands.points), 1)))
+        view = render_dataset(coloured, tmp_path / name, views=2, res=32, engine="cycles", samples=4).train[0]
+        means[name] = view.image[..., :3][view.image[..., 3] > 0.5].mean(0)
+    assert means["red"][0] > means["red"][2] + 0.1 and means["blue"][2] > means["blue"][0] + 0.1, means
+
+
+def _roughness(view) -> float:
+    """Mean absolute Laplacian of the luminance on the hair: sampling noise raises it."""
+    lum = view.image[..., :3].mean(-1)
+    lap = 4 * lum[1:-1, 1:-1] - lum[:-2, 1:-1] - lum[2:, 1:-1] - lum[1:-1, :-2] - lum[1:-1, 2:]
+    return float(np.abs(lap)[view.image[1:-1, 1:-1, 3] > 0.9].mean())
+
+
+@pytest.mark.blender
+@pytest.mark.slow
+def test_cycles_multitone_with_the_denoiser(tmp_path, strands):
+    _needs_bpy()
+    noisy = render_dataset(strands, tmp_path / "n", views=2, res=32, engine="cycles", samples=2, multitone=3)
+    clean = render_dataset(strands, tmp_path / "d", views=2, res=32, engine="cycles", samples=2, multitone=3,
+                           denoise=True)
+    assert clean.meta["denoise"] is True and clean.meta["multitone"] == 3
+    assert _roughness(clean.train[0]) < 0.7 * _roughness(noisy.train[0])
+    plain = render_dataset(strands, tmp_path / "p", views=2, res=32, engine="cycles", samples=2, denoise=True)
+    hair = plain.train[0].image[..., 3] > 0.5
+    assert np.abs(clean.train[0].image[..., :3] - plain.train[0].image[..., :3])[hair].mean() > 0.03

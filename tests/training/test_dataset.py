@@ -92,3 +92,54 @@ def test_render_dataset_bad_options(tmp_path, strands):
         render_dataset(strands, tmp_path, preset="green")
     with pytest.raises(DatasetError, match="at least 2 views"):
         render_dataset(strands, tmp_path, views=1)
+
+
+def test_multitone_colours_are_ordered_segments(strands):
+    from cghair_format.synth import melanin_rgb
+    from training.dataset import MULTITONE_MELANIN, multitone_colours
+
+    for tones in (2, 3, 4):
+        rgb = multitone_colours(strands, tones, seed=1)
+        palette = melanin_rgb(*np.asarray(MULTITONE_MELANIN[:tones]).T)
+        unit = palette / np.linalg.norm(palette, axis=1, keepdims=True)
+        for i in range(strands.count):
+            c = rgb[strands.offsets[i]:strands.offsets[i + 1]].astype(np.float64)
+            tone = np.argmax((c / np.linalg.norm(c, axis=1, keepdims=True)) @ unit.T, 1)
+            assert tone[0] == 0 and tone[-1] == tones - 1  # root tone first, tip tone last
+            assert np.all(np.diff(tone) >= 0)  # segments in order along the strand
+            # every point is its palette tone times one brightness per strand (clipped at 1)
+            scale = c / palette[tone]
+            ok = (c < 1).all(1)
+            np.testing.assert_allclose(scale[ok], scale[ok][0, 0], rtol=1e-5)
+    with pytest.raises(DatasetError, match="2 to 4 tones"):
+        multitone_colours(strands, 5)
+
+
+def test_multitone_changes_the_splat_ground_truth(tmp_path, strands):
+    plain = render_dataset(strands, tmp_path / "p", views=2, res=32)
+    multi = render_dataset(strands, tmp_path / "m", views=2, res=32, multitone=3)
+    assert multi.meta["multitone"] == 3 and plain.meta["multitone"] == 0
+    np.testing.assert_array_equal(multi.train[0].image[..., 3], plain.train[0].image[..., 3])  # same geometry
+    hair = plain.train[0].image[..., 3] > 0.5
+    assert np.abs(multi.train[0].image[..., :3] - plain.train[0].image[..., :3])[hair].mean() > 0.05
+
+
+def test_prepare_strands_reaches_the_requested_scale(strands):
+    from training.dataset import prepare_strands
+
+    out = prepare_strands(strands, points=10, count=300, seed=0)
+    assert out.count == 300 and np.all(out.point_counts == 10)
+    assert prepare_strands(strands) is strands
+
+
+def test_cli_paper_scale_options(tmp_path, strands_file, capsys):
+    from cghair_format.cli import main
+
+    out = tmp_path / "ds"
+    assert main(["render-dataset", str(strands_file), "-o", str(out), "--resample", "8", "--densify", "200",
+                 "--multitone", "--views", "9", "--res", "32", "--no-progress"]) == 0
+    assert "8 train + 1 test views (32 x 32, engine splat, 200 strands)" in capsys.readouterr().out
+    meta = json.loads((out / "dataset.json").read_text())
+    assert (meta["strands"], meta["points"], meta["multitone"]) == (200, 8, 3)
+    with pytest.raises(SystemExit):
+        main(["render-dataset", str(strands_file), "-o", str(out), "--multitone", "5"])

@@ -19,6 +19,7 @@ def test_ablation_table(tmp_path, strands_file, capsys):
     data = json.loads((tmp_path / "w" / "ablation.json").read_text())
     rows = {r["variant"]: r for r in data["rows"]}
     assert rows["unique"]["ratio_vs_unique"] == 1.0 and "file_psnr" in rows["latents"]
+    assert (tmp_path / "w" / "ablation.png").is_file() and "paper's table (its data)" in out
 
 
 @pytest.mark.parametrize("script", [ablation, bench])

@@ -15,6 +15,8 @@ import numpy as np
 KEY, FILL, RIM = 3.5, 1.2, 2.5  # sun strengths of the light rig
 AMBIENT = 0.25  # world background strength (lights the hair; the film is transparent)
 RANDOM_COLOR = 0.15  # per-strand melanin variation of the preset
+# the strands' colours as a point attribute; Cycles reads an attribute named "color" as zeros
+COLOR_ATTRIBUTE = "hair_rgb"
 
 
 def _hair_object(bpy, points, offsets, radius, colors):
@@ -26,7 +28,7 @@ def _hair_object(bpy, points, offsets, radius, colors):
         curves.attributes.new("radius", "FLOAT", "POINT")
     curves.attributes["radius"].data.foreach_set("value", radius.astype(np.float32))
     if colors is not None:
-        attr = curves.attributes.new("color", "FLOAT_COLOR", "POINT")
+        attr = curves.attributes.new(COLOR_ATTRIBUTE, "FLOAT_COLOR", "POINT")
         rgba = np.concatenate([colors, np.ones((len(colors), 1), np.float32)], 1)
         attr.data.foreach_set("color", rgba.reshape(-1))
     obj = bpy.data.objects.new("hair", curves)
@@ -44,7 +46,7 @@ def _material(bpy, has_colors: bool, melanin: float, redness: float):
     if has_colors:
         bsdf.parametrization = "COLOR"
         attr = nodes.new("ShaderNodeAttribute")
-        attr.attribute_name = "color"
+        attr.attribute_name = COLOR_ATTRIBUTE
         links.new(attr.outputs["Color"], bsdf.inputs["Color"])
     else:
         bsdf.parametrization = "MELANIN"
@@ -81,7 +83,10 @@ def main(job: Path) -> None:
     scene.cycles.device = "CPU"
     scene.cycles.samples = cfg["samples"]
     scene.cycles.seed = cfg["seed"]
-    scene.cycles.use_denoising = False
+    scene.cycles.use_denoising = bool(cfg.get("denoise"))
+    if scene.cycles.use_denoising:  # OpenImageDenoise on the CPU, guided by albedo and normals
+        scene.cycles.denoiser = "OPENIMAGEDENOISE"
+        scene.cycles.denoising_input_passes = "RGB_ALBEDO_NORMAL"
     scene.cycles_curves.shape = "THICK"
     scene.render.film_transparent = True
     scene.render.resolution_x, scene.render.resolution_y = cfg["width"], cfg["height"]

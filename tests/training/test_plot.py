@@ -1,0 +1,41 @@
+"""The ablation plot: our variants as dots placed by size (log x) and PSNR, the paper's as squares."""
+
+from __future__ import annotations
+
+import numpy as np
+from PIL import Image
+
+from training.ablation import PAPER_ABLATION
+from training.plot import COLOURS, MARGIN, SIZE, plot_ablation
+
+
+def _dot_centre(img: np.ndarray, colour) -> np.ndarray:
+    """Centre of the filled disc of ``colour`` in the plot area: the pixels whose 5 x 5 neighbourhood
+    shares it (a 2-pixel square outline has none)."""
+    same = np.all(img == np.asarray(colour, np.uint8), axis=-1)
+    same[:, SIZE[0] - MARGIN[2]:] = False  # the legend
+    h, w = same.shape
+    inner = np.ones((h - 4, w - 4), bool)
+    for dy in range(5):
+        for dx in range(5):
+            inner &= same[dy:dy + h - 4, dx:dx + w - 4]
+    ys, xs = np.nonzero(inner)
+    assert len(xs) > 20, f"no dot of colour {colour}"
+    return np.array([xs.mean(), ys.mean()])
+
+
+def test_dots_follow_size_and_psnr(tmp_path):
+    rows = [{"variant": "unique", "psnr": 30.0, "appearance_bytes": 4e7},
+            {"variant": "latents", "psnr": 29.0, "appearance_bytes": 4e5},
+            {"variant": "single-sh", "psnr": 27.0, "appearance_bytes": 4e3}]
+    path = plot_ablation(rows, PAPER_ABLATION, tmp_path / "a.png", "test")
+    img = np.asarray(Image.open(path).convert("RGB"))
+    assert img.shape == (SIZE[1], SIZE[0], 3)
+    u, lat, single = (_dot_centre(img, COLOURS[v]) for v in ("unique", "latents", "single-sh"))
+    # equal log steps in size give equal steps in x; PSNR up is y down
+    assert abs((u[0] - lat[0]) - (lat[0] - single[0])) <= 1.5
+    assert u[1] < lat[1] < single[1]
+    assert abs((single[1] - lat[1]) - 2 * (lat[1] - u[1])) <= 1.5
+    # 4e3 .. 1.637e8 bytes (the paper's unique) span the decades 10^3 .. 10^9
+    per_decade = (SIZE[0] - MARGIN[2] - MARGIN[0]) / 6
+    assert abs((u[0] - single[0]) - 4 * per_decade) <= 1.5
