@@ -10,7 +10,10 @@ import importlib
 import os
 import sys
 
+from ..atomic import check_writable
 from ..errors import CghError
+from ..limits import ReadLimits, set_default_limits
+from .argtypes import int_at_least
 
 # verb -> (module defining add_arguments(parser) and run(args) -> int, one-line help)
 VERBS: dict[str, tuple[str, str]] = {
@@ -29,10 +32,18 @@ VERBS: dict[str, tuple[str, str]] = {
     "render": ("viewer.cli_render", "render a .cgh to a PNG, GIF or MP4 without a display"),
     "bench-viewer": ("viewer.cli_bench", "measure the viewer's load and frame times"),
 }
+# verbs whose --output is a folder (made as needed); every other verb's --output is a file
+FOLDER_OUTPUTS = {"demo", "render-dataset"}
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="cgh", description="CGHair: compact Gaussian hair assets (.cgh).")
+    limits = ReadLimits()
+    parser.add_argument("--max-gaussians", type=int_at_least(1), default=limits.max_gaussians, metavar="N",
+                        help=f"largest Gaussian count a .cgh may hold to be read (default: {limits.max_gaussians:,})")
+    parser.add_argument("--max-decoded-mb", type=int_at_least(1), default=limits.max_decoded_bytes >> 20,
+                        metavar="MB", help="largest memory decoding a .cgh may take, in MiB (default: "
+                        f"{limits.max_decoded_bytes >> 20:,})")
     sub = parser.add_subparsers(dest="verb", metavar="VERB")
     for verb, (module, help_text) in VERBS.items():
         p = sub.add_parser(verb, help=help_text, description=help_text)
@@ -50,10 +61,13 @@ def main(argv: list[str] | None = None) -> int:
     if args.verb is None:
         parser.print_help()
         return 2
+    set_default_limits(ReadLimits(args.max_gaussians, args.max_decoded_mb << 20))
     if getattr(args, "_unavailable", None):
         print(f"cgh {args.verb}: unavailable: {args._unavailable}", file=sys.stderr)
         return 2
     try:
+        if getattr(args, "output", None) is not None:  # before any long work
+            check_writable(args.output, folder=args.verb in FOLDER_OUTPUTS)
         return int(importlib.import_module(args._module).run(args) or 0)
     except CghError as exc:
         print(f"cgh {args.verb}: error: {exc}", file=sys.stderr)
