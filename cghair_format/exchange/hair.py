@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..atomic import atomic_open
 from ..strands import Strands
 from ._common import StrandFileError, finish, need, offsets_from_counts, read_bytes
 
@@ -74,7 +75,7 @@ def save(strands: Strands, path: str | Path) -> None:
         bits |= BIT_COLORS
     info = b"Written by cghair (CGHair strand exchange)".ljust(88, b"\0")
     header = HEADER.pack(MAGIC, strands.count, len(strands.points), bits, 0, 1.0, 0.0, 1.0, 1.0, 1.0, info)
-    with open(path, "wb") as f:
+    with atomic_open(path) as f:
         f.write(header)
         f.write((counts - 1).astype("<u2").tobytes())
         f.write(strands.points.astype("<f4").tobytes())

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..atomic import atomic_open
 from ..strands import Strands
 from ._common import StrandFileError, finish
 
@@ -49,5 +50,5 @@ def save(strands: Strands, path: str | Path) -> None:
         arrays["colors"] = strands.colors.astype(np.float32)
     if strands.widths is not None:
         arrays["widths"] = strands.widths.astype(np.float32)
-    with open(path, "wb") as f:  # np.savez would append .npz to a path without it
+    with atomic_open(path) as f:  # np.savez would append .npz to a path without it
         np.savez_compressed(f, **arrays)

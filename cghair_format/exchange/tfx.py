@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..atomic import atomic_open
 from ..strands import Strands
 from ._common import StrandFileError, finish, need, offsets_from_counts, read_bytes
 
@@ -121,7 +122,7 @@ def save(strands: Strands, path: str | Path) -> None:
     off_pos = HEADER.size
     off_uv = off_pos + xyzw.nbytes
     header = HEADER.pack(4.0, strands.count, n_per, off_pos, off_uv, 0, 0, 0, *([0] * 32))
-    with open(path, "wb") as f:
+    with atomic_open(path) as f:
         f.write(header)
         f.write(xyzw.tobytes())
         f.write(np.zeros((strands.count, 2), "<f4").tobytes())

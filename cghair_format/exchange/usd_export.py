@@ -19,7 +19,6 @@ The stage's ``metersPerUnit`` and ``upAxis`` come from the asset or strands.
 
 from __future__ import annotations
 
-import os
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -27,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..asset import HairAsset
+from ..atomic import atomic_path
 from ..errors import CghError, require
 from ..strands import Strands
 
@@ -96,18 +96,18 @@ def write_stage(path: Path, build: Callable, meters_per_unit: float, up_axis: st
         with tempfile.TemporaryDirectory() as tmp:
             inner = Path(tmp) / (path.stem + ".usdc")
             write_stage(inner, build, meters_per_unit, up_axis)
-            if path.exists():
-                os.remove(path)
-            if not UsdUtils.CreateNewUsdzPackage(str(inner), str(path)):
-                raise CghError(f"{path}: usd-core could not write the .usdz package")
+            with atomic_path(path) as out:
+                if not UsdUtils.CreateNewUsdzPackage(str(inner), str(out)):
+                    raise CghError(f"{path}: usd-core could not write the .usdz package")
         return
-    stage = Usd.Stage.CreateNew(str(path))
-    UsdGeom.SetStageMetersPerUnit(stage, float(meters_per_unit))
-    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y if up_axis == "Y" else UsdGeom.Tokens.z)
-    root = UsdGeom.Xform.Define(stage, ROOT).GetPrim()
-    stage.SetDefaultPrim(root)
-    build(stage, root)
-    stage.GetRootLayer().Save()
+    with atomic_path(path) as out:
+        stage = Usd.Stage.CreateNew(str(out))
+        UsdGeom.SetStageMetersPerUnit(stage, float(meters_per_unit))
+        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y if up_axis == "Y" else UsdGeom.Tokens.z)
+        root = UsdGeom.Xform.Define(stage, ROOT).GetPrim()
+        stage.SetDefaultPrim(root)
+        build(stage, root)
+        stage.GetRootLayer().Save()
 
 
 def _point_average(seg: np.ndarray) -> np.ndarray:
