@@ -34,6 +34,9 @@ def load(path: str | Path) -> Strands:
     if not bits & BIT_POINTS:
         raise StrandFileError(path, "the header says the file has no points array")
     pos = HEADER.size
+    if n_strands > n_points or n_points > len(data) // 12:  # every strand has a point of 12 bytes at least
+        raise StrandFileError(path, f"header declares {n_points} points in {n_strands} strands, which a "
+                                    f"{len(data)}-byte file cannot hold")
     if bits & BIT_SEGMENTS:
         need(path, data, pos + 2 * n_strands, f"the segments array of {n_strands} strands")
         segments = np.frombuffer(data, "<u2", n_strands, pos).astype(np.int64)

@@ -75,6 +75,8 @@ def _strand_counts(path, ply, v, n: int, points_per_strand: int | None) -> np.nd
         for c in ply.comments:
             parts = c.split()
             if len(parts) == 2 and parts[0] in ("points_per_strand", "strand_points"):
+                if not parts[1].isdigit():
+                    raise StrandFileError(path, f"PLY comment {c!r} needs a whole number of points")
                 p = int(parts[1])
     if p is None and n % DEFAULT_FIXED_COUNT == 0:
         p = DEFAULT_FIXED_COUNT
