@@ -182,3 +182,26 @@ def test_mutated_files_raise_only_strand_file_errors(tmp_path, small_strands, ex
             assert str(bad) in str(exc), exc
         assert time.perf_counter() - start < MAX_SECONDS
         bad.unlink()
+
+
+def _tfx3(points: np.ndarray, version: float = 3.0, positions_at: int = 304) -> bytes:
+    """A TressFX 3 binary (TressFXFileObject: 296-byte header, positions offset at byte 144, float3)."""
+    s, p = points.shape[:2]
+    head = bytearray(296)
+    struct.pack_into("<fIII", head, 0, version, s, p, 0)
+    struct.pack_into("<I", head, 144, positions_at)
+    return bytes(head) + bytes(max(positions_at - 296, 0)) + points.astype("<f4").tobytes()
+
+
+def test_tressfx3_binary(tmp_path):
+    rng = np.random.default_rng(3)
+    points = np.cumsum(rng.normal(size=(5, 8, 3)), axis=1).astype(np.float32)
+    path = tmp_path / "v3.tfx"
+    path.write_bytes(_tfx3(points))
+    strands = load_strands(path)
+    assert strands.count == 5 and strands.up_axis == "Y"
+    np.testing.assert_array_equal(strands.points, points.reshape(-1, 3))
+    path.write_bytes(_tfx3(points)[:-4])
+    _refused(path, "truncated")
+    path.write_bytes(_tfx3(points, positions_at=200))
+    _refused(path, "inside the 296-byte header")
