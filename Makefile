@@ -5,7 +5,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 TORCH  ?= torch==2.13.0
 
-.PHONY: demo test bench lint clean venv blender
+.PHONY: demo test bench lint clean venv blender fuzz
 
 venv: $(VENV)/.installed
 
@@ -37,8 +37,16 @@ test: venv blender
 bench: venv
 	$(PY) -m pytest -q -m bench --benchmark-enable --benchmark-only tests/bench
 
+# The .cgh reader's fuzz target (atheris, from the dev extra) for FUZZ_SECONDS; a failing input is saved
+# as fuzz/crash-*, the corpus grows in fuzz/corpus
+FUZZ_SECONDS ?= 600
+
+fuzz: venv
+	mkdir -p fuzz/corpus
+	PYTHONPATH=. $(PY) tests/fuzz/fuzz_decode.py fuzz/corpus -max_total_time=$(FUZZ_SECONDS) -artifact_prefix=fuzz/
+
 lint: venv
 	$(VENV)/bin/ruff check .
 
 clean:
-	rm -rf $(VENV) demo_out .pytest_cache .benchmarks
+	rm -rf $(VENV) demo_out fuzz .pytest_cache .benchmarks
