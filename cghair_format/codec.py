@@ -242,7 +242,8 @@ def _decode(data: bytes, sh_ahead: bool, limits: ReadLimits | None) -> tuple[Hai
         infos = {i.type: i for i in table if i.type in KNOWN_CHUNKS}
         for name in REQUIRED_CHUNKS:
             if name not in infos:
-                raise InvalidContentError(f"required chunk {name!r} is missing", chunk=name, offset=len(data))
+                raise InvalidContentError(f"required chunk {name!r} is missing from the chunk table", chunk=name,
+                                          offset=container.HEADER_SIZE)
         meta = _parse_meta(_meta_payload(data, infos["META"]))
         check_limits(meta, list(infos.values()), limits or default_limits(), sh_ahead)
         payloads = {name: container.payload(data, info) for name, info in infos.items()}
@@ -1123,7 +1124,8 @@ def read_info(source) -> dict:
     version, infos = container.verify(data, set(KNOWN_CHUNKS))
     meta_info = next((i for i in infos if i.type == "META"), None)
     if meta_info is None:
-        raise InvalidContentError("required chunk 'META' is missing", chunk="META", offset=len(data))
+        raise InvalidContentError("required chunk 'META' is missing from the chunk table", chunk="META",
+                                  offset=container.HEADER_SIZE)
     try:
         meta = _parse_meta(_meta_payload(data, meta_info))
     except CghFormatError as exc:

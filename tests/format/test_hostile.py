@@ -85,8 +85,9 @@ def test_every_flipped_byte_is_caught_in_every_chunk_known_or_not():
     for pos in range(len(data)):
         bad = bytearray(data)
         bad[pos] ^= 0x01
-        with pytest.raises(cgh.CghFormatError):
+        with pytest.raises(cgh.CghFormatError) as refused:
             cgh.decode(bytes(bad))
+        assert refused.value.offset is not None, refused.value
         if pos % 7 == 0:  # cgh info reads META only, and checks every chunk all the same
             with pytest.raises(cgh.CghFormatError):
                 cgh.read_info(bytes(bad))
