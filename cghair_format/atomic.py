@@ -50,6 +50,11 @@ def write_bytes(path: str | os.PathLike, data: bytes) -> None:
         f.write(data)
 
 
+def write_text(path: str | os.PathLike, text: str) -> None:
+    with atomic_open(path, "w", encoding="utf-8") as f:
+        f.write(text)
+
+
 def _fsync_folder(folder: Path) -> None:
     """Flush the folder's entry of the renamed file (a no-op where folders cannot be opened, as on Windows)."""
     try:
@@ -64,15 +69,16 @@ def _fsync_folder(folder: Path) -> None:
         os.close(fd)
 
 
-def check_writable(path: str | os.PathLike, folder: bool = False) -> None:
-    """Raise :class:`OutputError` when ``path`` (a file, or with ``folder`` a folder that is created as
-    needed) cannot be written: what the CLI checks before its long work."""
+def check_writable(path: str | os.PathLike, folder: bool = False, make_parents: bool = False) -> None:
+    """Raise :class:`OutputError` when ``path`` (a file, or with ``folder`` a folder) cannot be written:
+    what the CLI checks before its long work. A folder output, and with ``make_parents`` a file's
+    folder, is made as needed, so only its nearest existing parent must be a writable folder."""
     path = Path(path)
     if path.exists() and path.is_dir() != folder:
         raise OutputError(f"cannot write {path}: it is {'not ' if folder else ''}a folder")
     parent = path if folder else path.parent
-    while not parent.exists() and folder and parent != parent.parent:
-        parent = parent.parent  # a folder output is made with its missing parents
+    while not parent.exists() and (folder or make_parents) and parent != parent.parent:
+        parent = parent.parent
     parent = parent if str(parent) else Path(".")
     if not parent.exists():
         raise OutputError(f"cannot write {path}: the folder {parent} does not exist")

@@ -104,6 +104,8 @@ WRITING_COMMANDS = [
     ["train", "{d}/missing_dataset", "--strands", "{d}/missing.hair", "-o", "{out}.cgh"],
     ["render-dataset", "{d}/missing.hair", "-o", "{out}"],
     ["demo", "-o", "{out}"],
+    ["eval", "{d}/missing.cgh", "{d}/missing_dataset", "--out", "{out}"],
+    ["cards", "{d}/missing.hair", "-o", "{d}/ok.cgh", "--debug-dir", "{out}"],
 ]
 
 
@@ -140,3 +142,9 @@ def test_read_only_check_as_a_user_would_see_it(tmp_path, monkeypatch):
     monkeypatch.setattr(atomic.os, "access", lambda path, mode: False)
     with pytest.raises(cgh.CghError, match="not writable"):
         atomic.check_writable(tmp_path / "a.cgh")
+
+
+def test_train_may_name_a_file_in_folders_it_makes(tmp_path):
+    atomic.check_writable(tmp_path / "new" / "deeper" / "hair.cgh", make_parents=True)
+    with pytest.raises(cgh.CghError, match="does not exist"):
+        atomic.check_writable(tmp_path / "new" / "hair.cgh")

@@ -34,6 +34,10 @@ VERBS: dict[str, tuple[str, str]] = {
 }
 # verbs whose --output is a folder (made as needed); every other verb's --output is a file
 FOLDER_OUTPUTS = {"demo", "render-dataset"}
+# verbs that make their --output file's missing folders
+PARENTS_MADE = {"train"}
+# other options that name a folder a verb writes into (cgh eval --out, cgh cards --debug-dir)
+FOLDER_OPTIONS = ("out", "debug_dir")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -67,7 +71,10 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         if getattr(args, "output", None) is not None:  # before any long work
-            check_writable(args.output, folder=args.verb in FOLDER_OUTPUTS)
+            check_writable(args.output, folder=args.verb in FOLDER_OUTPUTS, make_parents=args.verb in PARENTS_MADE)
+        for option in FOLDER_OPTIONS:
+            if getattr(args, option, None) is not None:
+                check_writable(getattr(args, option), folder=True)
         return int(importlib.import_module(args._module).run(args) or 0)
     except CghError as exc:
         print(f"cgh {args.verb}: error: {exc}", file=sys.stderr)
