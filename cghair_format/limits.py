@@ -62,18 +62,24 @@ def decoded_bytes(meta: dict, gaussians: bool) -> int:
 
 
 def min_payloads(meta: dict) -> dict[str, int]:
-    """Per required chunk, the fewest decompressed bytes that can hold the values META declares: one byte
-    per integer (the narrowest array type) and four per float32 (spec 2, 4)."""
+    """Per chunk, the fewest decompressed bytes that can hold the values META declares: one byte per
+    integer (the narrowest array type) and four per float32 (spec 2, 4)."""
     s, p, c, m, nt, k, d = (meta[key] for key in ("strands", "points", "cards", "segments", "groups", "k",
                                                   "latent_dim"))
     widths = [d] + [layer["out"] for layer in meta["mlp"]]
     weights = sum(i * o + o for i, o in zip(widths[:-1], widths[1:], strict=True))
+    optional = {"SIDS": s, "ROOT": FLOAT * 2 * s, "SCOL": 3 * s * p}
     if meta["quant"]["lossless"]:
-        return {"CARD": FLOAT * c * (m + 1) * 7 + 2 * c, "STRD": s + FLOAT * s * p * 3, "OPAC": FLOAT * s * (p - 1),
-                "LOGT": FLOAT * s * k, "CBKS": FLOAT * nt * k * d, "MLPW": FLOAT * weights}
+        return optional | {"CARD": FLOAT * c * (m + 1) * 7 + 2 * c, "STRD": s + FLOAT * s * p * 3,
+                           "OPAC": FLOAT * s * (p - 1), "LOGT": FLOAT * s * k, "CBKS": FLOAT * nt * k * d,
+                           "MLPW": FLOAT * weights}
     logits = s if meta["weight_mode"] == "hard" else s * k
-    return {"CARD": c * (m + 1) * 5 + 2 * c, "STRD": s, "OPAC": s * (p - 1), "LOGT": logits, "CBKS": nt * k * d,
-            "MLPW": weights}
+    return optional | {"CARD": c * (m + 1) * 5 + 2 * c, "STRD": s, "OPAC": s * (p - 1), "LOGT": logits,
+                       "CBKS": nt * k * d, "MLPW": weights, "CHLD": 6 * meta["quant"].get("children", 0)}
+
+
+# bytes of the arrays decoded from each optional chunk present, per strand (SCOL: per point)
+OPTIONAL_DECODED = {"SIDS": 4, "ROOT": 2 * FLOAT, "SCOL": 3 * FLOAT}
 
 
 def check(meta: dict, chunks: list, limits: ReadLimits, gaussians: bool) -> None:
@@ -84,7 +90,9 @@ def check(meta: dict, chunks: list, limits: ReadLimits, gaussians: bool) -> None
         raise LimitError(f"the file holds {count:,} Gaussians, more than this reader's limit of "
                          f"{limits.max_gaussians:,} (raise it with cgh --max-gaussians N, or "
                          "read(..., limits=ReadLimits(max_gaussians=N)))", chunk="META")
-    need = decoded_bytes(meta, gaussians) + sum(info.raw for info in chunks)
+    per_point = {"SCOL": meta["points"]}
+    need = decoded_bytes(meta, gaussians) + sum(info.raw for info in chunks) + sum(
+        meta["strands"] * per_point.get(info.type, 1) * OPTIONAL_DECODED.get(info.type, 0) for info in chunks)
     if need > limits.max_decoded_bytes:
         raise LimitError(f"decoding the file takes {need:,} bytes, more than this reader's limit of "
                          f"{limits.max_decoded_bytes:,} (raise it with cgh --max-decoded-mb M, or "

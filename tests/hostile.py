@@ -94,7 +94,7 @@ def lossless_spine(value: float) -> bytes:
 
 
 def meta_bomb(raw: int) -> bytes:
-    """META stored as a zstd stream of ``raw`` zero bytes (73 KB of it make 2 GB)."""
+    """META stored as a zstd stream of ``raw`` zero bytes (64 KB of it make 2 GB)."""
     z = zstandard.ZstdCompressor(level=1).compressobj()
     body = b"".join(z.compress(bytes(1 << 20)) for _ in range(raw >> 20)) + z.flush()
     return reseal(small_file(), bodies={"META": (container.CODEC_ZSTD, body, raw)})
@@ -114,7 +114,7 @@ def cases() -> dict[str, tuple[Callable[[], bytes], ReadLimits | None]]:
     out = {
         "zstd frame declaring 2^40 bytes": (lambda: _frame_in_card(1 << 40), None),
         "zstd frame of unknown size beyond raw_size": (lambda: _frame_in_card(None), None),
-        "META zstd bomb (64 MB declared)": (lambda: meta_bomb(64 << 20), None),
+        "META zstd bomb (2047 MiB in 64 KB)": (lambda: meta_bomb(2047 << 20), None),
         "META strands 2^24 - 1": (lambda: set_field(small_file(), ("strands",), str((1 << 24) - 1)), None),
         "META strands 2^20 (payloads too small)": (lambda: set_field(small_file(), ("strands",), str(1 << 20)), None),
         "META points 4096, strands 2^20": (
