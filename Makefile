@@ -5,7 +5,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 TORCH  ?= torch==2.13.0
 
-.PHONY: demo test check bench lint clean venv blender splat-transform
+.PHONY: demo test check bench lint clean venv blender splat-transform fuzz
 
 venv: $(VENV)/.installed
 
@@ -55,8 +55,16 @@ bench: venv
 	$(PY) -m pytest -q -s -m bench --benchmark-enable --benchmark-only --benchmark-json=.benchmarks/bench.json tests/bench
 	$(PY) tools/bench_tables.py .benchmarks/bench.json -o docs/benchmarks.md
 
+# The .cgh reader's fuzz target (atheris, from the dev extra) for FUZZ_SECONDS; a failing input is saved
+# as fuzz/crash-*, the corpus grows in fuzz/corpus
+FUZZ_SECONDS ?= 600
+
+fuzz: venv
+	mkdir -p fuzz/corpus
+	PYTHONPATH=. $(PY) tests/fuzz/fuzz_decode.py fuzz/corpus -max_total_time=$(FUZZ_SECONDS) -artifact_prefix=fuzz/
+
 lint: venv
 	$(VENV)/bin/ruff check .
 
 clean:
-	rm -rf $(VENV) demo_out .pytest_cache .benchmarks
+	rm -rf $(VENV) demo_out fuzz .pytest_cache .benchmarks

@@ -25,6 +25,11 @@ from .errors import AssetError
 UP_AXES = ("Y", "Z")
 ACTIVATIONS = ("relu", "none")
 MAX_MLP_VALUE = 1e30  # float32 reaches 3.4e38; a trained MLP stays many orders of magnitude below
+# Lengths (card spines and widths, delta, the thickness) and card coordinates u, v stay below these, so that
+# points, segment lengths and their squares stay finite in float32 (3.4e38): 1e12 scene units is a million
+# km in metres, and the card builder's u, v lie within a few card widths of [0, 1]
+MAX_LENGTH = 1e12
+MAX_CARD_COORDINATE = 1e3
 WEIGHT_MODES = ("soft", "hard")
 
 
@@ -33,7 +38,7 @@ def _check(cond: bool, message: str) -> None:
         raise AssetError(message)
 
 
-def _check_array(name: str, a: np.ndarray, shape: tuple, kind: str) -> None:
+def _check_array(name: str, a: np.ndarray, shape: tuple, kind: str, bound: float | None = None) -> None:
     _check(isinstance(a, np.ndarray), f"{name} must be a numpy array, got {type(a).__name__}")
     _check(a.ndim == len(shape), f"{name} must have {len(shape)} dimensions, got shape {a.shape}")
     for axis, (want, got) in enumerate(zip(shape, a.shape, strict=True)):
@@ -41,6 +46,8 @@ def _check_array(name: str, a: np.ndarray, shape: tuple, kind: str) -> None:
     _check(a.dtype.kind in kind, f"{name} has dtype {a.dtype}, expected kind {kind!r}")
     if a.dtype.kind == "f":
         _check(bool(np.isfinite(a).all()), f"{name} contains NaN or infinite values")
+        if bound is not None and a.size:
+            _check(float(np.abs(a).max()) <= bound, f"{name} holds values beyond +-{bound:g}")
 
 
 @dataclass
@@ -62,10 +69,10 @@ class Cards:
 
     def validate(self, n_groups: int) -> None:
         c, m1 = self.spine.shape[:2] if self.spine.ndim == 3 else (-1, -1)
-        _check_array("cards.spine", self.spine, (None, None, 3), "f")
+        _check_array("cards.spine", self.spine, (None, None, 3), "f", MAX_LENGTH)
         _check(c >= 1 and m1 >= 2, f"cards need at least 1 card of 1 segment, got spine shape {self.spine.shape}")
         _check_array("cards.normal", self.normal, (c, m1, 3), "f")
-        _check_array("cards.half_width", self.half_width, (c, m1), "f")
+        _check_array("cards.half_width", self.half_width, (c, m1), "f", MAX_LENGTH)
         _check_array("cards.group", self.group, (c,), "iu")
         _check(bool((self.half_width >= 0).all()), "cards.half_width must be >= 0")
         norms = np.linalg.norm(self.normal, axis=-1)
@@ -187,6 +194,10 @@ class HairAsset:
         self.cards.validate(self.appearance.n_groups if self.appearance.codebooks.ndim == 3 else 0)
         _check_array("uvd", self.uvd, (None, None, 3), "f")
         s, p = self.uvd.shape[:2]
+        if self.uvd.ndim == 3 and self.uvd.size:
+            _check(float(np.abs(self.uvd[..., :2]).max()) <= MAX_CARD_COORDINATE,
+                   f"uvd holds card coordinates u, v beyond +-{MAX_CARD_COORDINATE:g}")
+            _check(float(np.abs(self.uvd[..., 2]).max()) <= MAX_LENGTH, f"uvd holds a delta beyond +-{MAX_LENGTH:g}")
         _check(s >= 1 and p >= 2, f"need at least 1 strand of 2 points, got uvd shape {self.uvd.shape}")
         _check_array("strand_card", self.strand_card, (s,), "iu")
         _check(bool(((self.strand_card >= 0) & (self.strand_card < self.cards.count)).all()),
@@ -194,7 +205,8 @@ class HairAsset:
         _check_array("opacity", self.opacity, (s, p - 1), "f")
         _check(bool(((self.opacity >= 0) & (self.opacity <= 1)).all()), "opacity must lie in [0, 1]")
         self.appearance.validate(s, p - 1)
-        _check(np.isfinite(self.thickness) and self.thickness > 0, "thickness must be > 0")
+        _check(np.isfinite(self.thickness) and 0 < self.thickness <= MAX_LENGTH,
+               f"thickness must be > 0 and at most {MAX_LENGTH:g}, got {self.thickness}")
         _check(np.isfinite(self.meters_per_unit) and self.meters_per_unit > 0, "meters_per_unit must be > 0")
         _check(self.up_axis in UP_AXES, f"up_axis must be one of {UP_AXES}")
         if self.strand_ids is not None:
@@ -203,4 +215,16 @@ class HairAsset:
             _check_array("root_uv", self.root_uv, (s, 2), "f")
         if self.source_color is not None:
             _check_array("source_color", self.source_color, (s, p, 3), "f")
+        _check(_finite_json(self.metadata), "metadata must be JSON of finite numbers")
         return self
+
+
+def _finite_json(value) -> bool:
+    """Whether ``value`` is JSON data with no NaN or infinite number (which JSON cannot write)."""
+    if isinstance(value, float):
+        return bool(np.isfinite(value))
+    if isinstance(value, dict):
+        return all(isinstance(k, str) and _finite_json(v) for k, v in value.items())
+    if isinstance(value, (list, tuple)):
+        return all(_finite_json(v) for v in value)
+    return value is None or isinstance(value, (str, int, bool))

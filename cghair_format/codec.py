@@ -8,7 +8,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import tempfile
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -17,7 +16,8 @@ from typing import BinaryIO, NamedTuple
 import numpy as np
 
 from . import container, memory, rans
-from .asset import ACTIVATIONS, UP_AXES, WEIGHT_MODES, Appearance, Cards, HairAsset, MlpLayer
+from .asset import ACTIVATIONS, MAX_LENGTH, UP_AXES, WEIGHT_MODES, Appearance, Cards, HairAsset, MlpLayer
+from .atomic import write_bytes
 from .children import (
     WEIGHT_ONE,
     Children,
@@ -26,7 +26,7 @@ from .children import (
     fit_weights,
     place_children,
 )
-from .errors import AssetError, InvalidContentError, LimitError
+from .errors import AssetError, CghFormatError, InvalidContentError, LimitError
 from .gaussians import Gaussians, decode_gaussians
 from .geometry import (
     CardMap,
@@ -37,6 +37,8 @@ from .geometry import (
     normal_angles,
     strand_points,
 )
+from .limits import ReadLimits, default_limits
+from .limits import check as check_limits
 from .parallel import map_blocks, map_threads
 from .profiles import Profile, get_profile
 from .quantize import (
@@ -122,25 +124,17 @@ class EncodeReport:
 
 def write(asset: HairAsset, path: str | os.PathLike, profile: str | Profile = "compact",
           keep_order: bool = False) -> EncodeReport:
-    """Write ``asset`` to ``path`` atomically (temporary file, then rename); see :func:`encode`."""
+    """Write ``asset`` to ``path`` atomically (:mod:`.atomic`); see :func:`encode`."""
     data, report = encode(asset, profile, keep_order)
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_bytes(path, data)
     return report
 
 
-def read(source: str | os.PathLike | bytes | bytearray | memoryview | BinaryIO) -> HairAsset:
-    """Read a .cgh from a path, bytes or a binary file object; raises ``CghFormatError`` if bad."""
-    return decode(_read_bytes(source))
+def read(source: str | os.PathLike | bytes | bytearray | memoryview | BinaryIO,
+         limits: ReadLimits | None = None) -> HairAsset:
+    """Read a .cgh from a path, bytes or a binary file object; raises ``CghFormatError`` if bad, and
+    ``LimitError`` (one) if it is larger than ``limits`` (default: :func:`.limits.default_limits`)."""
+    return decode(_read_bytes(source), limits)
 
 
 def _read_bytes(source) -> bytes:
@@ -226,26 +220,41 @@ def _encode(asset: HairAsset, prof: Profile, keep_order: bool) -> tuple[bytes, E
     return data, EncodeReport(prof.name, step, err, diag, {i.type: i.stored for i in infos}, order)
 
 
-def decode(data: bytes) -> HairAsset:
-    return _decode(data, sh_ahead=False)[0]
+def decode(data: bytes, limits: ReadLimits | None = None) -> HairAsset:
+    return _decode(data, sh_ahead=False, limits=limits)[0]
 
 
-def read_with_gaussians(source: str | os.PathLike | bytes | bytearray | memoryview | BinaryIO
-                        ) -> tuple[HairAsset, Gaussians]:
+def read_with_gaussians(source: str | os.PathLike | bytes | bytearray | memoryview | BinaryIO,
+                        limits: ReadLimits | None = None) -> tuple[HairAsset, Gaussians]:
     """``read(source)`` and its ``decode_gaussians``, in one go and quicker: while a quantized file's
     strands decode, the kernel faults in the memory for their SH (475 MB at the paper's scale)."""
-    asset, sh_out = _decode(_read_bytes(source), sh_ahead=True)
+    asset, sh_out = _decode(_read_bytes(source), sh_ahead=True, limits=limits)
     return asset, decode_gaussians(asset, sh_out)
 
 
-def _decode(data: bytes, sh_ahead: bool) -> tuple[HairAsset, np.ndarray | None]:
+def _decode(data: bytes, sh_ahead: bool, limits: ReadLimits | None) -> tuple[HairAsset, np.ndarray | None]:
     """The asset, and with ``sh_ahead`` a quantized file's memory for :func:`.gaussians.strand_sh` (its
-    ``out``), faulted in while the strands decode (else None)."""
-    _, _, payloads = container.unpack(data, set(KNOWN_CHUNKS))
-    for name in REQUIRED_CHUNKS:
-        if name not in payloads:
-            raise InvalidContentError(f"required chunk {name!r} is missing", chunk=name)
-    meta = _parse_meta(payloads["META"])
+    ``out``), faulted in while the strands decode (else None). A refusal names a chunk and a byte offset
+    (where the decoder found no finer place, the chunk's start in the file)."""
+    infos = {}
+    try:
+        _, table = container.verify(data, set(KNOWN_CHUNKS))
+        infos = {i.type: i for i in table if i.type in KNOWN_CHUNKS}
+        for name in REQUIRED_CHUNKS:
+            if name not in infos:
+                raise InvalidContentError(f"required chunk {name!r} is missing from the chunk table", chunk=name,
+                                          offset=container.HEADER_SIZE)
+        meta = _parse_meta(_meta_payload(data, infos["META"]))
+        check_limits(meta, list(infos.values()), limits or default_limits(), sh_ahead)
+        payloads = {name: container.payload(data, info) for name, info in infos.items()}
+        return _decode_payloads(meta, payloads, sh_ahead)
+    except CghFormatError as exc:
+        if exc.offset is None and infos:
+            raise exc.at(infos.get(exc.chunk, infos["META"]).offset) from None
+        raise
+
+
+def _decode_payloads(meta: dict, payloads: dict[str, bytes], sh_ahead: bool) -> tuple[HairAsset, np.ndarray | None]:
     children = 0 if meta["quant"]["lossless"] else meta["quant"].get("children", 0)
     if (FAMILY_CHUNK in payloads) != (children > 0):
         raise InvalidContentError(f"chunk {FAMILY_CHUNK} must be present exactly when META quant.children is "
@@ -254,8 +263,16 @@ def _decode(data: bytes, sh_ahead: bool) -> tuple[HairAsset, np.ndarray | None]:
         asset, sh_out = _decode_chunks(meta, payloads, sh_ahead)
         asset.validate()
     except AssetError as exc:
-        raise InvalidContentError(f"decoded contents are inconsistent: {exc}") from None
+        chunk = next((c for prefix, c in _ASSET_FIELD_CHUNKS if str(exc).startswith(prefix)), "META")
+        raise InvalidContentError(f"decoded contents are inconsistent: {exc}", chunk=chunk) from None
     return asset, sh_out
+
+
+# the chunk that stores each field HairAsset.validate() names first in its messages (else META's counts)
+_ASSET_FIELD_CHUNKS = (("cards.", "CARD"), ("uvd", "STRD"), ("strand_card", "STRD"), ("opacity", "OPAC"),
+                       ("appearance.logits", "LOGT"), ("appearance.codebooks", "CBKS"), ("codebooks", "CBKS"),
+                       ("mlp[", "MLPW"), ("the MLP", "MLPW"), ("strand_ids", "SIDS"), ("root_uv", "ROOT"),
+                       ("source_color", "SCOL"))
 
 
 # --- META ----------------------------------------------------------------------------------------
@@ -299,11 +316,38 @@ def _normal_bits(asset: HairAsset, prof: Profile) -> int:
     return int(np.clip(math.ceil(math.log2(max(need, 1.0))) + 1, prof.normal_bits, 24))
 
 
+def _meta_payload(data: bytes, info: container.ChunkInfo) -> bytes:
+    """META's bytes, refused before decompressing when the chunk table gives it more than the limit."""
+    if info.raw > LIMITS["meta_bytes"]:
+        raise LimitError(f"META of {info.raw} bytes exceeds {LIMITS['meta_bytes']}", chunk="META", offset=info.offset)
+    return container.payload(data, info)
+
+
+def load_json(raw: bytes):
+    """JSON from UTF-8 bytes with only finite numbers in float64's range (``ValueError`` otherwise), so that
+    no field escapes as an ``OverflowError`` or a NaN later."""
+    def number(text: str) -> float:
+        v = float(text)
+        if not math.isfinite(v):
+            raise ValueError(f"number {text[:40]} is out of range")
+        return v
+
+    def integer(text: str) -> int:
+        if len(text.lstrip("-")) > 18:
+            raise ValueError(f"integer {text[:40]} is out of range")
+        return int(text)
+
+    def constant(text: str):
+        raise ValueError(f"{text} is not a JSON number")
+
+    return json.loads(raw.decode("utf-8"), parse_float=number, parse_int=integer, parse_constant=constant)
+
+
 def _parse_meta(raw: bytes) -> dict:
     if len(raw) > LIMITS["meta_bytes"]:
         raise LimitError(f"META of {len(raw)} bytes exceeds {LIMITS['meta_bytes']}", chunk="META")
     try:
-        meta = json.loads(raw.decode("utf-8"))
+        meta = load_json(raw)
     except (UnicodeDecodeError, ValueError, RecursionError) as exc:
         raise InvalidContentError(f"META is not valid UTF-8 JSON: {exc}", chunk="META") from None
     if not isinstance(meta, dict):
@@ -324,8 +368,9 @@ def _parse_meta(raw: bytes) -> dict:
     need("sh_degree", int, 0, 3)
     if meta.get("weight_mode") not in WEIGHT_MODES or meta.get("up_axis") not in UP_AXES:
         raise InvalidContentError("META weight_mode or up_axis has an unknown value", chunk="META")
-    for key in ("temperature", "thickness", "meters_per_unit"):
-        need(key, (int, float), 1e-30)
+    need("temperature", (int, float), 1e-30)
+    need("meters_per_unit", (int, float), 1e-30)
+    need("thickness", (int, float), 1e-30, MAX_LENGTH)
     for key in ("generator", "attribution", "profile"):
         need(key, str)
     layers = meta.get("mlp")
@@ -351,12 +396,15 @@ def _parse_meta(raw: bytes) -> dict:
                                   "references), which this reader cannot decode: write the asset again from its "
                                   "source (cgh encode, or cgh train --resume CHECKPOINT)", chunk="META")
     if not need("lossless", bool, src=quant):
-        for key in ("step", "card_step", "opacity_scale"):
-            need(key, (int, float), 1e-30, src=quant)
+        for key in ("step", "card_step"):
+            need(key, (int, float), 1e-30, MAX_LENGTH, src=quant)
+        need("opacity_scale", (int, float), 1e-30, src=quant)
         need("logit_levels", int, 1, 1 << 24, src=quant)
         need("logit_floor", (int, float), -1e6, 0, src=quant)
         need("normal_bits", int, 8, 24, src=quant)
-        need("base_stride", int, 1, 256, src=quant)
+        if need("base_stride", int, 1, 256, src=quant) & (quant["base_stride"] - 1):
+            raise InvalidContentError(f"META quant.base_stride must be a power of two, got {quant['base_stride']}",
+                                      chunk="META")
         need("newton_steps", int, 0, 8, src=quant)
         need("newton_halvings", int, 0, 8, src=quant)
         need("stretch_max", (int, float), 1, 16, src=quant)
@@ -874,7 +922,8 @@ def _optional_chunks(asset: HairAsset) -> list[container.Chunk]:
         w.array(np.rint(np.clip(asset.source_color, 0, 1) * 255).astype(np.uint8))
         out.append(container.Chunk("SCOL", w.getvalue(), required=False))
     if asset.metadata:
-        out.append(container.Chunk("XMET", json.dumps(asset.metadata).encode("utf-8"), required=False))
+        out.append(container.Chunk("XMET", json.dumps(asset.metadata, allow_nan=False).encode("utf-8"),
+                                   required=False))
     return out
 
 
@@ -1062,7 +1111,7 @@ def _decode_optional(asset: HairAsset, payloads: dict[str, bytes], s: int, p: in
         r.finish()
     if "XMET" in payloads:
         try:
-            asset.metadata = json.loads(payloads["XMET"].decode("utf-8"))
+            asset.metadata = load_json(payloads["XMET"])
         except (UnicodeDecodeError, ValueError, RecursionError) as exc:
             raise InvalidContentError(f"XMET is not valid UTF-8 JSON: {exc}", chunk="XMET") from None
         if not isinstance(asset.metadata, dict):
@@ -1072,11 +1121,15 @@ def _decode_optional(asset: HairAsset, payloads: dict[str, bytes], s: int, p: in
 def read_info(source) -> dict:
     """What ``cgh info`` prints: header, chunk table and counts, without decoding the streams."""
     data = _read_bytes(source)
-    version, infos = container.read_table(data)
-    _, _, payloads = container.unpack(data, set(KNOWN_CHUNKS), {"META"})
-    if "META" not in payloads:
-        raise InvalidContentError("required chunk 'META' is missing", chunk="META")
-    meta = _parse_meta(payloads["META"])
+    version, infos = container.verify(data, set(KNOWN_CHUNKS))
+    meta_info = next((i for i in infos if i.type == "META"), None)
+    if meta_info is None:
+        raise InvalidContentError("required chunk 'META' is missing from the chunk table", chunk="META",
+                                  offset=container.HEADER_SIZE)
+    try:
+        meta = _parse_meta(_meta_payload(data, meta_info))
+    except CghFormatError as exc:
+        raise exc.at(meta_info.offset) if exc.offset is None else exc from None
     gaussians = meta["strands"] * (meta["points"] - 1)
     return {
         "version": f"{version[0]}.{version[1]}", "file_bytes": len(data), "profile": meta["profile"],

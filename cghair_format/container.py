@@ -120,6 +120,7 @@ class ChunkInfo:
     offset: int
     stored: int
     raw: int
+    crc: int
 
 
 def read_table(data: bytes | memoryview) -> tuple[tuple[int, int], list[ChunkInfo]]:
@@ -149,7 +150,7 @@ def read_table(data: bytes | memoryview) -> tuple[tuple[int, int], list[ChunkInf
     infos, seen, prev_end = [], set(), table_end
     for i in range(count):
         pos = HEADER_SIZE + ENTRY_SIZE * i
-        ctype, flags, codec, _r, offset, stored, raw, _crc, _r2 = ENTRY.unpack_from(data, pos)
+        ctype, flags, codec, _r, offset, stored, raw, crc, _r2 = ENTRY.unpack_from(data, pos)
         try:
             name = ctype.decode("ascii")
         except UnicodeDecodeError:
@@ -168,7 +169,7 @@ def read_table(data: bytes | memoryview) -> tuple[tuple[int, int], list[ChunkInf
                              offset=pos + 24, chunk=name)
         _check_padding(data, prev_end, offset)
         prev_end = offset + stored
-        infos.append(ChunkInfo(name, bool(flags & FLAG_REQUIRED), codec, offset, stored, raw))
+        infos.append(ChunkInfo(name, bool(flags & FLAG_REQUIRED), codec, offset, stored, raw, crc))
     _check_padding(data, prev_end, len(data))
     return (major, minor), infos
 
@@ -182,40 +183,52 @@ def _check_padding(data: memoryview, start: int, end: int) -> None:
         raise CghFormatError("alignment padding must be zero bytes", offset=start)
 
 
-def unpack(data: bytes | memoryview, known: set[str], wanted: set[str] | None = None
-           ) -> tuple[tuple[int, int], list[ChunkInfo], dict[str, bytes]]:
-    """Verify and decompress the ``wanted`` chunks (default: all ``known``); unknown optional chunks
-    are skipped, an unknown required chunk fails."""
+def verify(data: bytes | memoryview, known: set[str]) -> tuple[tuple[int, int], list[ChunkInfo]]:
+    """:func:`read_table`, then every chunk's checksum, known or not (so that any changed byte of the
+    file is found, also in an optional chunk this reader skips); fails on an unknown required chunk."""
     data = memoryview(data)
     version, infos = read_table(data)
-    payloads = {}
     for i, info in enumerate(infos):
         pos = HEADER_SIZE + ENTRY_SIZE * i
-        if info.type not in known:
-            if info.required:
-                raise UnknownRequiredChunkError(
-                    f"required chunk type {info.type!r} is unknown to this reader; upgrade cghair",
-                    offset=pos, chunk=info.type)
-            continue
-        if wanted is not None and info.type not in wanted:
-            continue
-        stored = data[info.offset:info.offset + info.stored]
-        if crc32(stored) != struct.unpack_from("<I", data, pos + 32)[0]:
+        if info.type not in known and info.required:
+            raise UnknownRequiredChunkError(f"required chunk type {info.type!r} is unknown to this reader; upgrade "
+                                            "cghair", offset=pos, chunk=info.type)
+        if crc32(data[info.offset:info.offset + info.stored]) != info.crc:
             raise ChecksumError("chunk checksum mismatch: the file is corrupt", offset=info.offset,
                                 chunk=info.type)
-        if info.codec == CODEC_RAW:
-            payloads[info.type] = bytes(stored)
-            continue
-        try:
-            raw = zstandard.ZstdDecompressor().decompress(stored, max_output_size=info.raw)
-        except zstandard.ZstdError as exc:
-            raise CghFormatError(f"zstd stream is corrupt: {exc}", offset=info.offset,
-                                 chunk=info.type) from None
-        if len(raw) != info.raw:
-            raise CghFormatError(f"chunk decompresses to {len(raw)} bytes, {info.raw} declared",
+    return version, infos
+
+
+def payload(data: bytes | memoryview, info: ChunkInfo) -> bytes:
+    """The uncompressed bytes of a chunk whose checksum :func:`verify` checked: exactly ``info.raw``
+    bytes, never more in memory whatever the zstd frame's header declares (a streaming decompressor
+    with a hard cap; python-zstandard's ``max_output_size`` is ignored where the frame states its size)."""
+    stored = memoryview(data)[info.offset:info.offset + info.stored]
+    if info.codec == CODEC_RAW:
+        return bytes(stored)
+    try:
+        declared = zstandard.get_frame_parameters(stored).content_size
+        if declared not in (info.raw, zstandard.CONTENTSIZE_UNKNOWN):
+            raise CghFormatError(f"zstd frame declares {declared} bytes, the chunk table {info.raw}",
                                  offset=info.offset, chunk=info.type)
-        payloads[info.type] = raw
-    return version, infos, payloads
+        reader = zstandard.ZstdDecompressor().stream_reader(stored, read_across_frames=True)
+        raw = reader.read(info.raw + 1) if info.raw else b""
+        extra = reader.read(1)  # the end of the input, or the error of a corrupt tail
+    except zstandard.ZstdError as exc:
+        raise CghFormatError(f"zstd stream is corrupt: {exc}", offset=info.offset, chunk=info.type) from None
+    if len(raw) != info.raw or extra:
+        raise CghFormatError(f"chunk decompresses to {len(raw) + len(extra)}{'+' if extra else ''} bytes, "
+                             f"{info.raw} declared", offset=info.offset, chunk=info.type)
+    return raw
+
+
+def unpack(data: bytes | memoryview, known: set[str], wanted: set[str] | None = None
+           ) -> tuple[tuple[int, int], list[ChunkInfo], dict[str, bytes]]:
+    """Verify every chunk (:func:`verify`) and decompress the ``wanted`` ones (default: all ``known``);
+    unknown optional chunks are skipped, an unknown required chunk fails."""
+    version, infos = verify(data, known)
+    wanted = known if wanted is None else wanted & known
+    return version, infos, {i.type: payload(data, i) for i in infos if i.type in wanted}
 
 
 def _align(n: int) -> int:

@@ -21,8 +21,13 @@ class CghFormatError(CghError):
         if offset is not None:
             where.append(f"byte offset {offset}")
         super().__init__(f"{message} ({', '.join(where)})" if where else message)
+        self.message = message
         self.offset = offset
         self.chunk = chunk
+
+    def at(self, offset: int) -> CghFormatError:
+        """The same error placed at byte ``offset`` of the file (a decoder that knew only the chunk)."""
+        return type(self)(self.message, offset=offset, chunk=self.chunk)
 
 
 class TruncatedError(CghFormatError):
@@ -51,6 +56,10 @@ class LimitError(CghFormatError):
 
 class InvalidContentError(CghFormatError):
     """The chunks parse, but their contents are inconsistent (bad index, non-finite value, ...)."""
+
+
+class OutputError(CghError):
+    """An output file or folder cannot be written (a missing or read-only folder, a file in the way)."""
 
 
 class AssetError(CghError, ValueError):

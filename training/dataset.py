@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cghair_format.atomic import atomic_path, write_text
 from cghair_format.camera import Camera
 from cghair_format.errors import CghError
 from cghair_format.gaussians import Gaussians, rgb_to_sh0, segment_frames
@@ -118,11 +119,12 @@ def write_split(root: str | Path, split: str, views: list[View]) -> None:
     frames = []
     for i, v in enumerate(views):
         name = v.name or f"r_{i:03d}"
-        Image.fromarray(_to_u8(v.image), "RGBA").save(root / split / f"{name}.png")
+        with atomic_path(root / split / f"{name}.png") as tmp:
+            Image.fromarray(_to_u8(v.image), "RGBA").save(tmp)
         frames.append({"file_path": f"./{split}/{name}", "transform_matrix": v.camera.nerf_matrix().tolist()})
     cam = views[0].camera
     doc = {"camera_angle_x": cam.fov_x, "w": cam.width, "h": cam.height, "frames": frames}
-    (root / f"transforms_{split}.json").write_text(json.dumps(doc, indent=1) + "\n")
+    write_text(root / f"transforms_{split}.json", json.dumps(doc, indent=1) + "\n")
 
 
 def write_dataset(root: str | Path, dataset: Dataset) -> None:
@@ -130,7 +132,7 @@ def write_dataset(root: str | Path, dataset: Dataset) -> None:
     root.mkdir(parents=True, exist_ok=True)
     for split in SPLITS:
         write_split(root, split, dataset.split(split))
-    (root / "dataset.json").write_text(json.dumps(dataset.meta, indent=2) + "\n")
+    write_text(root / "dataset.json", json.dumps(dataset.meta, indent=2) + "\n")
 
 
 def read_split(root: str | Path, split: str) -> list[View]:

@@ -12,6 +12,7 @@ import numpy as np
 import torch
 
 from cghair_format.asset import HairAsset
+from cghair_format.atomic import atomic_path, write_text
 
 from . import losses
 from .dataset import Dataset, View, read_dataset
@@ -77,7 +78,8 @@ def evaluate_renders(render_fn: Callable[[View], np.ndarray], views: list[View],
         per_view.append(rec)
         if out is not None:
             path = out / f"{view.name or f'view_{i:03d}'}_gt_render_diff.png"
-            Image.fromarray(_side_by_side(gt, pred)).save(path)
+            with atomic_path(path) as tmp:
+                Image.fromarray(_side_by_side(gt, pred)).save(tmp)
             images.append(path)
     if not per_view:
         raise ValueError("no views to evaluate")
@@ -101,7 +103,7 @@ def evaluate(cgh: str | Path | HairAsset, dataset: str | Path | Dataset, out_dir
     result = evaluate_renders(lambda v: render_gaussians(g, v.camera, tuple(background), device)["rgb"],
                               ds.split(split), out_dir, background, use_lpips, lpips_net)
     if out_dir is not None:
-        (Path(out_dir) / "metrics.json").write_text(json.dumps(result.to_dict(), indent=2) + "\n")
+        write_text(Path(out_dir) / "metrics.json", json.dumps(result.to_dict(), indent=2) + "\n")
     return result
 
 

@@ -12,6 +12,7 @@ import numpy as np
 import torch
 
 from cghair_format.asset import HairAsset
+from cghair_format.atomic import atomic_path, write_text
 from cghair_format.errors import CghError
 from cghair_format.strands import Strands
 
@@ -115,9 +116,8 @@ def save_checkpoint(path: Path, *, model: HairModel, optimizer: torch.optim.Opti
         "rng": torch.get_rng_state(),
     }
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    torch.save(state, tmp)
-    tmp.replace(path)
+    with atomic_path(path) as tmp:
+        torch.save(state, tmp)
 
 
 def load_checkpoint(path: str | Path) -> dict:
@@ -309,7 +309,7 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
         asset.metadata["training"] = summary
     if out_path is not None:
         out_path.parent.mkdir(parents=True, exist_ok=True)
-        out_path.with_suffix(".train.json").write_text(json.dumps(summary, indent=2) + "\n")
+        write_text(out_path.with_suffix(".train.json"), json.dumps(summary, indent=2) + "\n")
         if asset is not None:
             from cghair_format import write
 

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from cghair_format import HairAsset
+from cghair_format.atomic import atomic_path
 
 from .camera_control import HELP, OrbitController, ViewerState
 from .context import create_window
@@ -21,7 +22,8 @@ def save_png(image: np.ndarray, path: str | Path) -> Path:
     from PIL import Image
 
     rgb = (np.clip(image[..., :3], 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
-    Image.fromarray(rgb).save(path)
+    with atomic_path(path) as tmp:
+        Image.fromarray(rgb).save(tmp)
     return Path(path)
 
 

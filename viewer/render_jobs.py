@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from cghair_format import HairAsset
+from cghair_format.atomic import atomic_path
 from cghair_format.camera import Camera
 from cghair_format.errors import CghError, require
 
@@ -131,22 +132,23 @@ def write_images(frames: list[np.ndarray], out: Path, fps: float = 24.0) -> Path
     from PIL import Image
 
     ext = out.suffix.lower()
-    rgb = [to_uint8(f) for f in frames]
-    if ext == ".png":
-        Image.fromarray(rgb[0]).save(out)
-    elif ext == ".gif":
-        images = [Image.fromarray(f) for f in rgb]
-        images[0].save(out, save_all=True, append_images=images[1:], duration=max(1, round(1000 / fps)), loop=0)
-    elif ext == ".mp4":
-        require("imageio_ffmpeg", "viewer", "MP4 output", package="imageio-ffmpeg")
-        import imageio.v2 as imageio
-
-        # H.264 wants even sizes: pad by one pixel where needed
-        h, w = rgb[0].shape[:2]
-        padded = [np.pad(f, ((0, h % 2), (0, w % 2), (0, 0)), mode="edge") for f in rgb]
-        imageio.mimwrite(out, padded, fps=fps, macro_block_size=1)
-    else:
+    if ext not in (".png", ".gif", ".mp4"):
         raise CghError(f"unsupported output {out.name!r}: use .png, .gif or .mp4")
+    rgb = [to_uint8(f) for f in frames]
+    with atomic_path(out) as tmp:
+        if ext == ".png":
+            Image.fromarray(rgb[0]).save(tmp)
+        elif ext == ".gif":
+            images = [Image.fromarray(f) for f in rgb]
+            images[0].save(tmp, save_all=True, append_images=images[1:], duration=max(1, round(1000 / fps)), loop=0)
+        else:
+            require("imageio_ffmpeg", "viewer", "MP4 output", package="imageio-ffmpeg")
+            import imageio.v2 as imageio
+
+            # H.264 wants even sizes: pad by one pixel where needed
+            h, w = rgb[0].shape[:2]
+            padded = [np.pad(f, ((0, h % 2), (0, w % 2), (0, 0)), mode="edge") for f in rgb]
+            imageio.mimwrite(tmp, padded, fps=fps, macro_block_size=1)
     return out
 
 

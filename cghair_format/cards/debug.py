@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..atomic import atomic_open, atomic_path
 from ..errors import require
 from ..geometry import card_mesh
 from .build import CardBuild
@@ -37,7 +38,7 @@ def write_obj(build: CardBuild, path: Path) -> None:
     cards = build.asset.cards
     mesh = card_mesh(cards)
     tris_per_card = 2 * cards.segments
-    with open(path, "w", encoding="ascii") as f:
+    with atomic_open(path, "w", encoding="ascii") as f:
         f.write(f"# {cards.count} hair cards of {cards.segments} segments, written by cgh cards --debug-dir\n")
         np.savetxt(f, mesh.vertices, fmt="v %.7g %.7g %.7g")
         np.savetxt(f, mesh.uvs, fmt="vt %.7g %.7g")
@@ -58,12 +59,14 @@ def write_debug(build: CardBuild, directory: str | Path, per_card_limit: int = 1
     groups = build.asset.cards.group
     written = []
     atlas = out / "textures.png"
-    image.fromarray(texture_atlas(build.textures, groups)).save(atlas)
+    with atomic_path(atlas) as tmp:
+        image.fromarray(texture_atlas(build.textures, groups)).save(tmp)
     written.append(atlas)
     for card, tex in enumerate(build.textures[:per_card_limit]):
         big = np.kron(tex, np.ones((TEXEL_SCALE, TEXEL_SCALE)))
         p = out / "textures" / f"card_{card:05d}_group_{int(groups[card]):03d}.png"
-        image.fromarray((big.clip(0, 1) * 255).round().astype(np.uint8)).save(p)
+        with atomic_path(p) as tmp:
+            image.fromarray((big.clip(0, 1) * 255).round().astype(np.uint8)).save(tmp)
     written.append(out / "textures")
     obj = out / "cards.obj"
     write_obj(build, obj)

@@ -11,7 +11,10 @@ import os
 import sys
 import warnings
 
+from ..atomic import check_writable
 from ..errors import CghError
+from ..limits import ReadLimits, set_default_limits
+from .argtypes import int_at_least
 
 # verb -> (module defining add_arguments(parser) and run(args) -> int, one-line help)
 VERBS: dict[str, tuple[str, str]] = {
@@ -30,10 +33,22 @@ VERBS: dict[str, tuple[str, str]] = {
     "render": ("viewer.cli_render", "render a .cgh to a PNG, GIF or MP4 without a display"),
     "bench-viewer": ("viewer.cli_bench", "measure the viewer's load and frame times"),
 }
+# verbs whose --output is a folder (made as needed); every other verb's --output is a file
+FOLDER_OUTPUTS = {"demo", "render-dataset"}
+# verbs that make their --output file's missing folders
+PARENTS_MADE = {"train"}
+# other options that name a folder a verb writes into (cgh eval --out, cgh cards --debug-dir)
+FOLDER_OPTIONS = ("out", "debug_dir")
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="cgh", description="CGHair: compact Gaussian hair assets (.cgh).")
+    limits = ReadLimits()
+    parser.add_argument("--max-gaussians", type=int_at_least(1), default=limits.max_gaussians, metavar="N",
+                        help=f"largest Gaussian count a .cgh may hold to be read (default: {limits.max_gaussians:,})")
+    parser.add_argument("--max-decoded-mb", type=int_at_least(1), default=limits.max_decoded_bytes >> 20,
+                        metavar="MB", help="largest memory decoding a .cgh may take, in MiB (default: "
+                        f"{limits.max_decoded_bytes >> 20:,})")
     sub = parser.add_subparsers(dest="verb", metavar="VERB")
     for verb, (module, help_text) in VERBS.items():
         p = sub.add_parser(verb, help=help_text, description=help_text)
@@ -60,10 +75,16 @@ def main(argv: list[str] | None = None) -> int:
     if args.verb is None:
         parser.print_help()
         return 2
+    set_default_limits(ReadLimits(args.max_gaussians, args.max_decoded_mb << 20))
     if getattr(args, "_unavailable", None):
         print(f"cgh {args.verb}: unavailable: {args._unavailable}", file=sys.stderr)
         return 2
     try:
+        if getattr(args, "output", None) is not None:  # before any long work
+            check_writable(args.output, folder=args.verb in FOLDER_OUTPUTS, make_parents=args.verb in PARENTS_MADE)
+        for option in FOLDER_OPTIONS:
+            if getattr(args, option, None) is not None:
+                check_writable(getattr(args, option), folder=True)
         with warnings.catch_warnings():  # restores the default hook when main returns (tests call it in-process)
             warnings.showwarning = _show_warning
             return int(importlib.import_module(args._module).run(args) or 0)

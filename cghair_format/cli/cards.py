@@ -55,11 +55,6 @@ def run(args: argparse.Namespace) -> int:
     if out.suffix.lower() != ".cgh":
         print(f"cgh cards: error: the output must be a .cgh file, got {out}", file=sys.stderr)
         return 2
-    if out.parent and not out.parent.exists():
-        raise FileNotFoundError(2, "No such directory", str(out.parent))
-    if args.debug_dir and Path(args.debug_dir).exists() and not Path(args.debug_dir).is_dir():
-        print(f"cgh cards: error: --debug-dir {args.debug_dir} exists and is not a folder", file=sys.stderr)
-        return 2
     strands = load_strands(args.strands, units=args.units, up=args.up)
     build = build_cards(strands, n_cards=args.cards, n_groups=args.groups, segments=args.segments,
                         points=args.points, seed=args.seed, progress=not args.no_progress,

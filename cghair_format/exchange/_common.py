@@ -34,15 +34,24 @@ def need(path: str | Path, data: bytes, end: int, what: str) -> None:
 
 
 def finish(path: str | Path, strands: Strands) -> Strands:
-    """Validate loaded strands, turning an inconsistency into an error that names the file."""
+    """Validate loaded strands, turning an inconsistency into an error that names the file: no strands, a
+    strand without points, a NaN or infinite point, colour or width, arrays that do not fit together."""
     if strands.count == 0:
         raise StrandFileError(path, "the file holds no strands")
-    if not np.isfinite(strands.points).all():
-        raise StrandFileError(path, "point coordinates contain NaN or infinite values")
     try:
-        return strands.validate()
+        strands.validate()
     except CghError as exc:
         raise StrandFileError(path, str(exc)) from exc
+    empty = np.flatnonzero(np.diff(strands.offsets) < 1)
+    if len(empty):
+        raise StrandFileError(path, f"{len(empty)} strands have no points (the first is strand {int(empty[0])})")
+    for name, shape in (("colors", (len(strands.points), 3)), ("widths", (len(strands.points),))):
+        values = getattr(strands, name)
+        if values is not None and values.shape != shape:
+            raise StrandFileError(path, f"point {name} have shape {values.shape}, expected {shape}")
+        if values is not None and not np.isfinite(values).all():
+            raise StrandFileError(path, f"point {name} contain NaN or infinite values")
+    return strands
 
 
 def offsets_from_counts(counts: np.ndarray) -> np.ndarray:

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..atomic import atomic_open
 from ._common import StrandFileError, need, read_bytes
 
 TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
@@ -176,7 +177,7 @@ def write_ply(path: str | Path, elements: list[tuple[str, dict[str, np.ndarray]]
             rec[prop] = arr
         blobs.append(rec.tobytes())
     head.append("end_header")
-    with open(path, "wb") as f:
+    with atomic_open(path) as f:
         f.write(("\n".join(head) + "\n").encode("ascii"))
         for b in blobs:
             f.write(b)

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..atomic import atomic_open
 from ..strands import Strands
 from ._common import StrandFileError, finish, need, offsets_from_counts, read_bytes
 
@@ -33,6 +34,9 @@ def load(path: str | Path) -> Strands:
     if not bits & BIT_POINTS:
         raise StrandFileError(path, "the header says the file has no points array")
     pos = HEADER.size
+    if n_strands > n_points or n_points > len(data) // 12:  # every strand has a point of 12 bytes at least
+        raise StrandFileError(path, f"header declares {n_points} points in {n_strands} strands, which a "
+                                    f"{len(data)}-byte file cannot hold")
     if bits & BIT_SEGMENTS:
         need(path, data, pos + 2 * n_strands, f"the segments array of {n_strands} strands")
         segments = np.frombuffer(data, "<u2", n_strands, pos).astype(np.int64)
@@ -74,7 +78,7 @@ def save(strands: Strands, path: str | Path) -> None:
         bits |= BIT_COLORS
     info = b"Written by cghair (CGHair strand exchange)".ljust(88, b"\0")
     header = HEADER.pack(MAGIC, strands.count, len(strands.points), bits, 0, 1.0, 0.0, 1.0, 1.0, 1.0, info)
-    with open(path, "wb") as f:
+    with atomic_open(path) as f:
         f.write(header)
         f.write((counts - 1).astype("<u2").tobytes())
         f.write(strands.points.astype("<f4").tobytes())

@@ -81,6 +81,8 @@ def _strand_counts(path, ply, v, n: int, points_per_strand: int | None) -> np.nd
         for c in ply.comments:
             parts = c.split()
             if len(parts) == 2 and parts[0] in ("points_per_strand", "strand_points"):
+                if not parts[1].isdigit():
+                    raise StrandFileError(path, f"PLY comment {c!r} needs a whole number of points")
                 stated = int(parts[1])
     p = stated if stated is not None else (DEFAULT_FIXED_COUNT if n % DEFAULT_FIXED_COUNT == 0 else None)
     runs = _colour_runs(v, n)

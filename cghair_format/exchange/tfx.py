@@ -1,10 +1,14 @@
 """AMD TressFX ``.tfx``: the binary format of TressFX 3 and 4, and the TressFX 2.0 ASCII format.
 
-Binary: a 160-byte header (f32 version, u32 strand count, u32 points per strand, u32 byte offsets
-of the vertex positions, strand UVs, vertex UVs, strand thickness and vertex colours, 32 reserved
-u32), then ``float4`` positions (xyz and inverse mass) at their offset. Every strand has the same
-point count. ASCII 2.0: ``key value`` header lines, then per strand a line
-``strand i numVerts n texcoord u v`` followed by ``n`` lines of ``x y z``.
+Binary, TressFX 4 (version 4.x): a 160-byte header (f32 version, u32 strand count, u32 points per
+strand, u32 byte offsets of the vertex positions, strand UVs, vertex UVs, strand thickness and vertex
+colours, 32 reserved u32), then ``float4`` positions (xyz and inverse mass) at their offset.
+TressFX 3 (version 3.x; AMD's ``TressFXFileObject`` in TressFX 3.0's ``TressFXFileFormat.h``): a
+296-byte header (f32 version, u32 strand count, u32 points per strand, u32 follow hairs per guide, a
+4-byte bool, 31 reserved u32, then at byte 144 the u32 offset of the vertex positions, five more
+offsets and 32 reserved u32), then ``float3`` positions. Every strand has the same point count.
+ASCII 2.0: ``key value`` header lines, then per strand a line ``strand i numVerts n texcoord u v``
+followed by ``n`` lines of ``x y z``.
 TressFX assets are y-up (game-engine convention); the format names no units.
 """
 
@@ -15,10 +19,13 @@ from pathlib import Path
 
 import numpy as np
 
+from ..atomic import atomic_open
 from ..strands import Strands
 from ._common import StrandFileError, finish, need, offsets_from_counts, read_bytes, warn
 
-HEADER = struct.Struct("<fIIIIIII32I")  # 160 bytes
+HEADER = struct.Struct("<fIIIIIII32I")  # 160 bytes (TressFX 4)
+V3_HEADER_SIZE = 296
+V3_POSITIONS_OFFSET = 144  # where TressFX 3 stores the byte offset of its float3 positions
 SUPPORTED_MAJOR = (3, 4)
 MAX_POINTS = 1 << 16
 
@@ -36,16 +43,20 @@ def _load_binary(path: str | Path, data: bytes) -> Strands:
     if not np.isfinite(version) or int(version) not in SUPPORTED_MAJOR:
         raise StrandFileError(path, f"not a TressFX 3/4 binary file: version field reads {version!r} "
                                     "(TressFX 2 files are ASCII and start with 'version')")
+    header, floats = (HEADER.size, 4) if int(version) == 4 else (V3_HEADER_SIZE, 3)
+    if header == V3_HEADER_SIZE:
+        need(path, data, V3_HEADER_SIZE, "the 296-byte TressFX 3 header")
+        off_pos = struct.unpack_from("<I", data, V3_POSITIONS_OFFSET)[0]
     if n_strands == 0 or not 2 <= n_per <= MAX_POINTS:
         raise StrandFileError(path, f"implausible header: {n_strands} strands of {n_per} points")
-    if off_pos < HEADER.size:
-        raise StrandFileError(path, f"vertex positions offset {off_pos} points inside the header")
+    if off_pos < header:
+        raise StrandFileError(path, f"vertex positions offset {off_pos} points inside the {header}-byte header")
     n = n_strands * n_per
-    need(path, data, off_pos + 16 * n, f"the positions of {n_strands} strands x {n_per} points")
-    xyzw = np.frombuffer(data, "<f4", 4 * n, off_pos).reshape(-1, 4)
-    points = np.ascontiguousarray(xyzw[:, :3], np.float32)
+    need(path, data, off_pos + 4 * floats * n, f"the positions of {n_strands} strands x {n_per} points")
+    xyz = np.frombuffer(data, "<f4", floats * n, off_pos).reshape(-1, floats)
+    points = np.ascontiguousarray(xyz[:, :3], np.float32)
     root_uv = None
-    if off_uv >= HEADER.size and off_uv + 8 * n_strands <= len(data):
+    if floats == 4 and off_uv >= HEADER.size and off_uv + 8 * n_strands <= len(data):  # TressFX 4's strand UVs
         root_uv = np.frombuffer(data, "<f4", 2 * n_strands, off_uv).reshape(-1, 2).astype(np.float32)
         if not root_uv.any():  # writers that have no UVs fill zeros
             root_uv = None
@@ -133,7 +144,7 @@ def save(strands: Strands, path: str | Path) -> None:
     off_pos = HEADER.size
     off_uv = off_pos + xyzw.nbytes
     header = HEADER.pack(4.0, strands.count, n_per, off_pos, off_uv, 0, 0, 0, *([0] * 32))
-    with open(path, "wb") as f:
+    with atomic_open(path) as f:
         f.write(header)
         f.write(xyzw.tobytes())
         uv = np.zeros((strands.count, 2), "<f4") if strands.root_uv is None else strands.root_uv.astype("<f4")

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..atomic import atomic_open
 from ..strands import Strands
 from ._common import StrandFileError, finish, need, offsets_from_counts, read_bytes
 
@@ -49,7 +50,7 @@ def load(path: str | Path) -> Strands:
 
 
 def save(strands: Strands, path: str | Path) -> None:
-    with open(path, "wb") as f:
+    with atomic_open(path) as f:
         f.write(np.int32(strands.count).astype("<i4").tobytes())
         pts = strands.points.astype("<f4")
         for i in range(strands.count):

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..errors import require
 from ..strands import Strands
-from ._common import StrandFileError, finish, linear_to_srgb, offsets_from_counts
+from ._common import StrandFileError, finish, linear_to_srgb, offsets_from_counts, read_bytes
 
 CUBIC_SAMPLES = 4
 BASIS = {
@@ -38,6 +38,13 @@ def _pxr():
 
 def load(path: str | Path) -> Strands:
     Usd, UsdGeom = _pxr()
+    with open(path, "rb") as f:
+        text = f.read(6) == b"#usda "
+    if text:  # usd-core reads text layers as UTF-8, and its errors about other bytes fail to print
+        try:
+            read_bytes(path).decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise StrandFileError(path, f"a .usda file must be UTF-8 text; byte offset {exc.start} is not") from None
     try:
         stage = Usd.Stage.Open(str(path))
     except Exception as exc:  # pxr raises Tf.ErrorException (a RuntimeError) with USD's own message
@@ -68,8 +75,12 @@ def load(path: str | Path) -> Strands:
 
 def _usd_message(exc: Exception) -> str:
     """The readable part of a Tf error: the quoted texts after each ``Error in '...' at line ... :``."""
-    msgs = [part.split(" : ", 1)[1].strip().strip("'") for part in str(exc).split("\n\tError in ") if " : " in part]
-    return "; ".join(m.strip() for m in msgs)[:400] or str(exc).strip()[:400]
+    try:
+        text = str(exc)
+    except UnicodeDecodeError:  # USD quotes the file's bytes in its messages
+        return "its error message is not UTF-8 text"
+    msgs = [part.split(" : ", 1)[1].strip().strip("'") for part in text.split("\n\tError in ") if " : " in part]
+    return "; ".join(m.strip() for m in msgs)[:400] or text.strip()[:400]
 
 
 def _curves(path, curves, time):

@@ -29,7 +29,6 @@ coordinate and width and divides ``metersPerUnit``, so the hair keeps its real s
 
 from __future__ import annotations
 
-import os
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -37,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from ..asset import HairAsset
+from ..atomic import atomic_path
 from ..errors import CghError, require
 from ..strands import Strands
 from ._common import check_scale, scale_strands, srgb_to_linear, warn
@@ -129,20 +129,20 @@ def write_stage(path: Path, build: Callable, meters_per_unit: float, up_axis: st
         with tempfile.TemporaryDirectory() as tmp:
             inner = Path(tmp) / (path.stem + ".usdc")
             write_stage(inner, build, meters_per_unit, up_axis)
-            if path.exists():
-                os.remove(path)
-            if not UsdUtils.CreateNewUsdzPackage(str(inner), str(path)):
-                raise CghError(f"{path}: usd-core could not write the .usdz package")
+            with atomic_path(path) as out:
+                if not UsdUtils.CreateNewUsdzPackage(str(inner), str(out)):
+                    raise CghError(f"{path}: usd-core could not write the .usdz package")
         return
-    stage = Usd.Stage.CreateNew(str(path))
-    UsdGeom.SetStageMetersPerUnit(stage, float(meters_per_unit))
-    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y if up_axis == "Y" else UsdGeom.Tokens.z)
-    root = UsdGeom.Xform.Define(stage, ROOT).GetPrim()
-    stage.SetDefaultPrim(root)
-    if hasattr(Usd, "ColorSpaceAPI"):  # usd-core >= 25.11
-        Usd.ColorSpaceAPI.Apply(root).CreateColorSpaceNameAttr(LINEAR)
-    build(stage, root, path)
-    stage.GetRootLayer().Save()
+    with atomic_path(path) as out:
+        stage = Usd.Stage.CreateNew(str(out))
+        UsdGeom.SetStageMetersPerUnit(stage, float(meters_per_unit))
+        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y if up_axis == "Y" else UsdGeom.Tokens.z)
+        root = UsdGeom.Xform.Define(stage, ROOT).GetPrim()
+        stage.SetDefaultPrim(root)
+        if hasattr(Usd, "ColorSpaceAPI"):  # usd-core >= 25.11
+            Usd.ColorSpaceAPI.Apply(root).CreateColorSpaceNameAttr(LINEAR)
+        build(stage, root, path)  # the final path: files written beside it are named after it
+        stage.GetRootLayer().Save()
 
 
 def _point_average(seg: np.ndarray) -> np.ndarray:

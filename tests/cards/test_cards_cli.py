@@ -77,7 +77,7 @@ def test_debug_dir_must_be_a_folder(strand_file, tmp_path, capsys):
 
 def test_missing_output_folder(strand_file, tmp_path, capsys):
     assert main(["cards", str(strand_file), "-o", str(tmp_path / "nope" / "o.cgh"), "--no-progress"]) == 2
-    assert "No such" in capsys.readouterr().err
+    assert "does not exist" in capsys.readouterr().err
 
 
 def test_output_must_be_cgh(strand_file, tmp_path, capsys):

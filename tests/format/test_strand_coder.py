@@ -309,9 +309,10 @@ def test_a_mix_of_widths_the_estimate_prefers_is_kept_only_where_it_codes_smalle
     assert cgh.encode(example_asset(seed), "compact")[1].chunk_sizes["STRD"] > report.chunk_sizes["STRD"]
 
 
-def test_a_step_that_decodes_beyond_float32_is_refused():
-    """A corrupt but well-formed step (1e40 scene units) scales the residuals past what float32 holds."""
-    with pytest.raises(InvalidContentError, match="beyond float32's range"):
+def test_a_step_beyond_the_length_limit_is_refused():
+    """A corrupt but well-formed step (1e40 scene units, which would scale the residuals past what float32
+    holds) is refused from META, beyond MAX_LENGTH."""
+    with pytest.raises(InvalidContentError, match="'step' is missing or out of range"):
         cgh.decode(_vector_with_quant(lambda quant: quant.update(step=1e40)))
 
 
@@ -378,7 +379,8 @@ def test_a_pre_release_draft_file_gets_a_clear_error(edit):
 @pytest.mark.parametrize("steps", [[], [0.1, 0.1], [0.1, 0.1, 0.0], [0.1, -0.1, 0.1], [0.1, 0.1, "0.1"],
                                    [0.1, 0.1, True], [0.1, 0.1, 0.1, 0.1], [0.1, 0.1, float("nan")]])
 def test_weight_steps_out_of_range_are_refused(steps):
-    with pytest.raises(InvalidContentError, match="weight_steps must list 3 positive steps"):
+    # NaN is refused as META's JSON is read (no JSON number is NaN), before the field is checked
+    with pytest.raises(InvalidContentError, match="weight_steps must list 3 positive steps|NaN is not a JSON"):
         cgh.decode(_vector_with_quant(lambda quant: quant.update(weight_steps=steps)))
 
 

@@ -1,0 +1,178 @@
+""".cgh files crafted to break a reader (issue 21), and a runner that measures what refusing each costs.
+
+Each case is a small valid file with one thing changed and its checksums re-sealed, so that the change
+reaches the part of the reader it aims at. ``python tests/hostile.py`` decodes every case in this
+process and prints one line per case: the error, the seconds, and the peak resident memory above what
+the process held before (Linux ``VmHWM``, reset per case through ``/proc/self/clear_refs``), which
+counts zstd's and numpy's C allocations that tracemalloc misses.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+import sys
+import time
+from collections.abc import Callable
+
+import numpy as np
+import zstandard
+
+import cghair_format as cgh
+from cghair_format import codec, container
+from cghair_format.examples import example_asset
+from cghair_format.limits import ReadLimits
+from cghair_format.streams import StreamReader, StreamWriter
+
+
+def small_file(profile: str = "compact") -> bytes:
+    return cgh.encode(example_asset(11, strands=24, points=12, cards=4, segments=5), profile)[0]
+
+
+def reseal(data: bytes, payloads: dict[str, bytes] | None = None,
+           bodies: dict[str, tuple[int, bytes, int]] | None = None, extra: list[container.Chunk] = ()) -> bytes:
+    """``data`` with some chunks' payloads replaced (``payloads``), or their stored bytes (``bodies``:
+    ``type -> (codec, stored bytes, raw size)``), ``extra`` chunks appended, every checksum recomputed."""
+    _, infos, old = container.unpack(data, set(codec.KNOWN_CHUNKS))
+    stored = []
+    for info in infos:
+        chunk = container.Chunk(info.type, (payloads or {}).get(info.type, old[info.type]), info.required)
+        if bodies and info.type in bodies:
+            kind, body, raw = bodies[info.type]
+            chunk.payload = bytes(raw)  # only its length goes into the table
+            stored.append(container.Stored(chunk, kind, body))
+        else:
+            stored.append(container.compress(chunk, 3))
+    stored += [container.compress(c, 3) for c in extra]
+    return container.assemble(stored)
+
+
+def with_meta(data: bytes, edit: Callable[[str], str]) -> bytes:
+    """``data`` with META's JSON text edited by ``edit``."""
+    meta = container.unpack(data, set(codec.KNOWN_CHUNKS), {"META"})[2]["META"].decode()
+    return reseal(data, {"META": edit(meta).encode()})
+
+
+def set_field(data: bytes, path: tuple[str, ...], text: str) -> bytes:
+    """META field ``path`` set to the raw JSON ``text`` (which may be beyond what json.dumps writes)."""
+    def edit(meta: str) -> str:
+        obj = json.loads(meta)
+        node = obj
+        for key in path[:-1]:
+            node = node[key]
+        node[path[-1]] = "@@"
+        return json.dumps(obj).replace('"@@"', text)
+    return with_meta(data, edit)
+
+
+def zstd_frame(declared: int | None, blocks: int, block: int = 1 << 17) -> bytes:
+    """A zstd frame of ``blocks`` RLE blocks of ``block`` zero bytes whose header declares ``declared``
+    bytes (None: no size), written by hand as no compressor declares a size it does not write."""
+    if declared is None:
+        head = bytes([0x00, 0x58])  # no content size, not single-segment; window 2^(10 + 11) ...
+    else:
+        head = bytes([0xC0, 0x58]) + struct.pack("<Q", declared)  # ... 8-byte content size
+    body = b""
+    for i in range(blocks):
+        last = 1 if i == blocks - 1 else 0
+        body += ((block << 3) | (1 << 1) | last).to_bytes(3, "little") + b"\0"  # RLE block of zeros
+    return b"\x28\xb5\x2f\xfd" + head + body
+
+
+def lossless_spine(value: float) -> bytes:
+    data = small_file("lossless")
+    payload = container.unpack(data, set(codec.KNOWN_CHUNKS))[2]["CARD"]
+    r = StreamReader(payload, "CARD")
+    arrays = [r.array((None, None, 3), "spine"), r.array((None, None, 3), "normal"), r.array((None, None), "hw"),
+              r.array((None,), "group")]
+    arrays[0] = arrays[0].copy()
+    arrays[0][0, 0, 0] = value
+    w = StreamWriter()
+    for a in arrays:
+        w.array(a, shuffle=True)
+    return reseal(data, {"CARD": w.getvalue()})
+
+
+def meta_bomb(raw: int) -> bytes:
+    """META stored as a zstd stream of ``raw`` zero bytes (64 KB of it make 2 GB)."""
+    z = zstandard.ZstdCompressor(level=1).compressobj()
+    body = b"".join(z.compress(bytes(1 << 20)) for _ in range(raw >> 20)) + z.flush()
+    return reseal(small_file(), bodies={"META": (container.CODEC_ZSTD, body, raw)})
+
+
+def flipped_unknown_chunk() -> bytes:
+    data = bytearray(reseal(small_file(), extra=[container.Chunk("XTRA", bytes(range(256)) * 4, required=False)]))
+    _, infos = container.read_table(bytes(data))
+    xtra = next(i for i in infos if i.type == "XTRA")
+    data[xtra.offset + 10] ^= 0x01
+    return bytes(data)
+
+
+def cases() -> dict[str, tuple[Callable[[], bytes], ReadLimits | None]]:
+    """Name -> (the file's builder, the limits to read it with; None: the defaults)."""
+    huge = "1" + "0" * 400
+    out = {
+        "zstd frame declaring 2^40 bytes": (lambda: _frame_in_card(1 << 40), None),
+        "zstd frame of unknown size beyond raw_size": (lambda: _frame_in_card(None), None),
+        "META zstd bomb (2047 MiB in 64 KB)": (lambda: meta_bomb(2047 << 20), None),
+        "META strands 2^24 - 1": (lambda: set_field(small_file(), ("strands",), str((1 << 24) - 1)), None),
+        "META strands 2^20 (payloads too small)": (lambda: set_field(small_file(), ("strands",), str(1 << 20)), None),
+        "META points 4096, strands 2^20": (
+            lambda: set_field(set_field(small_file(), ("points",), "4096"), ("strands",), str(1 << 20)), None),
+        "more Gaussians than the limit": (small_file, ReadLimits(max_gaussians=100)),
+        "more decoded bytes than the limit": (small_file, ReadLimits(max_decoded_bytes=10_000)),
+        "base_stride 3": (lambda: set_field(small_file(), ("quant", "base_stride"), "3"), None),
+        "thickness 1e308": (lambda: set_field(small_file(), ("thickness",), "1e308"), None),
+        "thickness 1e400": (lambda: set_field(small_file(), ("thickness",), "1e400"), None),
+        "lossless spine at 3e38": (lambda: lossless_spine(3e38), None),
+        "lossless spine at inf": (lambda: lossless_spine(np.inf), None),
+        "XMET with NaN": (lambda: reseal(small_file(), extra=[container.Chunk("XMET", b'{"a": NaN}', False)]),
+                          None),
+        "flipped byte in an unknown optional chunk": (flipped_unknown_chunk, None),
+    }
+    for path in (("thickness",), ("temperature",), ("quant", "step"), ("quant", "card_step"),
+                 ("quant", "opacity_scale"), ("quant", "weight_steps")):
+        text = f"[{huge}, 1, 1, 1]" if path[-1] == "weight_steps" else huge
+        out[f"{'.'.join(path)} = 10^400"] = (lambda p=path, t=text: set_field(small_file(), p, t), None)
+    return out
+
+
+def _frame_in_card(declared: int | None) -> bytes:
+    data = small_file()
+    raw = next(i.raw for i in container.read_table(data)[1] if i.type == "CARD")
+    return reseal(data, bodies={"CARD": (container.CODEC_ZSTD, zstd_frame(declared, 64), raw)})
+
+
+def _rss(field: str) -> int:
+    with open("/proc/self/status") as f:
+        return next(int(line.split()[1]) * 1024 for line in f if line.startswith(field))
+
+
+def measure(data: bytes, limits: ReadLimits | None) -> tuple[str, float, int]:
+    """Decode ``data`` (to Gaussians, as a viewer does): the outcome, seconds, and peak RSS bytes above the
+    RSS before."""
+    with open("/proc/self/clear_refs", "w") as f:
+        f.write("5")  # reset VmHWM to the current RSS
+    before = _rss("VmRSS:")
+    start = time.perf_counter()
+    try:
+        cgh.read_with_gaussians(data, limits)
+        outcome = "decoded"
+    except cgh.CghFormatError as exc:
+        outcome = f"{type(exc).__name__}|{exc.chunk}|{exc.offset}|{exc}"
+    except Exception as exc:  # noqa: BLE001 - what the test reports as an escape
+        outcome = f"ESCAPE {type(exc).__name__}: {exc}"
+    seconds = time.perf_counter() - start
+    return outcome, seconds, _rss("VmHWM:") - before
+
+
+def main() -> None:
+    built = {name: (build(), limits) for name, (build, limits) in cases().items()}
+    for name, (data, limits) in built.items():
+        outcome, seconds, peak = measure(data, limits)
+        print(json.dumps({"case": name, "bytes": len(data), "outcome": outcome, "seconds": seconds, "peak": peak}),
+              flush=True)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
