@@ -497,9 +497,9 @@ def test_the_dead_zone_moves_a_sample_that_rounding_leaves_beyond_the_tolerance(
 
 def test_the_writer_tries_the_neighbours_residual_where_a_cards_strands_are_alike():
     """Densified strands (each between two real ones) are much alike: the neighbour's residual pays.
-    Ratboy's own strands are not alike enough, and the writer keeps the plain dead zone."""
+    Ratboy's strands, evenly re-spaced, are not alike enough, and the writer keeps the plain dead zone."""
     from cghair_format.cards import build_cards
-    from cghair_format.strands import densify
+    from cghair_format.strands import densify, resample
 
     calls = []
     real = codec._choose_neighbour_zone
@@ -509,7 +509,7 @@ def test_the_writer_tries_the_neighbours_residual_where_a_cards_strands_are_alik
         return calls[-1]
 
     with unittest.mock.patch.object(codec, "_choose_neighbour_zone", spy):
-        strands = load_hair("Ratboy_mohawk.tfx")
+        strands = resample(load_hair("Ratboy_mohawk.tfx"), 32)
         plain = build_cards(strands, n_cards=60, n_groups=4, points=32, seed=0, progress=False).asset
         cgh.encode(plain, "compact")
         plain_calls, calls[:] = list(calls), []
