@@ -3,8 +3,8 @@
 backward, run on every core through OpenMP with the GIL released.
 
 - :func:`project`: per Gaussian, EWA projection, SH colour and the tiles its footprint touches.
-- :func:`bin_tiles`: the visible Gaussians in depth order (stable), their features packed in that
-  order, and per 16 x 16 tile the list of Gaussians front to back.
+- :func:`bin_tiles`: the Gaussians in depth order (stable) and per 16 x 16 tile the list of
+  those it touches, front to back.
 - :func:`rasterize`: per tile, front-to-back compositing with early termination; keeps per pixel
   the final transmittance and the last contribution, all the backward pass needs.
 - :func:`rasterize_backward`: per tile, each pixel's contributions walked back to front;
@@ -16,11 +16,22 @@ from cython.parallel import prange
 
 from libc.math cimport ceil, expf, floor, log, sqrt
 from libc.stdint cimport int32_t, int64_t, uint32_t
-from libc.string cimport memcpy
+from libc.stdlib cimport free, malloc
 
 cdef enum:
     TILE = 16  # tile side in pixels
-    NF = 13  # packed per-Gaussian features, see pack()
+    NF = 13  # per-Gaussian features the rasterizer reads, see project()
+    AHEAD = 16  # entries prefetched ahead: the features of a tile's list are scattered in memory
+
+cdef extern from *:
+    """
+    #if defined(__GNUC__)
+    #define PREFETCH(p) __builtin_prefetch(p)
+    #else
+    #define PREFETCH(p) ((void)0)
+    #endif
+    """
+    void PREFETCH(const void* p) noexcept nogil
 
 cdef double NEAR_PLANE = 0.01
 cdef double DILATION = 0.3
@@ -142,9 +153,8 @@ cdef inline double footprint_q(float opacity) noexcept nogil:
 
 
 cdef void project_one(const float* mean, const float* quat, const float* scale, float opacity,
-                      const float* sh, int nc, const double* cam, int width, int height, float* mean2d,
-                      float* conic, float* depth, float* colour, float* extent, int32_t* rect,
-                      int64_t* ntiles) noexcept nogil:
+                      const float* sh, int nc, const double* cam, int width, int height, float* f,
+                      int32_t* rect, int64_t* ntiles) noexcept nogil:
     cdef double fx = cam[15], fy = cam[16], cx = cam[17], cy = cam[18]
     cdef double t[3]
     cdef double q[4]
@@ -162,7 +172,7 @@ cdef void project_one(const float* mean, const float* quat, const float* scale, 
     cdef int k, j, ch, x0, x1, y0, y1
     for k in range(3):
         t[k] = cam[3 * k] * mean[0] + cam[3 * k + 1] * mean[1] + cam[3 * k + 2] * mean[2] + cam[9 + k]
-    depth[0] = <float>t[2]
+    f[9] = <float>t[2]
     for k in range(4):
         rect[k] = 0
     ntiles[0] = 0
@@ -186,13 +196,14 @@ cdef void project_one(const float* mean, const float* quat, const float* scale, 
     cb = a0[0] * a1[0] + a0[1] * a1[1] + a0[2] * a1[2]
     cc = a1[0] * a1[0] + a1[1] * a1[1] + a1[2] * a1[2] + DILATION
     det = ca * cc - cb * cb
-    conic[0] = <float>(cc / det)
-    conic[1] = <float>(-cb / det)
-    conic[2] = <float>(ca / det)
+    f[2] = <float>(cc / det)
+    f[3] = <float>(-cb / det)
+    f[4] = <float>(ca / det)
+    f[5] = opacity
     mx = fx * x / z + cx
     my = fy * y / z + cy
-    mean2d[0] = <float>mx
-    mean2d[1] = <float>my
+    f[0] = <float>mx
+    f[1] = <float>my
     mid = 0.5 * (ca + cc)
     lam = mid + sqrt(dmax(mid * mid - det, 0.0))
     rad = ceil(SIGMA_SUPPORT * sqrt(lam))
@@ -204,12 +215,13 @@ cdef void project_one(const float* mean, const float* quat, const float* scale, 
         col = 0.0
         for k in range(nc):
             col += b[k] * sh[3 * k + ch]
-        colour[ch] = <float>dmax(col + 0.5, 0.0)
+        f[6 + ch] = <float>dmax(col + 0.5, 0.0)
     qmax = footprint_q(opacity)
     hx = dmin(sqrt(qmax * ca), rad)
     hy = dmin(sqrt(qmax * cc), rad)
-    extent[0] = <float>rad
-    extent[1] = <float>hy
+    f[10] = <float>qmax
+    f[11] = <float>rad
+    f[12] = <float>hy
     # pixels k with |k + 0.5 - m| <= h, clipped to the image, then their tiles
     x0 = <int>dmax(ceil(mx - hx - 0.5), 0.0)
     x1 = <int>dmin(floor(mx + hx - 0.5), width - 1.0)
@@ -226,112 +238,99 @@ cdef void project_one(const float* mean, const float* quat, const float* scale, 
 
 def project(const float[:, ::1] means, const float[:, ::1] quats, const float[:, ::1] scales,
             const float[::1] opacities, const float[:, :, ::1] sh, const double[::1] cam,
-            int width, int height, float[:, ::1] mean2d, float[:, ::1] conic, float[::1] depth,
-            float[:, ::1] colour, float[:, ::1] extent, int32_t[:, ::1] rect, int64_t[::1] ntiles):
-    """Per Gaussian: screen centre, conic, camera depth, colour, (radius, half-height of the
-    footprint's rows) and the tile rectangle [x0, y0, x1, y1) its footprint touches (ntiles 0 when
-    culled). ``cam`` holds world-to-camera rotation (9, row-major), translation (3), camera centre
-    (3), fx, fy, cx, cy."""
+            int width, int height, float[:, ::1] feat, int32_t[:, ::1] rect, int64_t[::1] ntiles):
+    """Per Gaussian the features the rasterizer reads, ``feat [G, 13]``: screen centre (2), conic
+    (3), opacity, colour (3), camera depth, footprint bound q, radius, half-height of the footprint's
+    rows; and the tile rectangle [x0, y0, x1, y1) its footprint touches (ntiles 0 when culled).
+    ``cam`` holds world-to-camera rotation (9, row-major), translation (3), camera centre (3),
+    fx, fy, cx, cy."""
     cdef Py_ssize_t g
     cdef int nc = sh.shape[1]
     for g in prange(means.shape[0], nogil=True, schedule="static"):
         project_one(&means[g, 0], &quats[g, 0], &scales[g, 0], opacities[g], &sh[g, 0, 0], nc, &cam[0],
-                    width, height, &mean2d[g, 0], &conic[g, 0], &depth[g], &colour[g, 0], &extent[g, 0],
-                    &rect[g, 0], &ntiles[g])
+                    width, height, &feat[g, 0], &rect[g, 0], &ntiles[g])
 
 
-def bin_tiles(const float[::1] depth, const int32_t[:, ::1] rect, const int64_t[::1] ntiles,
-              int tiles_x, int tiles_y, int32_t[::1] order, int32_t[::1] scratch, int64_t[::1] pair_start,
-              int32_t[::1] tile_start, int32_t[::1] entries, int32_t[::1] entry_pair):
+cdef struct Item:  # a Gaussian and its sort key (the bits of its depth)
+    uint32_t key
+    int32_t g
+
+
+def bin_tiles(const float[:, ::1] feat, const int32_t[:, ::1] rect, const int64_t[::1] ntiles,
+              int tiles_x, int tiles_y, int64_t[::1] pair_start, int32_t[::1] tile_start,
+              int32_t[::1] entries, int32_t[::1] entry_pair):
     """Sort the Gaussians with tiles by depth (stable radix sort of the float bits, so ties keep
     input order as the reference's stable argsort does), then list them per tile front to back.
 
-    Fills ``order[:v]`` (Gaussian of each depth rank), ``pair_start[:v+1]`` (first (Gaussian, tile)
-    pair of each rank), ``tile_start[:tiles+1]`` (first entry of each tile), ``entries`` (rank of
-    each entry) and ``entry_pair`` (its pair index); returns v. ``scratch`` is as long as ``order``,
-    ``entries`` as the number of pairs. Serial: a few passes over the arrays.
+    Fills ``pair_start[:G+1]`` (first (Gaussian, tile) pair of each Gaussian, in input order),
+    ``tile_start[:tiles+1]`` (first entry of each tile), ``entries`` (the Gaussian of each entry,
+    as long as the number of pairs) and ``entry_pair`` (its pair index); returns the number of
+    Gaussians with tiles. Serial: a few passes over the arrays.
     """
-    cdef Py_ssize_t n = depth.shape[0], g, i, v = 0, k
+    cdef Py_ssize_t n = feat.shape[0], g, i, v = 0, k
     cdef int tiles = tiles_x * tiles_y, pass_, shift, tx, ty
-    cdef uint32_t key
-    cdef int64_t p, hist[2048]
-    cdef const uint32_t* bits = <const uint32_t*>&depth[0]
-    cdef int32_t* src = &order[0]
-    cdef int32_t* dst = &scratch[0]
-    cdef int32_t* swap
-    cdef int32_t* cursor = &scratch[0]
+    cdef int64_t p, c
+    cdef int64_t hist[2048]
+    cdef Item* src = <Item*>malloc(max(n, 1) * sizeof(Item))
+    cdef Item* dst = <Item*>malloc(max(n, 1) * sizeof(Item))
+    cdef int64_t* cursor = <int64_t*>malloc((tiles + 1) * sizeof(int64_t))
+    cdef Item* swap
+    if src == NULL or dst == NULL or cursor == NULL:
+        free(src)
+        free(dst)
+        free(cursor)
+        raise MemoryError()
     with nogil:
+        pair_start[0] = 0
+        for k in range(tiles + 1):
+            tile_start[k] = 0
         for g in range(n):
+            pair_start[g + 1] = pair_start[g] + ntiles[g]
             if ntiles[g] > 0:
-                src[v] = <int32_t>g
+                src[v].key = (<const uint32_t*>&feat[g, 9])[0]
+                src[v].g = <int32_t>g
                 v += 1
+                for ty in range(rect[g, 1], rect[g, 3]):
+                    for tx in range(rect[g, 0], rect[g, 2]):
+                        tile_start[ty * tiles_x + tx + 1] += 1
         for pass_ in range(3):  # 11 + 11 + 10 bits; positive floats sort as their bit patterns
             shift = 11 * pass_
             for k in range(2048):
                 hist[k] = 0
             for i in range(v):
-                hist[(bits[src[i]] >> shift) & 2047] += 1
+                hist[(src[i].key >> shift) & 2047] += 1
             p = 0
             for k in range(2048):
-                key = <uint32_t>hist[k]
+                c = hist[k]
                 hist[k] = p
-                p += key
+                p += c
             for i in range(v):
-                k = (bits[src[i]] >> shift) & 2047
+                k = (src[i].key >> shift) & 2047
                 dst[hist[k]] = src[i]
                 hist[k] += 1
             swap = src
             src = dst
             dst = swap
-        if v > 0:  # after three passes the sorted ranks are in scratch
-            memcpy(&order[0], src, v * sizeof(int32_t))
-        for k in range(tiles + 1):
-            tile_start[k] = 0
-        pair_start[0] = 0
-        for i in range(v):
-            g = order[i]
-            pair_start[i + 1] = pair_start[i] + ntiles[g]
-            for ty in range(rect[g, 1], rect[g, 3]):
-                for tx in range(rect[g, 0], rect[g, 2]):
-                    tile_start[ty * tiles_x + tx + 1] += 1
         for k in range(tiles):
             tile_start[k + 1] += tile_start[k]
             cursor[k] = tile_start[k]
-        p = 0
         for i in range(v):
-            g = order[i]
+            if i + AHEAD < v:
+                PREFETCH(&rect[src[i + AHEAD].g, 0])
+                PREFETCH(&pair_start[src[i + AHEAD].g])
+            g = src[i].g
+            p = pair_start[g]
             for ty in range(rect[g, 1], rect[g, 3]):
                 for tx in range(rect[g, 0], rect[g, 2]):
                     k = ty * tiles_x + tx
-                    entries[cursor[k]] = <int32_t>i
+                    entries[cursor[k]] = <int32_t>g
                     entry_pair[cursor[k]] = <int32_t>p
                     cursor[k] += 1
                     p += 1
+    free(src)
+    free(dst)
+    free(cursor)
     return v
-
-
-def pack(const int32_t[::1] order, Py_ssize_t v, const float[:, ::1] mean2d, const float[:, ::1] conic,
-         const float[::1] opacities, const float[:, ::1] colour, const float[::1] depth,
-         const float[:, ::1] extent, float[:, ::1] feat):
-    """Per depth rank the features the rasterizer reads, contiguous in the order it reads them:
-    centre (2), conic (3), opacity, colour (3), depth, footprint bound q, radius, row half-height."""
-    cdef Py_ssize_t i
-    cdef int32_t g
-    for i in prange(v, nogil=True, schedule="static"):
-        g = order[i]
-        feat[i, 0] = mean2d[g, 0]
-        feat[i, 1] = mean2d[g, 1]
-        feat[i, 2] = conic[g, 0]
-        feat[i, 3] = conic[g, 1]
-        feat[i, 4] = conic[g, 2]
-        feat[i, 5] = opacities[g]
-        feat[i, 6] = colour[g, 0]
-        feat[i, 7] = colour[g, 1]
-        feat[i, 8] = colour[g, 2]
-        feat[i, 9] = depth[g]
-        feat[i, 10] = <float>footprint_q(opacities[g])
-        feat[i, 11] = extent[g, 0]
-        feat[i, 12] = extent[g, 1]
 
 
 cdef inline int row_span(const float* f, int y, int x_lo, int x_hi, int* x0, int* x1) noexcept nogil:
@@ -366,6 +365,7 @@ cdef void raster_tile(int tile, int tiles_x, int width, int height, const float*
     cdef double acc[TILE * TILE * 4]
     cdef int32_t lst[TILE * TILE]
     cdef char done[TILE * TILE]
+    cdef int rowleft[TILE]  # pixels of each row still compositing
     cdef int start = tile_start[tile], end = tile_start[tile + 1], npix = tw * th, ndone = 0
     cdef int e, k, y, x, x0, x1, y0, y1, pix, ch
     cdef const float* f
@@ -379,14 +379,18 @@ cdef void raster_tile(int tile, int tiles_x, int width, int height, const float*
         acc[4 * k + 1] = 0.0
         acc[4 * k + 2] = 0.0
         acc[4 * k + 3] = 0.0
+    for k in range(TILE):
+        rowleft[k] = tw
     for e in range(start, end):
         if ndone == npix:
             break
+        if e + AHEAD < end:
+            PREFETCH(feat + NF * entries[e + AHEAD])
         f = feat + NF * entries[e]
         y0 = <int>dmax(ceil(f[1] - f[12] - 0.5), ty0)
         y1 = <int>dmin(floor(f[1] + f[12] - 0.5), ty0 + th - 1)
         for y in range(y0, y1 + 1):
-            if not row_span(f, y, tx0, tx0 + tw - 1, &x0, &x1):
+            if rowleft[y - ty0] == 0 or not row_span(f, y, tx0, tx0 + tw - 1, &x0, &x1):
                 continue
             dy = <float>y + half - f[1]
             for x in range(x0, x1 + 1):
@@ -402,6 +406,7 @@ cdef void raster_tile(int tile, int tiles_x, int width, int height, const float*
                 if tn < T_MIN:  # as 3DGS: stop before the contribution that would take T below 1e-4
                     done[pix] = 1
                     ndone += 1
+                    rowleft[y - ty0] -= 1
                     continue
                 w = a * trans[pix]
                 acc[4 * pix] += w * f[6]
@@ -447,19 +452,25 @@ cdef void raster_tile_backward(int tile, int tiles_x, int width, int height, con
     cdef double dc[TILE * TILE * 3]
     cdef double dfin[TILE * TILE]  # (dL/dalpha - bg . dL/drgb) * T_final
     cdef int32_t lst[TILE * TILE]
+    cdef int rowlast[TILE]  # the last contribution of each row
     cdef int start = tile_start[tile], n = tile_start[tile + 1] - start, maxlast = -1
     cdef int le, k, y, x, x0, x1, y0, y1, pix, ch
     cdef const float* f
     cdef float* out
     cdef float a, raw, gauss, dx, dy, half = 0.5
-    cdef double oma, tb, w, dlda, dpow, gr[9]
+    cdef double oma, tb, w, dlda, dpow
+    cdef double gr[9]
     for k in range(TILE * TILE):
         lst[k] = -1
+    for k in range(TILE):
+        rowlast[k] = -1
     for y in range(th):
         for x in range(tw):
             pix = y * TILE + x
             k = (ty0 + y) * width + tx0 + x
             lst[pix] = last[k]
+            if last[k] > rowlast[y]:
+                rowlast[y] = last[k]
             if last[k] > maxlast:
                 maxlast = last[k]
             trans[pix] = t_final[k]
@@ -473,11 +484,13 @@ cdef void raster_tile_backward(int tile, int tiles_x, int width, int height, con
         for k in range(9):
             gr[k] = 0.0
         if le <= maxlast:
+            if le >= AHEAD:
+                PREFETCH(feat + NF * entries[start + le - AHEAD])
             f = feat + NF * entries[start + le]
             y0 = <int>dmax(ceil(f[1] - f[12] - 0.5), ty0)
             y1 = <int>dmin(floor(f[1] + f[12] - 0.5), ty0 + th - 1)
             for y in range(y0, y1 + 1):
-                if not row_span(f, y, tx0, tx0 + tw - 1, &x0, &x1):
+                if le > rowlast[y - ty0] or not row_span(f, y, tx0, tx0 + tw - 1, &x0, &x1):
                     continue
                 dy = <float>y + half - f[1]
                 for x in range(x0, x1 + 1):
@@ -528,8 +541,8 @@ def rasterize_backward(const float[:, ::1] feat, const int32_t[::1] tile_start,
 
 cdef void project_backward_one(const float* mean, const float* quat, const float* scale, const float* sh,
                                int nc, const double* cam, const float* pair_grad, int64_t npairs,
-                               float* g_mean, float* g_quat, float* g_scale, float* g_opacity,
-                               float* g_sh) noexcept nogil:
+                               int geometry, float* g_mean, float* g_quat, float* g_scale,
+                               float* g_opacity, float* g_sh) noexcept nogil:
     cdef double fx = cam[15], fy = cam[16]
     cdef double gs[9]
     cdef double t[3]
@@ -579,6 +592,8 @@ cdef void project_backward_one(const float* mean, const float* quat, const float
             gd[0] += gc * sh[3 * k + ch] * bx[k]
             gd[1] += gc * sh[3 * k + ch] * by[k]
             gd[2] += gc * sh[3 * k + ch] * bz[k]
+    if not geometry:
+        return
     dot = d[0] * gd[0] + d[1] * gd[1] + d[2] * gd[2]
     for k in range(3):
         gd[k] = (gd[k] - d[k] * dot) / nd
@@ -647,18 +662,29 @@ cdef void project_backward_one(const float* mean, const float* quat, const float
 
 
 def project_backward(const float[:, ::1] means, const float[:, ::1] quats, const float[:, ::1] scales,
-                     const float[:, :, ::1] sh, const double[::1] cam, const int32_t[::1] order,
-                     const int64_t[::1] pair_start, Py_ssize_t v, const float[:, ::1] pair_grad,
-                     float[:, ::1] g_means, float[:, ::1] g_quats, float[:, ::1] g_scales,
-                     float[::1] g_opacities, float[:, :, ::1] g_sh):
-    """Per Gaussian with tiles: its pairs' gradients summed, then taken back through the SH colour
-    and the projection to the inputs. Rows of the other Gaussians are left as they are (zeros)."""
-    cdef Py_ssize_t i
-    cdef int32_t g
-    cdef int nc = sh.shape[1]
+                     const float[:, :, ::1] sh, const double[::1] cam, const int64_t[::1] pair_start,
+                     const float[:, ::1] pair_grad, bint geometry, float[:, ::1] g_means,
+                     float[:, ::1] g_quats, float[:, ::1] g_scales, float[::1] g_opacities,
+                     float[:, :, ::1] g_sh):
+    """Per Gaussian, its pairs' gradients summed, then taken back through the SH colour and the
+    projection to the inputs; every output row is written (zeros where the Gaussian has no pair).
+    Without ``geometry`` only the opacity and SH gradients are computed (g_means, g_quats and
+    g_scales are left as they are): the geometry is frozen."""
+    cdef Py_ssize_t g
+    cdef int k, nc = sh.shape[1]
     cdef const float* pg = &pair_grad[0, 0] if pair_grad.shape[0] > 0 else NULL
-    for i in prange(v, nogil=True, schedule="static"):
-        g = order[i]
+    for g in prange(means.shape[0], nogil=True, schedule="static"):
+        if pair_start[g + 1] == pair_start[g]:
+            for k in range(3):
+                g_means[g, k] = 0
+                g_scales[g, k] = 0
+            for k in range(4):
+                g_quats[g, k] = 0
+            g_opacities[g] = 0
+            for k in range(3 * nc):
+                g_sh[g, k // 3, k % 3] = 0
+            continue
         project_backward_one(&means[g, 0], &quats[g, 0], &scales[g, 0], &sh[g, 0, 0], nc, &cam[0],
-                             pg + 9 * pair_start[i], pair_start[i + 1] - pair_start[i], &g_means[g, 0],
+                             pg + 9 * pair_start[g], pair_start[g + 1] - pair_start[g], geometry,
+                             &g_means[g, 0],
                              &g_quats[g, 0], &g_scales[g, 0], &g_opacities[g], &g_sh[g, 0, 0])

@@ -14,6 +14,7 @@ output is forward-only (its gradient is not propagated), and the background is a
 
 from __future__ import annotations
 
+import sys
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -32,6 +33,7 @@ except ImportError:  # not built: render() says how to build it
     _raster = None
 
 TILE = 16  # tile side in pixels, as in _raster.pyx
+FEATURES = 13  # per-Gaussian features the kernel keeps, as NF in _raster.pyx
 
 
 class NativeSplatterMissing(CghError, ImportError):
@@ -47,6 +49,35 @@ def _require() -> None:
     if _raster is None:
         raise NativeSplatterMissing("the native splatter's compiled kernel training/_raster is not built: run "
                                     "`make venv`, or `python setup.py build_ext --inplace` in the repository")
+
+
+class _Pool:
+    """Reused work and gradient arrays: writing a fresh 480 MB array (the SH gradient at paper scale)
+    costs more in page faults than the whole rasterization. An array is handed out again only once
+    nothing but the pool refers to it (a torch tensor made with ``torch.from_numpy`` holds a
+    reference to its array until the tensor's storage dies), so reuse never aliases live data."""
+
+    KEEP = 32  # arrays kept per dtype
+    SMALL = 1 << 18  # elements; smaller arrays are not worth keeping
+
+    def __init__(self):
+        self.free: dict[np.dtype, list[np.ndarray]] = {}
+
+    def take(self, shape: tuple[int, ...], dtype) -> np.ndarray:
+        size, arrays = int(np.prod(shape)), self.free.setdefault(np.dtype(dtype), [])
+        if size < self.SMALL:
+            return np.empty(shape, dtype)
+        # the smallest idle array that fits; idle: referred to by the list, `a` and the call only
+        fits = [a for a in arrays if a.size >= size and sys.getrefcount(a) == 3]
+        if fits:
+            return min(fits, key=lambda a: a.size)[:size].reshape(shape)
+        base = np.empty(size, dtype)
+        if len(arrays) < self.KEEP:
+            arrays.append(base)
+        return base.reshape(shape)
+
+
+_POOL = _Pool()
 
 
 def _camera_vector(camera: Camera) -> np.ndarray:
@@ -73,24 +104,17 @@ class _Frame:
         self.tiles_x = (self.width + TILE - 1) // TILE
         tiles = self.tiles_x * ((self.height + TILE - 1) // TILE)
         g = means.shape[0]
-        mean2d, conic, colour = (np.empty((g, k), np.float32) for k in (2, 3, 3))
-        depth = np.empty(g, np.float32)
-        extent = np.empty((g, 2), np.float32)
-        rect = np.empty((g, 4), np.int32)
-        ntiles = np.empty(g, np.int64)
-        _raster.project(means, quats, scales, opac, sh, self.cam, self.width, self.height, mean2d, conic,
-                        depth, colour, extent, rect, ntiles)
+        self.feat = _POOL.take((g, FEATURES), np.float32)
+        rect = _POOL.take((g, 4), np.int32)
+        ntiles = _POOL.take((g,), np.int64)
+        _raster.project(means, quats, scales, opac, sh, self.cam, self.width, self.height, self.feat, rect, ntiles)
         pairs = int(ntiles.sum())
-        self.order = np.empty(g, np.int32)
-        self.pair_start = np.empty(g + 1, np.int64)
+        self.pair_start = _POOL.take((g + 1,), np.int64)
         self.tile_start = np.empty(tiles + 1, np.int32)
-        self.entries = np.empty(pairs, np.int32)
-        self.entry_pair = np.empty(pairs, np.int32)
-        self.visible = _raster.bin_tiles(depth, rect, ntiles, self.tiles_x, tiles // self.tiles_x, self.order,
-                                         np.empty(max(g, tiles), np.int32), self.pair_start, self.tile_start,
-                                         self.entries, self.entry_pair)
-        self.feat = np.empty((self.visible, 13), np.float32)
-        _raster.pack(self.order, self.visible, mean2d, conic, opac, colour, depth, extent, self.feat)
+        self.entries = _POOL.take((pairs,), np.int32)
+        self.entry_pair = _POOL.take((pairs,), np.int32)
+        self.visible = _raster.bin_tiles(self.feat, rect, ntiles, self.tiles_x, tiles // self.tiles_x,
+                                         self.pair_start, self.tile_start, self.entries, self.entry_pair)
 
     def rasterize(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         h, w = self.height, self.width
@@ -102,15 +126,16 @@ class _Frame:
                           alpha, depth, self.t_final, self.last)
         return rgb, alpha, depth
 
-    def backward(self, grad_rgb: np.ndarray, grad_alpha: np.ndarray) -> list[np.ndarray]:
+    def backward(self, grad_rgb: np.ndarray, grad_alpha: np.ndarray, geometry: bool = True) -> list[np.ndarray]:
+        """Gradients of means, quats, scales, opacities and sh; without ``geometry`` the first three
+        are not computed (and the arrays returned for them hold garbage)."""
         means, quats, scales, _, sh = self.inputs
-        pair_grad = np.empty((len(self.entries), 9), np.float32)
+        pair_grad = _POOL.take((len(self.entries), 9), np.float32)
         _raster.rasterize_backward(self.feat, self.tile_start, self.entries, self.entry_pair, self.tiles_x,
                                    self.width, self.height, self.background, grad_rgb, grad_alpha,
                                    self.t_final, self.last, pair_grad)
-        grads = [np.zeros_like(a) for a in self.inputs]
-        _raster.project_backward(means, quats, scales, sh, self.cam, self.order, self.pair_start, self.visible,
-                                 pair_grad, *grads)
+        grads = [_POOL.take(a.shape, np.float32) for a in self.inputs]
+        _raster.project_backward(means, quats, scales, sh, self.cam, self.pair_start, pair_grad, geometry, *grads)
         return grads
 
 
@@ -129,9 +154,11 @@ class _Render(torch.autograd.Function):
         h, w = ctx.frame.height, ctx.frame.width
         grad_rgb = _f32(grad_rgb) if grad_rgb is not None else np.zeros((h, w, 3), np.float32)
         grad_alpha = _f32(grad_alpha) if grad_alpha is not None else np.zeros((h, w), np.float32)
-        grads = ctx.frame.backward(grad_rgb, grad_alpha)
+        # frozen geometry (means, quats and scales not requiring grad): the projection's backward is skipped
+        grads = ctx.frame.backward(grad_rgb, grad_alpha, geometry=any(ctx.needs_input_grad[:3]))
         ctx.frame = None
-        return (*(torch.from_numpy(g).to(dt) for g, dt in zip(grads, ctx.dtypes)), None, None)
+        return (*(torch.from_numpy(g).to(dt) if need else None
+                  for g, dt, need in zip(grads, ctx.dtypes, ctx.needs_input_grad[:5], strict=True)), None, None)
 
 
 def render(
