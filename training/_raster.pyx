@@ -168,7 +168,7 @@ cdef void project_one(const float* mean, const float* quat, const float* scale, 
     cdef double jw1[3]
     cdef double a0[3]
     cdef double a1[3]
-    cdef double inv_n, x, y, z, m, ca, cb, cc, det, mid, lam, rad, qmax, hx, hy, mx, my, nd, col
+    cdef double inv_n, x, y, z, iz, m, ca, cb, cc, det, idet, mid, lam, rad, qmax, hx, hy, mx, my, nd, col
     cdef int k, j, ch, x0, x1, y0, y1
     for k in range(3):
         t[k] = cam[3 * k] * mean[0] + cam[3 * k + 1] * mean[1] + cam[3 * k + 2] * mean[2] + cam[9 + k]
@@ -181,10 +181,11 @@ cdef void project_one(const float* mean, const float* quat, const float* scale, 
     x = t[0]
     y = t[1]
     z = t[2]
+    iz = 1.0 / z
     quat_rotmat(quat, q, &inv_n, r)
     for k in range(3):
-        jw0[k] = fx / z * cam[k] - fx * x / (z * z) * cam[6 + k]
-        jw1[k] = fy / z * cam[3 + k] - fy * y / (z * z) * cam[6 + k]
+        jw0[k] = fx * iz * cam[k] - fx * x * iz * iz * cam[6 + k]
+        jw1[k] = fy * iz * cam[3 + k] - fy * y * iz * iz * cam[6 + k]
     for j in range(3):  # A = J W R_q S, by rows
         a0[j] = 0.0
         a1[j] = 0.0
@@ -196,12 +197,13 @@ cdef void project_one(const float* mean, const float* quat, const float* scale, 
     cb = a0[0] * a1[0] + a0[1] * a1[1] + a0[2] * a1[2]
     cc = a1[0] * a1[0] + a1[1] * a1[1] + a1[2] * a1[2] + DILATION
     det = ca * cc - cb * cb
-    f[2] = <float>(cc / det)
-    f[3] = <float>(-cb / det)
-    f[4] = <float>(ca / det)
+    idet = 1.0 / det
+    f[2] = <float>(cc * idet)
+    f[3] = <float>(-cb * idet)
+    f[4] = <float>(ca * idet)
     f[5] = opacity
-    mx = fx * x / z + cx
-    my = fy * y / z + cy
+    mx = fx * x * iz + cx
+    my = fy * y * iz + cy
     f[0] = <float>mx
     f[1] = <float>my
     mid = 0.5 * (ca + cc)
@@ -209,8 +211,8 @@ cdef void project_one(const float* mean, const float* quat, const float* scale, 
     rad = ceil(SIGMA_SUPPORT * sqrt(lam))
     for k in range(3):
         d[k] = mean[k] - cam[12 + k]
-    nd = dmax(sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]), 1e-12)
-    sh_basis(nc, d[0] / nd, d[1] / nd, d[2] / nd, b, bx, by, bz)
+    nd = 1.0 / dmax(sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]), 1e-12)
+    sh_basis(nc, d[0] * nd, d[1] * nd, d[2] * nd, b, bx, by, bz)
     for ch in range(3):
         col = 0.0
         for k in range(nc):
@@ -339,8 +341,9 @@ cdef inline int row_span(const float* f, int y, int x_lo, int x_hi, int* x0, int
     cdef double mx = f[0], a = f[2], b = f[3], c = f[4], qmax = f[10], rad = f[11]
     cdef double dy = y + 0.5 - <double>f[1]
     cdef double disc = dmax((b * dy) * (b * dy) - a * (c * dy * dy - qmax), 0.0)
-    cdef double half = sqrt(disc) / a + 1e-4
-    cdef double centre = -b * dy / a
+    cdef double ia = 1.0 / a
+    cdef double half = sqrt(disc) * ia + 1e-4
+    cdef double centre = -b * dy * ia
     cdef double lo = mx + dmax(centre - half, -rad), hi = mx + dmin(centre + half, rad)
     x0[0] = <int>dmax(ceil(lo - 0.5), x_lo)
     x1[0] = <int>dmin(floor(hi - 0.5), x_hi)
@@ -565,7 +568,8 @@ cdef void project_backward_one(const float* mean, const float* quat, const float
     cdef double ga1[3]
     cdef double gj0[3]
     cdef double gj1[3]
-    cdef double inv_n, x, y, z, ca, cb, cc, det, det2, gca, gcb, gcc, nd, col, gc, dot, m, w
+    cdef double gcol[3]
+    cdef double inv_n, x, y, z, iz, ca, cb, cc, idet, idet2, gca, gcb, gcc, nd, col, dot, m, w
     cdef int64_t p
     cdef int k, j, ch
     for k in range(9):
@@ -586,14 +590,17 @@ cdef void project_backward_one(const float* mean, const float* quat, const float
         col = 0.5
         for k in range(nc):
             col += b[k] * sh[3 * k + ch]
-        gc = gs[6 + ch] if col >= 0 else 0.0
-        for k in range(nc):
-            g_sh[3 * k + ch] = <float>(b[k] * gc)
-            gd[0] += gc * sh[3 * k + ch] * bx[k]
-            gd[1] += gc * sh[3 * k + ch] * by[k]
-            gd[2] += gc * sh[3 * k + ch] * bz[k]
+        gcol[ch] = gs[6 + ch] if col >= 0 else 0.0
+    for k in range(nc):
+        for ch in range(3):
+            g_sh[3 * k + ch] = <float>(b[k] * gcol[ch])
     if not geometry:
         return
+    for k in range(nc):  # the colour's dependence on the view direction
+        w = gcol[0] * sh[3 * k] + gcol[1] * sh[3 * k + 1] + gcol[2] * sh[3 * k + 2]
+        gd[0] += w * bx[k]
+        gd[1] += w * by[k]
+        gd[2] += w * bz[k]
     dot = d[0] * gd[0] + d[1] * gd[1] + d[2] * gd[2]
     for k in range(3):
         gd[k] = (gd[k] - d[k] * dot) / nd
@@ -603,10 +610,11 @@ cdef void project_backward_one(const float* mean, const float* quat, const float
     x = t[0]
     y = t[1]
     z = t[2]
+    iz = 1.0 / z
     quat_rotmat(quat, q, &inv_n, r)
     for k in range(3):
-        jw0[k] = fx / z * cam[k] - fx * x / (z * z) * cam[6 + k]
-        jw1[k] = fy / z * cam[3 + k] - fy * y / (z * z) * cam[6 + k]
+        jw0[k] = fx * iz * cam[k] - fx * x * iz * iz * cam[6 + k]
+        jw1[k] = fy * iz * cam[3 + k] - fy * y * iz * iz * cam[6 + k]
     for j in range(3):
         a0[j] = 0.0
         a1[j] = 0.0
@@ -617,12 +625,12 @@ cdef void project_backward_one(const float* mean, const float* quat, const float
     ca = a0[0] * a0[0] + a0[1] * a0[1] + a0[2] * a0[2] + DILATION
     cb = a0[0] * a1[0] + a0[1] * a1[1] + a0[2] * a1[2]
     cc = a1[0] * a1[0] + a1[1] * a1[1] + a1[2] * a1[2] + DILATION
-    det = ca * cc - cb * cb
-    det2 = det * det
+    idet = 1.0 / (ca * cc - cb * cb)
+    idet2 = idet * idet
     # conic (cc, -cb, ca) / det back to the 2D covariance
-    gca = gs[2] * (-cc * cc / det2) + gs[3] * (cb * cc / det2) + gs[4] * (1 / det - ca * cc / det2)
-    gcc = gs[2] * (1 / det - cc * ca / det2) + gs[3] * (cb * ca / det2) + gs[4] * (-ca * ca / det2)
-    gcb = gs[2] * (2 * cc * cb / det2) + gs[3] * (-1 / det - 2 * cb * cb / det2) + gs[4] * (2 * ca * cb / det2)
+    gca = gs[2] * (-cc * cc * idet2) + gs[3] * (cb * cc * idet2) + gs[4] * (idet - ca * cc * idet2)
+    gcc = gs[2] * (idet - cc * ca * idet2) + gs[3] * (cb * ca * idet2) + gs[4] * (-ca * ca * idet2)
+    gcb = gs[2] * (2 * cc * cb * idet2) + gs[3] * (-idet - 2 * cb * cb * idet2) + gs[4] * (2 * ca * cb * idet2)
     for j in range(3):
         ga0[j] = 2 * gca * a0[j] + gcb * a1[j]
         ga1[j] = 2 * gcc * a1[j] + gcb * a0[j]
@@ -638,14 +646,14 @@ cdef void project_backward_one(const float* mean, const float* quat, const float
             gr[3 * k + j] = m * scale[j]
         g_scale[j] = <float>w
     # J W's rows and the centre's projection, by camera-space x, y, z
-    gt[0] = gs[0] * fx / z
-    gt[1] = gs[1] * fy / z
-    gt[2] = -gs[0] * fx * x / (z * z) - gs[1] * fy * y / (z * z)
+    gt[0] = gs[0] * fx * iz
+    gt[1] = gs[1] * fy * iz
+    gt[2] = -(gs[0] * fx * x + gs[1] * fy * y) * iz * iz
     for k in range(3):
-        gt[0] -= gj0[k] * fx / (z * z) * cam[6 + k]
-        gt[1] -= gj1[k] * fy / (z * z) * cam[6 + k]
-        gt[2] += gj0[k] * (-fx / (z * z) * cam[k] + 2 * fx * x / (z * z * z) * cam[6 + k])
-        gt[2] += gj1[k] * (-fy / (z * z) * cam[3 + k] + 2 * fy * y / (z * z * z) * cam[6 + k])
+        gt[0] -= gj0[k] * fx * iz * iz * cam[6 + k]
+        gt[1] -= gj1[k] * fy * iz * iz * cam[6 + k]
+        gt[2] += gj0[k] * (-fx * cam[k] + 2 * fx * x * iz * cam[6 + k]) * iz * iz
+        gt[2] += gj1[k] * (-fy * cam[3 + k] + 2 * fy * y * iz * cam[6 + k]) * iz * iz
     for k in range(3):
         g_mean[k] = <float>(cam[k] * gt[0] + cam[3 + k] * gt[1] + cam[6 + k] * gt[2] + gd[k])
     # rotation matrix back to the unit quaternion (w, x, y, z), then through the normalisation
