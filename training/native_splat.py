@@ -9,7 +9,10 @@ transmittance and the last contribution. The backward pass walks each pixel's co
 to front from there, recomputing alpha, so no (pixel, Gaussian) pair is ever stored.
 
 Differentiable w.r.t. means, quats, scales, opacities and sh through rgb and alpha. The depth
-output is forward-only (its gradient is not propagated), and the background is a constant.
+output is forward-only (its gradient is not propagated), and the background is a constant. When
+means, quats and scales need no gradient (frozen geometry) the projection's backward is skipped.
+Threads: OpenMP's (``OMP_NUM_THREADS``, default every core). Work and gradient arrays are kept
+and reused between calls (:func:`release_memory` drops them).
 """
 
 from __future__ import annotations
@@ -78,6 +81,11 @@ class _Pool:
 
 
 _POOL = _Pool()
+
+
+def release_memory() -> None:
+    """Drop the reused arrays (at paper scale about 1 GB per view kept alive at once)."""
+    _POOL.free.clear()
 
 
 def _camera_vector(camera: Camera) -> np.ndarray:
