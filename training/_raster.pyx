@@ -14,7 +14,7 @@ backward, run on every core through OpenMP with the GIL released.
 
 from cython.parallel import prange
 
-from libc.math cimport ceil, expf, floor, log, sqrt
+from libc.math cimport ceil, expf, floor, isfinite, log, sqrt
 from libc.stdint cimport int32_t, int64_t, uint32_t
 from libc.stdlib cimport free, malloc
 
@@ -56,6 +56,22 @@ cdef inline double dmin(double a, double b) noexcept nogil:
 
 cdef inline double dmax(double a, double b) noexcept nogil:
     return a if a > b else b
+
+
+cdef inline int first_pixel(double lo, int first, int last) noexcept nogil:
+    """The first pixel k with k + 0.5 >= lo, clamped to [first, last + 1]; NaN or beyond: last + 1."""
+    cdef double v = ceil(lo - 0.5)
+    if v < first:
+        return first
+    return <int>v if v <= last else last + 1  # NaN fails both tests
+
+
+cdef inline int last_pixel(double hi, int first, int last) noexcept nogil:
+    """The last pixel k with k + 0.5 <= hi, clamped to [first - 1, last]; NaN or before: first - 1."""
+    cdef double v = floor(hi - 0.5)
+    if v > last:
+        return last
+    return <int>v if v >= first else first - 1
 
 
 cdef void sh_basis(int n, double x, double y, double z, double* b, double* bx, double* by,
@@ -225,12 +241,12 @@ cdef void project_one(const float* mean, const float* quat, const float* scale, 
     f[11] = <float>rad
     f[12] = <float>hy
     # pixels k with |k + 0.5 - m| <= h, clipped to the image, then their tiles
-    x0 = <int>dmax(ceil(mx - hx - 0.5), 0.0)
-    x1 = <int>dmin(floor(mx + hx - 0.5), width - 1.0)
-    y0 = <int>dmax(ceil(my - hy - 0.5), 0.0)
-    y1 = <int>dmin(floor(my + hy - 0.5), height - 1.0)
-    if qmax <= 0 or x0 > x1 or y0 > y1:
-        return
+    x0 = first_pixel(mx - hx, 0, width - 1)
+    x1 = last_pixel(mx + hx, 0, width - 1)
+    y0 = first_pixel(my - hy, 0, height - 1)
+    y1 = last_pixel(my + hy, 0, height - 1)
+    if not (qmax > 0) or x0 > x1 or y0 > y1 or not (isfinite(f[2]) and isfinite(f[3]) and isfinite(f[4])):
+        return  # off-screen, transparent, or not finite (NaN or infinite inputs)
     rect[0] = x0 // TILE
     rect[1] = y0 // TILE
     rect[2] = x1 // TILE + 1
@@ -345,8 +361,8 @@ cdef inline int row_span(const float* f, int y, int x_lo, int x_hi, int* x0, int
     cdef double half = sqrt(disc) * ia + 1e-4
     cdef double centre = -b * dy * ia
     cdef double lo = mx + dmax(centre - half, -rad), hi = mx + dmin(centre + half, rad)
-    x0[0] = <int>dmax(ceil(lo - 0.5), x_lo)
-    x1[0] = <int>dmin(floor(hi - 0.5), x_hi)
+    x0[0] = first_pixel(lo, x_lo, x_hi)
+    x1[0] = last_pixel(hi, x_lo, x_hi)
     return x0[0] <= x1[0]
 
 
@@ -390,8 +406,8 @@ cdef void raster_tile(int tile, int tiles_x, int width, int height, const float*
         if e + AHEAD < end:
             PREFETCH(feat + NF * entries[e + AHEAD])
         f = feat + NF * entries[e]
-        y0 = <int>dmax(ceil(f[1] - f[12] - 0.5), ty0)
-        y1 = <int>dmin(floor(f[1] + f[12] - 0.5), ty0 + th - 1)
+        y0 = first_pixel(f[1] - f[12], ty0, ty0 + th - 1)
+        y1 = last_pixel(f[1] + f[12], ty0, ty0 + th - 1)
         for y in range(y0, y1 + 1):
             if rowleft[y - ty0] == 0 or not row_span(f, y, tx0, tx0 + tw - 1, &x0, &x1):
                 continue
@@ -490,8 +506,8 @@ cdef void raster_tile_backward(int tile, int tiles_x, int width, int height, con
             if le >= AHEAD:
                 PREFETCH(feat + NF * entries[start + le - AHEAD])
             f = feat + NF * entries[start + le]
-            y0 = <int>dmax(ceil(f[1] - f[12] - 0.5), ty0)
-            y1 = <int>dmin(floor(f[1] + f[12] - 0.5), ty0 + th - 1)
+            y0 = first_pixel(f[1] - f[12], ty0, ty0 + th - 1)
+            y1 = last_pixel(f[1] + f[12], ty0, ty0 + th - 1)
             for y in range(y0, y1 + 1):
                 if le > rowlast[y - ty0] or not row_span(f, y, tx0, tx0 + tw - 1, &x0, &x1):
                     continue

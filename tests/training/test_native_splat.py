@@ -122,6 +122,18 @@ def test_equal_depths_keep_input_order():
     assert float((flipped.rgb - ref.rgb).abs().max()) > 0.05  # the order does show
 
 
+def test_far_off_screen_and_nan_gaussians_are_culled():
+    """Projections far outside int range and NaN positions touch no pixel (no overflow)."""
+    scene, cam = random_scene(40, 0, seed=6), camera(32, 24)
+    c2w = torch.as_tensor(cam.camera_to_world, dtype=torch.float32)
+    extra = torch.tensor([[1e4, 0.0, 0.011, 1.0], [0.0, -3e9, 0.02, 1.0]]) @ c2w.T  # near the near plane
+    scene[0] = torch.cat([scene[0], extra[:, :3], torch.full((1, 3), float("nan"))])
+    scene[1:] = [torch.cat([t, t[:3]]) for t in scene[1:]]
+    ref = splatter.render(*[t.double() for t in scene], cam, BACKGROUND)
+    out = native_splat.render(*scene, cam, BACKGROUND)
+    assert bool(torch.isfinite(out.rgb).all()) and psnr(out.rgb, ref.rgb) >= 60.0
+
+
 def test_frozen_geometry_gives_the_same_appearance_gradients():
     scene, cam = hair_scene(3), camera(56, 44)
     _, full = grads(native_splat.render, scene, cam, torch.float32)
