@@ -594,6 +594,17 @@ cdef void project_backward_one(const float* mean, const float* quat, const float
         for k in range(9):
             gs[k] += pair_grad[9 * p + k]
     g_opacity[0] = <float>gs[5]
+    if gs[0] == 0 and gs[1] == 0 and gs[2] == 0 and gs[3] == 0 and gs[4] == 0 and gs[6] == 0 and gs[7] == 0 \
+            and gs[8] == 0:  # hidden behind others (or transparent): nothing to take back
+        for k in range(3 * nc):
+            g_sh[k] = 0
+        if geometry:
+            for k in range(3):
+                g_mean[k] = 0
+                g_scale[k] = 0
+            for k in range(4):
+                g_quat[k] = 0
+        return
     # colour: clamp at 0 (gradient where the argument is >= 0), SH basis, direction
     for k in range(3):
         d[k] = mean[k] - cam[12 + k]
