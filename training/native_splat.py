@@ -1,12 +1,14 @@
 """The compiled CPU splatter: the image contract of spec/rendering.md, as the reference
 :func:`training.splatter.render`, forward and backward in :mod:`training._raster` on every core.
 
-Tile-based as the original 3DGS rasterizer: per Gaussian the EWA projection and SH colour, the
-16 x 16 tiles its tight footprint (3-sigma square AND the ellipse where alpha can reach 1/255)
-touches; per tile the Gaussians front to back (a stable depth sort, the reference's tie order);
-per pixel front-to-back compositing with early termination at T < 1e-4, keeping only the final
-transmittance and the last contribution. The backward pass walks each pixel's contributions back
-to front from there, recomputing alpha, so no (pixel, Gaussian) pair is ever stored.
+Tile-based as the original 3DGS rasterizer: per Gaussian the EWA projection and the 16 x 16 tiles
+its tight footprint (3-sigma square AND the ellipse where alpha can reach 1/255) touches; per tile
+the Gaussians front to back (a stable depth sort, the reference's tie order); per pixel
+front-to-back compositing with early termination at T < 1e-4, keeping only the final
+transmittance and the last contribution, with SH colours evaluated only for the Gaussians that
+contribute. The backward pass walks each pixel's contributions back to front from there,
+recomputing alpha, so no (pixel, Gaussian) pair is ever stored, and skips the Gaussians that
+received no gradient (most of them in dense hair).
 
 Differentiable w.r.t. means, quats, scales, opacities and sh through rgb and alpha. The depth
 output is forward-only (its gradient is not propagated), and the background is a constant. When
