@@ -56,6 +56,16 @@ def _require() -> None:
                                     "`make venv`, or `python setup.py build_ext --inplace` in the repository")
 
 
+def _idle_refs() -> int:
+    """What sys.getrefcount says, in the comprehension of _Pool.take, of an array only a list holds
+    (measured: interpreters differ in the references they count)."""
+    arrays = [np.empty(1)]
+    return [sys.getrefcount(a) for a in arrays][0]
+
+
+_IDLE_REFS = _idle_refs()
+
+
 class _Pool:
     """Reused work and gradient arrays: writing a fresh 480 MB array (the SH gradient at paper scale)
     costs more in page faults than the whole rasterization. An array is handed out again only once
@@ -72,8 +82,8 @@ class _Pool:
         size, arrays = int(np.prod(shape)), self.free.setdefault(np.dtype(dtype), [])
         if size < self.SMALL:
             return np.empty(shape, dtype)
-        # the smallest idle array that fits; idle: referred to by the list, `a` and the call only
-        fits = [a for a in arrays if a.size >= size and sys.getrefcount(a) == 3]
+        # the smallest idle array that fits: one referred to as often as an array only the pool holds
+        fits = [a for a in arrays if a.size >= size and sys.getrefcount(a) == _IDLE_REFS]
         if fits:
             return min(fits, key=lambda a: a.size)[:size].reshape(shape)
         base = np.empty(size, dtype)
