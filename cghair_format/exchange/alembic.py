@@ -1,32 +1,44 @@
-"""Alembic (``.abc``) grooms and Blender (``.blend``) scenes, written and read through Blender.
+"""Alembic (``.abc``) grooms, written by our own Ogawa writer; Blender (``.blend``) scenes and
+Alembic reading through Blender.
 
-No Alembic library installs from PyPI, so Blender (bpy 5.0, in its own interpreter: see
-:mod:`.blender`) does the Alembic work in a subprocess, by way of our USD stage
-(:mod:`.usd_export`): writing imports the stage and exports Alembic; reading imports the Alembic
-file and exports a y-up USD stage that :mod:`.usd_curves` reads.
+Curves go to Alembic through :mod:`._ogawa` (no Alembic library installs from PyPI): one
+``IXform`` ``/Hair`` holding an ``ICurves`` ``/Hair/Strands`` (linear, non-periodic) with ``P``,
+``nVertices``, per-vertex ``width`` (the diameter) and, in ``.arbGeomParams``, the attributes of
+Unreal's groom Alembic schema: ``groom_color`` (per vertex, linear Rec.709 C3f),
+``groom_width`` (per vertex), ``groom_group_id`` and ``groom_guide`` (per curve; 0: rendered
+strand), ``groom_id`` and ``groom_root_uv`` (per curve, where the asset has them) and the
+constant ``groom_version_major/minor`` (int16). One static sample, Y up; Alembic states no
+units, so coordinates and widths are metres times the export scale (Unreal and Houdini grooms
+are in centimetres: ``--scale 100``).
 
-What Blender 5.0's Alembic writer keeps: curve points, per-point ``width`` (the diameter), the
-card mesh with its UVs and normals. What it drops: colours and every other curve attribute
-(``groom_*``), so Unreal's groom importer sees the strands with widths but no ``groom_color``.
-Alembic states no units: Blender writes metres times the export scale (Unreal and Houdini grooms
-are in centimetres: ``--scale 100``). Reading gives strands in Alembic's y-up frame, as stored.
-A ``.blend`` is in metres (Blender's unit), so it takes no scale.
+Card meshes still go through Blender (bpy 5.0, in its own interpreter: see :mod:`.blender`):
+``--cards`` hands the whole groom to Blender's Alembic writer by way of our USD stage
+(:mod:`.usd_export`), which keeps the curve points and widths and the card mesh with UVs and
+normals but drops colours and the ``groom_*`` attributes. Reading imports the Alembic file in
+Blender and exports a y-up USD stage that :mod:`.usd_curves` reads. A ``.blend`` is in metres
+(Blender's unit), so it takes no scale.
 """
 
 from __future__ import annotations
 
 import subprocess
 import tempfile
+import time
 from pathlib import Path
 
+import numpy as np
+
+from .. import __version__
 from ..errors import CghError
 from ..strands import Strands
-from ._common import StrandFileError, finish
+from ._common import StrandFileError, check_scale, finish, srgb_to_linear
+from ._ogawa import Compound, Object, Values, write_archive
+from .usd_export import GROOM_VERSION
 
 WORKER = Path(__file__).with_name("_bpy_worker") / "groom.py"
 TIMEOUT_S = 600
-DROPS = ("Blender's Alembic writer keeps curve points and widths (and the card mesh with UVs); "
-         "it drops colours and the groom_* attributes")
+DROPS = ("with --cards the groom goes through Blender's Alembic writer, which keeps curve points, widths and "
+         "the card mesh with UVs but drops colours and the groom_* attributes (export without --cards keeps them)")
 
 
 class BlenderRunError(CghError, RuntimeError):
@@ -64,14 +76,88 @@ def load(path: str | Path) -> Strands:
 
 
 def save(strands: Strands, path: str | Path) -> None:
-    export_blender(Path(path), strands=strands)
+    write_groom(path, strands)
+
+
+XFORM = "AbcGeom_Xform_v3"
+CURVES = "AbcGeom_Curve_v2"
+LINEAR_NONPERIODIC = np.array([1, 0, 0, 0], np.uint8)  # curveBasisAndType: linear, non-periodic, no basis
+
+
+def _geom_param(name: str, values: np.ndarray, scope: str, interpretation: str = "") -> Values:
+    """An Alembic GeomParam (not indexed): an array property whose metadata names its scope
+    (``con``, ``uni``: per curve, ``vtx``: per vertex) and type."""
+    v = np.asarray(values)
+    pod = {"f": "float32_t", "i": f"int{8 * v.dtype.itemsize}_t"}[v.dtype.kind]
+    md = {"geoScope": scope, "isGeomParam": "true", "podName": pod, "arrayExtent": "1",
+          "podExtent": str(1 if v.ndim == 1 else v.shape[1])}
+    if interpretation:
+        md["interpretation"] = interpretation
+    return Values(name, v, md)
+
+
+def to_y_up_metres(strands: Strands, scale: float) -> tuple[np.ndarray, np.ndarray | None]:
+    """Points and widths in Alembic's frame: y up, metres times ``scale``."""
+    k = np.float32(strands.meters_per_unit * check_scale(scale))
+    pts = np.asarray(strands.points, np.float32) * k
+    if strands.up_axis == "Z":  # z-up to y-up, as Blender and Maya convert: (x, y, z) -> (x, z, -y)
+        pts = np.stack([pts[:, 0], pts[:, 2], -pts[:, 1]], 1)
+    widths = None if strands.widths is None else np.asarray(strands.widths, np.float32) * k
+    return np.ascontiguousarray(pts, np.float32), widths
+
+
+def groom_curves(strands: Strands, *, scale: float = 1.0, group: np.ndarray | None = None,
+                 strand_ids: np.ndarray | None = None) -> Object:
+    """``strands`` as an Alembic ICurves object named ``Strands`` with Unreal's groom attributes."""
+    pts, widths = to_y_up_metres(strands, scale)
+    n = strands.count
+    bounds = np.concatenate([pts.min(0), pts.max(0)]).astype(np.float64) if len(pts) else np.zeros(6)
+    geom = [Values(".selfBnds", bounds, {"interpretation": "box"}, scalar=True),
+            Values("P", pts, {"geoScope": "vtx", "interpretation": "point"}),
+            Values("nVertices", strands.point_counts.astype(np.int32)),
+            Values("curveBasisAndType", LINEAR_NONPERIODIC, scalar=True)]
+    arb = []
+    if widths is not None:
+        geom.append(_geom_param("width", widths, "vtx"))
+        arb.append(_geom_param("groom_width", widths, "vtx"))
+    if strands.colors is not None:
+        arb.append(_geom_param("groom_color", srgb_to_linear(strands.colors), "vtx", "rgb"))
+    gid = np.zeros(n, np.int32) if group is None else np.asarray(group, np.int32)
+    arb += [_geom_param("groom_group_id", gid, "uni"),
+            _geom_param("groom_guide", np.zeros(n, np.int16), "uni")]  # all rendered strands
+    if strand_ids is not None:
+        arb.append(_geom_param("groom_id", np.asarray(strand_ids).astype(np.int32), "uni"))
+    if strands.root_uv is not None:
+        arb.append(_geom_param("groom_root_uv", np.asarray(strands.root_uv, np.float32), "uni", "vector"))
+    arb += [_geom_param("groom_version_major", np.array([GROOM_VERSION[0]], np.int16), "con"),
+            _geom_param("groom_version_minor", np.array([GROOM_VERSION[1]], np.int16), "con")]
+    geom.append(Compound(".arbGeomParams", arb))
+    schema = {"schema": CURVES, "schemaBaseType": "AbcGeom_GeomBase_v1"}
+    return Object("Strands", {"schema": CURVES, "schemaObjTitle": f"{CURVES}:.geom"},
+                  [Compound(".geom", geom, schema)])
+
+
+def write_groom(path: str | Path, strands: Strands, *, scale: float = 1.0, group: np.ndarray | None = None,
+                strand_ids: np.ndarray | None = None) -> None:
+    """Write ``strands`` as an Alembic groom: ``/Hair`` (IXform) holding ``/Hair/Strands`` (ICurves)."""
+    strands.validate()
+    curves = groom_curves(strands, scale=scale, group=group, strand_ids=strand_ids)
+    xform = Object("Hair", {"schema": XFORM, "schemaObjTitle": f"{XFORM}:.xform"},
+                   [Compound(".xform", [Values(".inherits", np.array([True]), scalar=True)], {"schema": XFORM})],
+                   [curves])
+    try:
+        write_archive(path, [xform], {"_ai_Application": f"cghair {__version__}",
+                                      "_ai_DateWritten": time.strftime("%a %b %d %H:%M:%S %Y")})
+    except OSError as exc:
+        raise CghError(f"{path}: cannot write the Alembic file ({exc.strerror or exc})") from exc
 
 
 def export_blender(path: Path, *, asset=None, strands: Strands | None = None, cards: bool = False,
                    scale: float = 1.0) -> None:
-    """Write ``asset`` (curves, and ``cards``) or ``strands`` as Alembic (``.abc``) or as a Blender
-    scene (``.blend``: curves with the Principled Hair BSDF, cards with their texture)."""
-    from ._common import check_scale, warn
+    """Write ``asset`` (curves, and ``cards``) or ``strands`` as Alembic (``.abc``: our own writer,
+    or Blender's when there are cards) or as a Blender scene (``.blend``: curves with the Principled
+    Hair BSDF, cards with their texture)."""
+    from ._common import warn
     from .usd_export import export_usd
 
     ext = path.suffix.lower()
@@ -79,6 +165,15 @@ def export_blender(path: Path, *, asset=None, strands: Strands | None = None, ca
         raise CghError(f"{path}: Blender export writes .abc or .blend, not {ext or 'no extension'}")
     if check_scale(scale) != 1.0 and ext == ".blend":
         raise CghError(f"{path}: a .blend is in metres (Blender's unit); --scale applies to .abc, USD and the rest")
+    if ext == ".abc" and not cards:
+        if asset is None:
+            write_groom(path, strands, scale=scale)
+        else:
+            from .cgh_strands import strands_from_asset
+
+            write_groom(path, strands_from_asset(asset), scale=scale,
+                        group=asset.cards.group.astype(np.int32)[asset.strand_card], strand_ids=asset.strand_ids)
+        return
     with tempfile.TemporaryDirectory(prefix="cgh_abc_") as tmp:
         usd = Path(tmp) / "groom.usdc"
         if asset is not None:
