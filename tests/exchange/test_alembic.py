@@ -20,10 +20,11 @@ from cghair_format.errors import CghError
 from cghair_format.examples import example_asset
 from cghair_format.exchange import load_strands
 from cghair_format.exchange._common import srgb_to_linear
-from cghair_format.exchange._ogawa import Object, Values, write_archive
-from cghair_format.exchange.alembic import export_blender, write_groom
+from cghair_format.exchange._ogawa import Compound, Object, Values, write_archive
+from cghair_format.exchange.alembic import _geom_param, card_polymesh, export_groom, write_groom
 from cghair_format.exchange.blender import BlenderNotFoundError, find_blender_python
 from cghair_format.exchange.cgh_strands import strands_from_asset
+from cghair_format.geometry import card_mesh
 from cghair_format.strands import Strands
 
 BLENDER_SCRIPT = r"""
@@ -49,6 +50,28 @@ if curves:
     np.savez(out, **arrays)
     report.update(curves=len(d.curves), points=len(d.points),
                   attributes={a.name: [a.domain, a.data_type] for a in d.attributes})
+meshes = [o for o in bpy.data.objects if o.type == "MESH"]
+if meshes:
+    m = meshes[0].data
+    n = len(m.vertices)
+    co = np.empty(n * 3, np.float32)
+    m.vertices.foreach_get("co", co)
+    normals = np.empty(len(m.polygons) * 3, np.float32)
+    m.polygons.foreach_get("normal", normals)
+    corners = np.empty(len(m.loops), np.int32)
+    m.loops.foreach_get("vertex_index", corners)
+    mesh = {"co": co.reshape(-1, 3), "face_normals": normals.reshape(-1, 3), "corners": corners,
+            "world": np.array(meshes[0].matrix_world, np.float64)}
+    for a in m.attributes:
+        if a.data_type in ("FLOAT_COLOR", "BYTE_COLOR", "FLOAT2") and not a.name.startswith("."):
+            field = {"FLOAT_COLOR": "color", "BYTE_COLOR": "color_srgb", "FLOAT2": "vector"}[a.data_type]
+            width = 2 if field == "vector" else 4
+            vals = np.empty(len(a.data) * width, np.float32)
+            a.data.foreach_get(field, vals)
+            mesh["attr_" + a.name] = vals.reshape(-1, width)
+    np.savez(out.replace(".npz", "_mesh.npz"), **mesh)
+    report["mesh"] = {"vertices": n, "polygons": len(m.polygons), "uv_layers": [uv.name for uv in m.uv_layers],
+                      "attributes": {a.name: [a.domain, a.data_type] for a in m.attributes}}
 print("CGH_REPORT " + json.dumps(report))
 """
 Y_UP_TO_Z_UP = np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]], np.float64)  # Blender's import rotation
@@ -65,7 +88,11 @@ def blender_import(abc, tmp_path) -> tuple[dict, dict]:
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("CGH_REPORT ")]
     assert proc.returncode == 0 and lines, f"Blender failed (exit {proc.returncode}):\n{proc.stderr[-3000:]}"
     report = json.loads(lines[-1][len("CGH_REPORT "):])
-    return report, (dict(np.load(out)) if out.exists() else {})
+    arrays = {}
+    for npz in (out, tmp_path / "blender_mesh.npz"):
+        if npz.exists():
+            arrays.update(np.load(npz))
+    return report, arrays
 
 
 def small_strands(up: str = "Y") -> Strands:
@@ -80,7 +107,7 @@ def small_strands(up: str = "Y") -> Strands:
 
 def groom_props(path):
     a = Archive(path)
-    curves = a.top.children["Hair"].children["Strands"]
+    curves = a.top.children["Strands"].children["StrandsShape"]
     return a, curves, curves.props[".geom"].props
 
 
@@ -95,7 +122,7 @@ def test_layout_and_groom_attributes(tmp_path):
     # the default time sampling: one sample, 1 s per cycle, starting at 0
     assert a.time_samplings == np.array([1], "<u4").tobytes() + np.array([1.0], "<f8").tobytes() + \
         np.array([1], "<u4").tobytes() + np.array([0.0], "<f8").tobytes()
-    hair = a.top.children["Hair"]
+    hair = a.top.children["Strands"]
     assert hair.metadata["schema"] == "AbcGeom_Xform_v3" and hair.props[".xform"].props[".inherits"].values[0, 0]
     assert curves.metadata == {"schema": "AbcGeom_Curve_v2", "schemaObjTitle": "AbcGeom_Curve_v2:.geom"}
     assert curves.props[".geom"].metadata["schema"] == "AbcGeom_Curve_v2"
@@ -172,7 +199,7 @@ def test_blender_imports_our_groom(tmp_path):
     path = tmp_path / "g.abc"
     write_groom(path, s, scale=100)
     report, got = blender_import(path, tmp_path)
-    assert report["result"] == ["FINISHED"] and report["objects"] == {"Hair": "CURVES"}
+    assert report["result"] == ["FINISHED"] and report["objects"] == {"Strands": "CURVES"}
     assert report["curves"] == s.count and report["points"] == len(s.points)
     assert list(got["sizes"]) == list(s.point_counts)
     expect = s.points.astype(np.float64)  # 0.01 m per unit times 100
@@ -191,8 +218,9 @@ def test_cli_export_of_a_cgh_asset_round_trips_through_blender(tmp_path, capsys)
     asset = example_asset(seed=5, strands=40, points=10)
     cgh, abc, back = tmp_path / "a.cgh", tmp_path / "a.abc", tmp_path / "back.npz"
     cghair_format.write(asset, cgh)
-    assert main(["export", str(cgh), "-o", str(abc), "--scale", "100"]) == 0
-    assert "warning" not in capsys.readouterr().err  # nothing dropped without --cards
+    assert main(["export", str(cgh), "-o", str(abc), "--scale", "100", "--cards"]) == 0
+    assert "warning" not in capsys.readouterr().err  # nothing dropped
+    assert (tmp_path / "a_cards.png").exists()  # the card atlas the mesh's uv points into
     _, _, geom = groom_props(abc)
     assert {"groom_color", "groom_group_id", "groom_width"} <= set(geom[".arbGeomParams"].props)
     assert main(["convert", str(abc), str(back)]) == 0  # read back through Blender
@@ -208,10 +236,53 @@ def test_cli_export_of_a_cgh_asset_round_trips_through_blender(tmp_path, capsys)
 def test_blender_imports_a_real_groom(tmp_path):
     s = load_strands(hair_path("Ratboy_mohawk.tfx"))
     path = tmp_path / "ratboy.abc"
-    export_blender(path, strands=s)
+    export_groom(path, strands=s)
     report, got = blender_import(path, tmp_path)
     assert report["curves"] == s.count and report["points"] == len(s.points)
     assert list(got["sizes"]) == list(s.point_counts)
     k = np.float32(s.meters_per_unit)
     np.testing.assert_array_equal(got["position"] @ got["world"][:3, :3].T,
                                   (s.points * k).astype(np.float64) @ Y_UP_TO_Z_UP.T)
+
+
+@pytest.mark.blender
+def test_blender_imports_the_card_mesh(tmp_path):
+    asset = example_asset(seed=7, strands=40, points=10)
+    path = tmp_path / "c.abc"
+    export_groom(path, asset=asset, cards=True, scale=100)
+    report, got = blender_import(path, tmp_path)
+    assert report["objects"] == {"Strands": "CURVES", "Cards": "MESH"}
+    m = card_mesh(asset.cards)
+    assert report["mesh"]["vertices"] == len(m.vertices) and report["mesh"]["polygons"] == len(m.triangles)
+    assert report["mesh"]["uv_layers"] == ["uv"]
+    k = 100 * asset.meters_per_unit
+    world = got["co"] @ got["world"][:3, :3].T + got["world"][:3, 3]
+    expect = m.vertices.astype(np.float64) * k @ Y_UP_TO_Z_UP.T
+    np.testing.assert_allclose(world, expect, rtol=0, atol=1e-6 * np.abs(expect).max())
+    # Blender's face normals (from the winding it reads) agree with the cards' stored normals
+    tri = got["corners"].reshape(-1, 3)
+    stored = m.normals[tri].mean(1) @ Y_UP_TO_Z_UP.T
+    face = got["face_normals"] @ got["world"][:3, :3].T
+    assert ((face * stored).sum(1) > 0).mean() > 0.99
+
+
+@pytest.mark.blender
+def test_blender_reads_our_geom_param_encoding(tmp_path):
+    """Blender 5.0 imports arbGeomParams of meshes, not of curves: a card mesh carrying groom_color
+    encoded exactly as on the curves (per-vertex C3f) shows it with its values, and the mesh's
+    ``uv`` (a per-vertex V2f GeomParam, the encoding of groom_root_uv) arrives as its UV map.
+    (Blender reads an arbitrary V2f only when indexed, so groom_root_uv itself it skips.)"""
+    from cghair_format.exchange.usd_materials import card_atlas
+
+    asset = example_asset(seed=8, strands=20, points=8)
+    mesh = card_polymesh(asset, tmp_path / "p.abc")
+    n = len(card_mesh(asset.cards).vertices)
+    color = np.random.default_rng(1).random((n, 3)).astype(np.float32)
+    mesh.properties[0].properties.append(Compound(".arbGeomParams",
+                                                  [_geom_param("groom_color", color, "vtx", "rgb")]))
+    write_archive(tmp_path / "p.abc", [mesh], {})
+    report, got = blender_import(tmp_path / "p.abc", tmp_path)
+    assert report["mesh"]["attributes"]["groom_color"] == ["CORNER", "BYTE_COLOR"]
+    corners = got["corners"]
+    np.testing.assert_allclose(got["attr_groom_color"][:, :3], color[corners], atol=0.5 / 255 + 1e-6)  # 8 bits
+    np.testing.assert_allclose(got["attr_uv"], card_atlas(asset)[1][corners], atol=1e-7)
