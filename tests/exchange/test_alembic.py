@@ -181,6 +181,21 @@ def test_equal_samples_are_stored_once_and_metadata_is_indexed(tmp_path):
     np.testing.assert_array_equal(a.top.children["o"].props["b"].values[:, 0], one.values)
 
 
+def test_cli_exports_plain_strands(tmp_path, capsys):
+    from cghair_format.cli import main
+    from cghair_format.exchange import save_strands
+
+    s = small_strands()
+    save_strands(s, tmp_path / "in.npz")
+    assert main(["export", str(tmp_path / "in.npz"), "-o", str(tmp_path / "x.abc"), "--scale", "2"]) == 0
+    assert "warning" not in capsys.readouterr().err
+    _, _, geom = groom_props(tmp_path / "x.abc")
+    np.testing.assert_array_equal(geom["P"].values, s.points * np.float32(0.01 * 2))
+    np.testing.assert_array_equal(geom[".arbGeomParams"].props["groom_color"].values, srgb_to_linear(s.colors))
+    assert main(["export", str(tmp_path / "in.npz"), "-o", str(tmp_path / "no" / "x.abc")]) != 0
+    assert "cannot write the Alembic file" in capsys.readouterr().err
+
+
 def test_unwritable_output_is_a_clear_error(tmp_path):
     with pytest.raises(CghError, match="cannot write the Alembic file"):
         write_groom(tmp_path / "missing" / "g.abc", small_strands())
