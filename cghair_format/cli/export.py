@@ -4,7 +4,7 @@ or a Blender scene.
 USD (``.usd .usda .usdc .usdz``): strands as curves (default), ``--cards`` card meshes,
 ``--gaussians`` the Gaussians (a ParticleField3DGaussianSplat and Points); ``--all`` for everything.
 PLY (``.ply``): the decoded Gaussians as a standard 3DGS PLY, y down unless ``--up`` says otherwise.
-Alembic (``.abc``) and Blender (``.blend``): curves (and ``--cards``) through Blender (bpy).
+Alembic (``.abc``, our own writer) and Blender (``.blend``, through bpy): curves (and ``--cards``).
 ``--scale`` multiplies every coordinate and width (output units per input unit).
 """
 
@@ -16,7 +16,7 @@ from pathlib import Path
 from .argtypes import positive_float
 
 USD_EXTS = (".usd", ".usda", ".usdc", ".usdz")
-BLENDER_EXTS = (".abc", ".blend")
+GROOM_EXTS = (".abc", ".blend")
 PLY_UPS = ("-y", "y", "z")
 
 
@@ -50,8 +50,8 @@ def run(args: argparse.Namespace) -> int:
 
     src, out = Path(args.file), Path(args.output)
     ext = out.suffix.lower()
-    if ext not in USD_EXTS + BLENDER_EXTS + (".ply",):
-        raise CghError(f"{out}: export writes {', '.join(USD_EXTS + BLENDER_EXTS)} or .ply (3DGS), "
+    if ext not in USD_EXTS + GROOM_EXTS + (".ply",):
+        raise CghError(f"{out}: export writes {', '.join(USD_EXTS + GROOM_EXTS)} or .ply (3DGS), "
                        f"not {ext or 'no extension'}")
     if args.up is not None and ext != ".ply":
         raise CghError(f"--up chooses a 3DGS PLY's up axis; {ext} states its own (y up)")
@@ -69,10 +69,10 @@ def run(args: argparse.Namespace) -> int:
     from ..exchange import load_strands
 
     strands = load_strands(src, units=args.units, up=args.input_up)
-    if ext in BLENDER_EXTS:
-        from ..exchange.alembic import export_blender
+    if ext in GROOM_EXTS:
+        from ..exchange.alembic import export_groom
 
-        export_blender(out, strands=strands, scale=args.scale)
+        export_groom(out, strands=strands, scale=args.scale)
     else:
         from ..exchange.usd_export import export_usd
 
@@ -97,13 +97,13 @@ def _export_asset(src: Path, out: Path, args: argparse.Namespace) -> int:
     from ..codec import read
 
     asset = read(src)
-    if ext in BLENDER_EXTS:
+    if ext in GROOM_EXTS:
         from ..errors import CghError
-        from ..exchange.alembic import export_blender
+        from ..exchange.alembic import export_groom
 
         if args.gaussians or not args.curves:
             raise CghError(f"{out}: {ext} export writes the curves (and --cards); Gaussians go to USD or .ply")
-        export_blender(out, asset=asset, cards=args.cards, scale=args.scale)
+        export_groom(out, asset=asset, cards=args.cards, scale=args.scale)
     else:
         from ..exchange.usd_export import export_usd
 
@@ -124,7 +124,7 @@ def _export_splats(src: Path, out: Path, args: argparse.Namespace) -> int:
     ext = out.suffix.lower()
     if ext == ".ply":
         write_3dgs_ply(g, out, up=args.up or DEFAULT_UP, scale=args.scale)
-    elif ext in BLENDER_EXTS:
+    elif ext in GROOM_EXTS:
         raise CghError(f"{src}: a 3DGS PLY has no curves for {ext}; export it to USD or .ply")
     else:
         if args.cards:

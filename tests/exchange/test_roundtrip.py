@@ -22,7 +22,7 @@ KEEPS = {
     ".usdc": {"colors": 1e-6, "widths": True, "units": True},  # stored linear, float32
     ".usdz": {"colors": 1e-6, "widths": True, "units": True},  # stored linear, float32
 }
-THROUGH_BLENDER = {".abc"}  # round-tripped in test_blender_import.py (metres, y up)
+THROUGH_BLENDER = {".abc"}  # read through Blender: round-tripped in test_alembic.py (metres, y up)
 
 
 def test_every_writable_format_is_covered():

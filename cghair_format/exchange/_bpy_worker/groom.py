@@ -1,7 +1,5 @@
-"""Blender worker: ``python groom.py OP SRC DST [SCALE]``, converting a groom through Blender (bpy 5.0).
+"""Blender worker: ``python groom.py OP SRC DST``, converting a groom through Blender (bpy 5.0).
 
-- ``usd_to_abc``: import our USD stage (curves, and cards and points where present; Blender
-  converts it to metres), write Alembic with coordinates multiplied by SCALE.
 - ``abc_to_usd``: import an Alembic file, write a y-up USD stage (read back by :mod:`..usd_curves`).
 - ``usd_to_blend``: import our USD stage, give the curves Blender's Principled Hair BSDF (colour
   from the ``displayColor`` attribute) and save a .blend file.
@@ -31,11 +29,11 @@ def hair_material(bpy):
     return mat
 
 
-def main(op: str, src: str, dst: str, scale: str = "1") -> None:
+def main(op: str, src: str, dst: str) -> None:
     import bpy
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    if op in ("usd_to_abc", "usd_to_blend"):
+    if op == "usd_to_blend":
         if bpy.ops.wm.usd_import(filepath=src) != {"FINISHED"}:
             raise SystemExit(f"Blender could not import {src}")
     elif op == "abc_to_usd":
@@ -45,16 +43,7 @@ def main(op: str, src: str, dst: str, scale: str = "1") -> None:
             raise SystemExit(f"{src}: the Alembic file has no curves")
     else:
         raise SystemExit(f"unknown operation {op!r}")
-    if op == "usd_to_abc":
-        for obj in bpy.data.objects:  # global_scale moves the points but leaves the widths
-            if obj.type == "CURVES" and "radius" in obj.data.attributes:
-                radius = obj.data.attributes["radius"].data
-                values = [0.0] * len(radius)
-                radius.foreach_get("value", values)
-                radius.foreach_set("value", [v * float(scale) for v in values])
-        result = bpy.ops.wm.alembic_export(filepath=dst, selected=False, uvs=True, normals=True,
-                                           export_custom_properties=True, global_scale=float(scale))
-    elif op == "abc_to_usd":
+    if op == "abc_to_usd":
         result = bpy.ops.wm.usd_export(filepath=dst, convert_orientation=True, export_global_up_selection="Y",
                                        export_global_forward_selection="NEGATIVE_Z", export_materials=False)
     else:
@@ -71,4 +60,4 @@ def main(op: str, src: str, dst: str, scale: str = "1") -> None:
 
 
 if __name__ == "__main__":
-    main(*sys.argv[1:5])
+    main(*sys.argv[1:4])
