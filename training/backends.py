@@ -28,13 +28,13 @@ from torch import Tensor
 from cghair_format.errors import CghError
 
 from . import splatter
+from .config import BACKENDS
 from .splatter import ALPHA_MAX, DILATION, NEAR_PLANE, RenderOutput, eval_sh, torch_device
 
 if TYPE_CHECKING:
     from cghair_format.camera import Camera
     from cghair_format.gaussians import Gaussians
 
-BACKENDS = ("reference", "native", "gsplat")
 NATIVE_BUILD = "python setup.py build_ext --inplace"
 GSPLAT_INSTALL = "pip install 'cghair[cuda]'"
 

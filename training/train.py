@@ -16,10 +16,11 @@ from cghair_format.errors import CghError
 from cghair_format.strands import Strands
 
 from . import losses
+from .backends import renderer, resolve_backend
 from .config import TrainConfig
 from .dataset import Dataset, View, read_dataset
 from .model import HairModel, tau_at
-from .splatter import render, torch_device
+from .splatter import torch_device
 
 CHECKPOINT_VERSION = 1
 EXPORT_PROBE_VIEWS = 4  # training views used to choose hard or soft weights at export
@@ -43,6 +44,7 @@ class TrainResult:
     stage_seconds: dict = field(default_factory=dict)
     iterations_run: int = 0
     out_path: Path | None = None
+    backend: str = "reference"  # the rasterizer that trained it (training.backends)
 
 
 def base_asset(config: TrainConfig, strands: Strands | str | Path | None = None,
@@ -135,18 +137,15 @@ def load_checkpoint(path: str | Path) -> dict:
     return state
 
 
-def render_model(model: HairModel, camera, mode: str, tau: float, background) -> torch.Tensor:
-    with torch.no_grad():
-        return render(*model(mode, tau), camera, tuple(background)).rgb
-
-
 def choose_export(model: HairModel, base: HairAsset, views: list[View], config: TrainConfig,
-                  profile: str, device: str | torch.device = "cpu") -> tuple[HairAsset | None, str | None, dict]:
+                  profile: str, device: str | torch.device = "cpu", backend: str = "reference"
+                  ) -> tuple[HairAsset | None, str | None, dict]:
     """Export with hard and with soft weights, decode each through the codec with ``profile``, and
-    keep the one with the higher PSNR on a few training views (rendered on the torch ``device``)."""
+    keep the one with the higher PSNR on a few training views (rendered on the torch ``device``
+    with ``backend``)."""
     from cghair_format import decode, decode_gaussians, encode
 
-    from .splatter import render_gaussians
+    from .backends import render_gaussians
 
     if model.variant in ("unique", "single-sh"):
         return None, None, {}
@@ -157,7 +156,7 @@ def choose_export(model: HairModel, base: HairAsset, views: list[View], config: 
     for mode in ("hard", "soft"):
         asset = model.to_asset(base, mode, tau)
         g = decode_gaussians(decode(encode(asset, profile)[0]))
-        rgbs = [render_gaussians(g, v.camera, tuple(config.background), device)["rgb"] for v in probe]
+        rgbs = [render_gaussians(g, v.camera, tuple(config.background), device, backend)["rgb"] for v in probe]
         scores[mode] = losses.psnr(torch.as_tensor(np.stack(rgbs)), target)
         assets[mode] = asset
     best = max(scores, key=scores.get)
@@ -169,18 +168,21 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
           config: TrainConfig | None = None, resume: str | Path | None = None,
           checkpoint: str | Path | None = None, profile: str = "compact", progress: bool = True,
           log=None, threads: int | None = None, stop_at: int | None = None,
-          device: str = "cpu") -> TrainResult:
+          device: str = "cpu", backend: str | None = None) -> TrainResult:
     """Fit the model to the dataset's training views and write ``out`` (.cgh) if given.
 
     ``checkpoint`` (default ``<out>.ckpt.pt``) is written every ``config.checkpoint_every``
     iterations and at the end; ``resume`` continues from one (its config wins, except
     ``iterations`` when ``config`` is given). The config and final figures are saved in
     ``asset.metadata["training"]`` and as ``<out>.train.json``. ``device`` is a torch device
-    ("cpu", "cuda"); the splatter follows it. ``stop_at`` ends the run after
+    ("cpu", "cuda"); the splatter follows it. ``backend`` is the rasterizer (:mod:`training.backends`;
+    default: the fastest one that runs on ``device``). ``stop_at`` ends the run after
     that iteration as if interrupted (checkpoint written, nothing exported); resume continues it.
     """
     log = log if log is not None else sys.stderr
     dev = torch_device(device)
+    backend = resolve_backend(backend, dev)
+    render = renderer(backend)
     if threads:
         torch.set_num_threads(threads)
     ds = dataset if isinstance(dataset, Dataset) else read_dataset(dataset)
@@ -289,13 +291,13 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
                         iteration=end, history=history, dataset=dataset_name)
 
     result = TrainResult(model, base, config, history=history, seconds=seconds, stage_seconds=stage,
-                         iterations_run=iterations_run, out_path=out_path)
+                         iterations_run=iterations_run, out_path=out_path, backend=backend)
     if end < config.iterations:
         return result
-    asset, mode, scores = choose_export(model, base, ds.train, config, profile, dev)
+    asset, mode, scores = choose_export(model, base, ds.train, config, profile, dev, backend)
     result.asset, result.weight_mode, result.export_psnr = asset, mode, scores
     summary = {
-        "config": config.to_dict(), "dataset": dataset_name, "iterations_run": iterations_run,
+        "config": config.to_dict(), "dataset": dataset_name, "backend": backend, "iterations_run": iterations_run,
         "seconds": round(seconds, 3), "stage_seconds": {k: round(v, 3) for k, v in stage.items()},
         "final": history[-1] if history else None, "weight_mode": mode, "export_psnr": scores,
         "appearance_parameters": model.appearance_parameters(), "gaussians": model.n_strands * (model.n_points - 1),
