@@ -73,14 +73,19 @@ def main(argv: list[str] | None = None) -> int:
     if args.strands is None and not args.paper_scale:
         p.error("--strands is required (or give --paper-scale)")
     try:
-        report = _run(args)
+        _run(args)
     except CghError as exc:
         print(f"bench: error: {exc}", file=sys.stderr)
         return 2
-    _print(report)
+    return 0
+
+
+def _emit(report: dict, args: argparse.Namespace, lines: list[str]) -> None:
+    """Print ``lines`` now and rewrite the JSON, so that a run stopped later keeps what it measured."""
+    report["machine"]["load_average_now"] = os.getloadavg()[0]
+    print("\n".join(lines), flush=True)
     if args.json:
         Path(args.json).write_text(json.dumps(report, indent=2) + "\n")
-    return 0
 
 
 def _paper_scale_module():
@@ -123,7 +128,7 @@ def _train_run(ds_dir: Path, base, cfg, backend: str, device, out: Path | None, 
             "final": result.history[-1] if result.history else None, **_peak_memory(device)}
 
 
-def _run(args: argparse.Namespace) -> dict:
+def _run(args: argparse.Namespace) -> None:
     import torch
 
     from cghair_format.exchange import load_strands
@@ -188,51 +193,48 @@ def _run(args: argparse.Namespace) -> dict:
                   "cards": base.cards.count, "views": args.views, "res": args.res, "engine": args.engine},
         "cards_seconds": round(cards_s, 2), "dataset_seconds": round(time.perf_counter() - t, 2) if rendered else None,
     }
+    m, s = report["machine"], report["scene"]
+    gpu = f", {m['gpu']}" if m["gpu"] else ""
+    _emit(report, args, [
+        f"machine: {m['cores']} cores{gpu}, torch threads {m['torch_threads']}, load average at start "
+        f"{m['load_average_start']:.2f}",
+        f"scene: {s['strands']} strands x {s['points']} points = {s['gaussians']} Gaussians, {s['cards']} cards, "
+        f"{s['views']} views at {s['res']} x {s['res']} ({s['engine']})",
+        f"cards: {cards_s:.1f} s" + (f"; dataset: {report['dataset_seconds']:.1f} s" if rendered else "")])
     if args.paper_scale:
         report["run"] = _train_run(ds_dir, base, config(args.iters + 1), backend, device, None, args.iters)
+        _emit(report, args, _run_lines("", report["run"]))
         if args.reference_iters > 0 and backend != "reference":
             ref = _train_run(ds_dir, base, config(args.reference_iters + 1), "reference", device, None,
                              args.reference_iters)
             report["reference"] = ref
             report["speedup_over_reference"] = round(ref["ms_per_iteration"] / report["run"]["ms_per_iteration"], 2)
+            _emit(report, args, _run_lines("reference ", ref)
+                  + [f"speed-up over reference: {report['speedup_over_reference']:.1f} x"])
     else:
         from .evaluate import evaluate
 
         out = work / f"{tag}_{backend}.cgh"
         report["run"] = _train_run(ds_dir, base, config(args.iters), backend, device, out, None)
         ev = evaluate(out, ds_dir, use_lpips=False, device=str(device), backend=backend)
-        report["held_out"] = {"psnr": round(ev.psnr, 3), "ssim": round(ev.ssim, 4), "views": len(ev.per_view),
-                              "ground_truth": args.engine}
-    report["machine"]["load_average_end"] = os.getloadavg()[0]
-    return report
+        h = report["held_out"] = {"psnr": round(ev.psnr, 3), "ssim": round(ev.ssim, 4), "views": len(ev.per_view),
+                                  "ground_truth": args.engine}
+        _emit(report, args, _run_lines("", report["run"]) + [
+            f"held-out: PSNR {h['psnr']:.2f} dB, SSIM {h['ssim']:.4f} ({h['views']} views, {h['ground_truth']} "
+            "ground truth)"])
+    print(f"load average at end {os.getloadavg()[0]:.2f}")
 
 
-def _print(r: dict) -> None:
-    m, s, run = r["machine"], r["scene"], r["run"]
-    gpu = f", {m['gpu']}" if m["gpu"] else ""
-    print(f"machine: {m['cores']} cores{gpu}, torch threads {m['torch_threads']}, load average at start "
-          f"{m['load_average_start']:.2f}, at end {m['load_average_end']:.2f}")
-    print(f"scene: {s['strands']} strands x {s['points']} points = {s['gaussians']} Gaussians, {s['cards']} cards, "
-          f"{s['views']} views at {s['res']} x {s['res']} ({s['engine']})")
-    print(f"cards: {r['cards_seconds']:.1f} s" + (f"; dataset: {r['dataset_seconds']:.1f} s" if r["dataset_seconds"]
-                                                  else ""))
-    for label, x in (("", run), ("reference ", r.get("reference"))):
-        if x is None:
-            continue
-        mem = f"peak RSS {x['peak_rss_gib']:.2f} GiB" + (f", CUDA peak {x['cuda_peak_allocated_gib']:.2f} GiB"
-                                                         if "cuda_peak_allocated_gib" in x else "")
-        print(f"{label}backend {x['backend']}: {x['iterations']} iterations ({x['geometry_frozen_iterations']} with "
-              f"frozen geometry) in {x['seconds']:.1f} s, {x['iterations_per_second']:.2f} it/s, "
-              f"{x['ms_per_iteration']:.0f} ms/it; {mem}")
-        total = max(x["ms_per_iteration"], 1e-9)
-        for name, ms in x["stage_ms_per_iteration"].items():
-            print(f"  {name:<9}{ms:9.1f} ms/it  {100 * ms / total:5.1f} %")
-    if "speedup_over_reference" in r:
-        print(f"speed-up over reference: {r['speedup_over_reference']:.1f} x")
-    if "held_out" in r:
-        h = r["held_out"]
-        print(f"held-out: PSNR {h['psnr']:.2f} dB, SSIM {h['ssim']:.4f} ({h['views']} views, {h['ground_truth']} "
-              "ground truth)")
+def _run_lines(label: str, x: dict) -> list[str]:
+    mem = f"peak RSS so far {x['peak_rss_gib']:.2f} GiB" + (
+        f", CUDA peak {x['cuda_peak_allocated_gib']:.2f} GiB" if "cuda_peak_allocated_gib" in x else "")
+    lines = [f"{label}backend {x['backend']}: {x['iterations']} iterations ({x['geometry_frozen_iterations']} with "
+             f"frozen geometry) in {x['seconds']:.1f} s, {x['iterations_per_second']:.2f} it/s, "
+             f"{x['ms_per_iteration']:.0f} ms/it; {mem}"]
+    total = max(x["ms_per_iteration"], 1e-9)
+    lines += [f"  {name:<9}{ms:9.1f} ms/it  {100 * ms / total:5.1f} %"
+              for name, ms in x["stage_ms_per_iteration"].items()]
+    return lines
 
 
 if __name__ == "__main__":

@@ -34,7 +34,7 @@ def test_bench_small_config_reports_every_figure(tmp_path, capsys):
     assert report["scene"]["strands"] == 100 and report["scene"]["res"] == 16
     assert math.isfinite(report["held_out"]["psnr"]) and report["held_out"]["views"] == 1
     text = capsys.readouterr().out
-    assert "backend reference: 4 iterations" in text and "held-out: PSNR" in text
+    assert "backend reference: 4 iterations" in text and "held-out: PSNR" in text and "load average at end" in text
 
 
 def test_bench_paper_scale_path_on_a_reduced_recipe(tmp_path, monkeypatch, capsys):
