@@ -2,11 +2,12 @@
 """Compiled CPU splatting kernels of :mod:`training.native_splat` (spec/rendering.md), forward and
 backward, run on every core through OpenMP with the GIL released.
 
-- :func:`project`: per Gaussian, EWA projection, SH colour and the tiles its footprint touches.
+- :func:`project`: per Gaussian, the EWA projection and the tiles its footprint touches.
 - :func:`bin_tiles`: the Gaussians in depth order (stable) and per 16 x 16 tile the list of
   those it touches, front to back.
-- :func:`rasterize`: per tile, front-to-back compositing with early termination; keeps per pixel
-  the final transmittance and the last contribution, all the backward pass needs.
+- :func:`rasterize`: per tile, front-to-back compositing with early termination (SH colours
+  computed only for the Gaussians that contribute); keeps per pixel the final transmittance and
+  the last contribution, all the backward pass needs.
 - :func:`rasterize_backward`: per tile, each pixel's contributions walked back to front;
   per (Gaussian, tile) gradients, then summed per Gaussian without races.
 - :func:`project_backward`: per Gaussian, gradients through SH and the projection.
@@ -14,13 +15,13 @@ backward, run on every core through OpenMP with the GIL released.
 
 from cython.parallel import prange
 
-from libc.math cimport ceil, expf, floor, log, sqrt
+from libc.math cimport ceil, expf, floor, isfinite, log, sqrt
 from libc.stdint cimport int32_t, int64_t, uint32_t
 from libc.stdlib cimport free, malloc
 
 cdef enum:
     TILE = 16  # tile side in pixels
-    NF = 13  # per-Gaussian features the rasterizer reads, see project()
+    NF = 10  # per-Gaussian features the rasterizer reads, see project()
     AHEAD = 16  # entries prefetched ahead: the features of a tile's list are scattered in memory
 
 cdef extern from *:
@@ -56,6 +57,22 @@ cdef inline double dmin(double a, double b) noexcept nogil:
 
 cdef inline double dmax(double a, double b) noexcept nogil:
     return a if a > b else b
+
+
+cdef inline int first_pixel(double lo, int first, int last) noexcept nogil:
+    """The first pixel k with k + 0.5 >= lo, clamped to [first, last + 1]; NaN or beyond: last + 1."""
+    cdef double v = ceil(lo - 0.5)
+    if v < first:
+        return first
+    return <int>v if v <= last else last + 1  # NaN fails both tests
+
+
+cdef inline int last_pixel(double hi, int first, int last) noexcept nogil:
+    """The last pixel k with k + 0.5 <= hi, clamped to [first - 1, last]; NaN or before: first - 1."""
+    cdef double v = floor(hi - 0.5)
+    if v > last:
+        return last
+    return <int>v if v >= first else first - 1
 
 
 cdef void sh_basis(int n, double x, double y, double z, double* b, double* bx, double* by,
@@ -152,27 +169,43 @@ cdef inline double footprint_q(float opacity) noexcept nogil:
     return dmax(q, 0.0)
 
 
-cdef void project_one(const float* mean, const float* quat, const float* scale, float opacity,
-                      const float* sh, int nc, const double* cam, int width, int height, float* f,
-                      int32_t* rect, int64_t* ntiles) noexcept nogil:
-    cdef double fx = cam[15], fy = cam[16], cx = cam[17], cy = cam[18]
-    cdef double t[3]
-    cdef double q[4]
-    cdef double r[9]
+cdef void colour_of(const float* mean, const float* sh, int nc, const double* cam,
+                    double* colour) noexcept nogil:
+    """SH colour seen from the camera centre: ``max(0, sum_lm sh_lm Y_lm(dir) + 0.5)``."""
+    cdef double d[3]
     cdef double b[16]
     cdef double bx[16]
     cdef double by[16]
     cdef double bz[16]
-    cdef double d[3]
+    cdef double nd, col
+    cdef int k, ch
+    for k in range(3):
+        d[k] = mean[k] - cam[12 + k]
+    nd = 1.0 / dmax(sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]), 1e-12)
+    sh_basis(nc, d[0] * nd, d[1] * nd, d[2] * nd, b, bx, by, bz)
+    for ch in range(3):
+        col = 0.0
+        for k in range(nc):
+            col += b[k] * sh[3 * k + ch]
+        colour[ch] = dmax(col + 0.5, 0.0)
+
+
+cdef void project_one(const float* mean, const float* quat, const float* scale, float opacity,
+                      const double* cam, int width, int height, float* f, int32_t* rect,
+                      int64_t* ntiles) noexcept nogil:
+    cdef double fx = cam[15], fy = cam[16], cx = cam[17], cy = cam[18]
+    cdef double t[3]
+    cdef double q[4]
+    cdef double r[9]
     cdef double jw0[3]
     cdef double jw1[3]
     cdef double a0[3]
     cdef double a1[3]
-    cdef double inv_n, x, y, z, m, ca, cb, cc, det, mid, lam, rad, qmax, hx, hy, mx, my, nd, col
-    cdef int k, j, ch, x0, x1, y0, y1
+    cdef double inv_n, x, y, z, iz, m, ca, cb, cc, det, idet, mid, lam, rad, qmax, hx, hy, mx, my
+    cdef int k, j, x0, x1, y0, y1
     for k in range(3):
         t[k] = cam[3 * k] * mean[0] + cam[3 * k + 1] * mean[1] + cam[3 * k + 2] * mean[2] + cam[9 + k]
-    f[9] = <float>t[2]
+    f[6] = <float>t[2]
     for k in range(4):
         rect[k] = 0
     ntiles[0] = 0
@@ -181,10 +214,11 @@ cdef void project_one(const float* mean, const float* quat, const float* scale, 
     x = t[0]
     y = t[1]
     z = t[2]
+    iz = 1.0 / z
     quat_rotmat(quat, q, &inv_n, r)
     for k in range(3):
-        jw0[k] = fx / z * cam[k] - fx * x / (z * z) * cam[6 + k]
-        jw1[k] = fy / z * cam[3 + k] - fy * y / (z * z) * cam[6 + k]
+        jw0[k] = fx * iz * cam[k] - fx * x * iz * iz * cam[6 + k]
+        jw1[k] = fy * iz * cam[3 + k] - fy * y * iz * iz * cam[6 + k]
     for j in range(3):  # A = J W R_q S, by rows
         a0[j] = 0.0
         a1[j] = 0.0
@@ -196,39 +230,31 @@ cdef void project_one(const float* mean, const float* quat, const float* scale, 
     cb = a0[0] * a1[0] + a0[1] * a1[1] + a0[2] * a1[2]
     cc = a1[0] * a1[0] + a1[1] * a1[1] + a1[2] * a1[2] + DILATION
     det = ca * cc - cb * cb
-    f[2] = <float>(cc / det)
-    f[3] = <float>(-cb / det)
-    f[4] = <float>(ca / det)
+    idet = 1.0 / det
+    f[2] = <float>(cc * idet)
+    f[3] = <float>(-cb * idet)
+    f[4] = <float>(ca * idet)
     f[5] = opacity
-    mx = fx * x / z + cx
-    my = fy * y / z + cy
+    mx = fx * x * iz + cx
+    my = fy * y * iz + cy
     f[0] = <float>mx
     f[1] = <float>my
     mid = 0.5 * (ca + cc)
     lam = mid + sqrt(dmax(mid * mid - det, 0.0))
     rad = ceil(SIGMA_SUPPORT * sqrt(lam))
-    for k in range(3):
-        d[k] = mean[k] - cam[12 + k]
-    nd = dmax(sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]), 1e-12)
-    sh_basis(nc, d[0] / nd, d[1] / nd, d[2] / nd, b, bx, by, bz)
-    for ch in range(3):
-        col = 0.0
-        for k in range(nc):
-            col += b[k] * sh[3 * k + ch]
-        f[6 + ch] = <float>dmax(col + 0.5, 0.0)
     qmax = footprint_q(opacity)
     hx = dmin(sqrt(qmax * ca), rad)
     hy = dmin(sqrt(qmax * cc), rad)
-    f[10] = <float>qmax
-    f[11] = <float>rad
-    f[12] = <float>hy
+    f[7] = <float>qmax
+    f[8] = <float>rad
+    f[9] = <float>hy
     # pixels k with |k + 0.5 - m| <= h, clipped to the image, then their tiles
-    x0 = <int>dmax(ceil(mx - hx - 0.5), 0.0)
-    x1 = <int>dmin(floor(mx + hx - 0.5), width - 1.0)
-    y0 = <int>dmax(ceil(my - hy - 0.5), 0.0)
-    y1 = <int>dmin(floor(my + hy - 0.5), height - 1.0)
-    if qmax <= 0 or x0 > x1 or y0 > y1:
-        return
+    x0 = first_pixel(mx - hx, 0, width - 1)
+    x1 = last_pixel(mx + hx, 0, width - 1)
+    y0 = first_pixel(my - hy, 0, height - 1)
+    y1 = last_pixel(my + hy, 0, height - 1)
+    if not (qmax > 0) or x0 > x1 or y0 > y1 or not (isfinite(f[2]) and isfinite(f[3]) and isfinite(f[4])):
+        return  # off-screen, transparent, or not finite (NaN or infinite inputs)
     rect[0] = x0 // TILE
     rect[1] = y0 // TILE
     rect[2] = x1 // TILE + 1
@@ -237,18 +263,17 @@ cdef void project_one(const float* mean, const float* quat, const float* scale, 
 
 
 def project(const float[:, ::1] means, const float[:, ::1] quats, const float[:, ::1] scales,
-            const float[::1] opacities, const float[:, :, ::1] sh, const double[::1] cam,
-            int width, int height, float[:, ::1] feat, int32_t[:, ::1] rect, int64_t[::1] ntiles):
-    """Per Gaussian the features the rasterizer reads, ``feat [G, 13]``: screen centre (2), conic
-    (3), opacity, colour (3), camera depth, footprint bound q, radius, half-height of the footprint's
-    rows; and the tile rectangle [x0, y0, x1, y1) its footprint touches (ntiles 0 when culled).
-    ``cam`` holds world-to-camera rotation (9, row-major), translation (3), camera centre (3),
-    fx, fy, cx, cy."""
+            const float[::1] opacities, const double[::1] cam, int width, int height, float[:, ::1] feat,
+            int32_t[:, ::1] rect, int64_t[::1] ntiles):
+    """Per Gaussian the features the rasterizer reads, ``feat [G, 10]``: screen centre (2), conic
+    (3), opacity, camera depth, footprint bound q, radius, half-height of the footprint's rows; and
+    the tile rectangle [x0, y0, x1, y1) its footprint touches (ntiles 0 when culled). Colours are
+    computed later, only for the Gaussians that contribute. ``cam`` holds world-to-camera rotation
+    (9, row-major), translation (3), camera centre (3), fx, fy, cx, cy."""
     cdef Py_ssize_t g
-    cdef int nc = sh.shape[1]
     for g in prange(means.shape[0], nogil=True, schedule="static"):
-        project_one(&means[g, 0], &quats[g, 0], &scales[g, 0], opacities[g], &sh[g, 0, 0], nc, &cam[0],
-                    width, height, &feat[g, 0], &rect[g, 0], &ntiles[g])
+        project_one(&means[g, 0], &quats[g, 0], &scales[g, 0], opacities[g], &cam[0], width, height,
+                    &feat[g, 0], &rect[g, 0], &ntiles[g])
 
 
 cdef struct Item:  # a Gaussian and its sort key (the bits of its depth)
@@ -287,7 +312,7 @@ def bin_tiles(const float[:, ::1] feat, const int32_t[:, ::1] rect, const int64_
         for g in range(n):
             pair_start[g + 1] = pair_start[g] + ntiles[g]
             if ntiles[g] > 0:
-                src[v].key = (<const uint32_t*>&feat[g, 9])[0]
+                src[v].key = (<const uint32_t*>&feat[g, 6])[0]
                 src[v].g = <int32_t>g
                 v += 1
                 for ty in range(rect[g, 1], rect[g, 3]):
@@ -336,14 +361,15 @@ def bin_tiles(const float[:, ::1] feat, const int32_t[:, ::1] rect, const int64_
 cdef inline int row_span(const float* f, int y, int x_lo, int x_hi, int* x0, int* x1) noexcept nogil:
     """Pixels x0..x1 of row y (clipped to [x_lo, x_hi]) inside both the footprint ellipse (with the
     reference's margin) and the 3-sigma square; returns 0 when there are none."""
-    cdef double mx = f[0], a = f[2], b = f[3], c = f[4], qmax = f[10], rad = f[11]
+    cdef double mx = f[0], a = f[2], b = f[3], c = f[4], qmax = f[7], rad = f[8]
     cdef double dy = y + 0.5 - <double>f[1]
     cdef double disc = dmax((b * dy) * (b * dy) - a * (c * dy * dy - qmax), 0.0)
-    cdef double half = sqrt(disc) / a + 1e-4
-    cdef double centre = -b * dy / a
+    cdef double ia = 1.0 / a
+    cdef double half = sqrt(disc) * ia + 1e-4
+    cdef double centre = -b * dy * ia
     cdef double lo = mx + dmax(centre - half, -rad), hi = mx + dmin(centre + half, rad)
-    x0[0] = <int>dmax(ceil(lo - 0.5), x_lo)
-    x1[0] = <int>dmin(floor(hi - 0.5), x_hi)
+    x0[0] = first_pixel(lo, x_lo, x_hi)
+    x1[0] = last_pixel(hi, x_lo, x_hi)
     return x0[0] <= x1[0]
 
 
@@ -357,8 +383,9 @@ cdef inline float raw_alpha(const float* f, int x, float dy, float* gauss, float
 
 
 cdef void raster_tile(int tile, int tiles_x, int width, int height, const float* feat,
-                      const int32_t* tile_start, const int32_t* entries, const float* bg, float* rgb,
-                      float* alpha, float* depth, double* t_final, int32_t* last) noexcept nogil:
+                      const int32_t* tile_start, const int32_t* entries, const float* means, const float* sh,
+                      int nc, const double* cam, const float* bg, float* rgb, float* alpha, float* depth,
+                      double* t_final, int32_t* last, float* entry_colour) noexcept nogil:
     cdef int tx0 = (tile % tiles_x) * TILE, ty0 = (tile // tiles_x) * TILE
     cdef int tw = min(TILE, width - tx0), th = min(TILE, height - ty0)
     cdef double trans[TILE * TILE]
@@ -367,10 +394,12 @@ cdef void raster_tile(int tile, int tiles_x, int width, int height, const float*
     cdef char done[TILE * TILE]
     cdef int rowleft[TILE]  # pixels of each row still compositing
     cdef int start = tile_start[tile], end = tile_start[tile + 1], npix = tw * th, ndone = 0
-    cdef int e, k, y, x, x0, x1, y0, y1, pix, ch
+    cdef int e, k, y, x, x0, x1, y0, y1, pix, ch, have
+    cdef int64_t g
     cdef const float* f
     cdef float a, gauss, dx, dy, half = 0.5
     cdef double tn, w
+    cdef double col[3]
     for k in range(TILE * TILE):
         trans[k] = 1.0
         lst[k] = -1
@@ -386,9 +415,11 @@ cdef void raster_tile(int tile, int tiles_x, int width, int height, const float*
             break
         if e + AHEAD < end:
             PREFETCH(feat + NF * entries[e + AHEAD])
-        f = feat + NF * entries[e]
-        y0 = <int>dmax(ceil(f[1] - f[12] - 0.5), ty0)
-        y1 = <int>dmin(floor(f[1] + f[12] - 0.5), ty0 + th - 1)
+        g = entries[e]
+        f = feat + NF * g
+        have = 0  # colour computed (only for Gaussians that contribute)
+        y0 = first_pixel(f[1] - f[9], ty0, ty0 + th - 1)
+        y1 = last_pixel(f[1] + f[9], ty0, ty0 + th - 1)
         for y in range(y0, y1 + 1):
             if rowleft[y - ty0] == 0 or not row_span(f, y, tx0, tx0 + tw - 1, &x0, &x1):
                 continue
@@ -408,11 +439,16 @@ cdef void raster_tile(int tile, int tiles_x, int width, int height, const float*
                     ndone += 1
                     rowleft[y - ty0] -= 1
                     continue
+                if not have:  # kept per entry for the backward pass (each entry is this tile's alone)
+                    colour_of(means + 3 * g, sh + 3 * nc * g, nc, cam, col)
+                    for ch in range(3):
+                        entry_colour[3 * e + ch] = <float>col[ch]
+                    have = 1
                 w = a * trans[pix]
-                acc[4 * pix] += w * f[6]
-                acc[4 * pix + 1] += w * f[7]
-                acc[4 * pix + 2] += w * f[8]
-                acc[4 * pix + 3] += w * f[9]
+                acc[4 * pix] += w * col[0]
+                acc[4 * pix + 1] += w * col[1]
+                acc[4 * pix + 2] += w * col[2]
+                acc[4 * pix + 3] += w * f[6]
                 trans[pix] = tn
                 lst[pix] = e - start
     for y in range(th):
@@ -428,21 +464,28 @@ cdef void raster_tile(int tile, int tiles_x, int width, int height, const float*
 
 
 def rasterize(const float[:, ::1] feat, const int32_t[::1] tile_start, const int32_t[::1] entries,
-              int tiles_x, int width, int height, const float[::1] bg, float[:, :, ::1] rgb,
-              float[:, ::1] alpha, float[:, ::1] depth, double[:, ::1] t_final, int32_t[:, ::1] last):
+              const float[:, ::1] means, const float[:, :, ::1] sh, const double[::1] cam, int tiles_x,
+              int width, int height, const float[::1] bg, float[:, :, ::1] rgb, float[:, ::1] alpha,
+              float[:, ::1] depth, double[:, ::1] t_final, int32_t[:, ::1] last, float[:, ::1] entry_colour):
     """Front-to-back compositing of every tile; also keeps per pixel the final transmittance and the
-    index (within its tile's list) of the last contribution, -1 where none."""
+    index (within its tile's list) of the last contribution, -1 where none, and per entry the colour
+    of the Gaussian (written only for entries that contribute: those the backward pass reads)."""
     cdef int tile, tiles = tile_start.shape[0] - 1
     cdef const float* fp = &feat[0, 0] if feat.shape[0] > 0 else NULL
     cdef const int32_t* ep = &entries[0] if entries.shape[0] > 0 else NULL
+    cdef const float* mp = &means[0, 0] if means.shape[0] > 0 else NULL
+    cdef const float* shp = &sh[0, 0, 0] if sh.shape[0] > 0 else NULL
+    cdef float* cp = &entry_colour[0, 0] if entry_colour.shape[0] > 0 else NULL
+    cdef int nc = sh.shape[1]
     for tile in prange(tiles, nogil=True, schedule="dynamic"):
-        raster_tile(tile, tiles_x, width, height, fp, &tile_start[0], ep, &bg[0], &rgb[0, 0, 0],
-                    &alpha[0, 0], &depth[0, 0], &t_final[0, 0], &last[0, 0])
+        raster_tile(tile, tiles_x, width, height, fp, &tile_start[0], ep, mp, shp, nc, &cam[0], &bg[0],
+                    &rgb[0, 0, 0], &alpha[0, 0], &depth[0, 0], &t_final[0, 0], &last[0, 0], cp)
 
 
 cdef void raster_tile_backward(int tile, int tiles_x, int width, int height, const float* feat,
                                const int32_t* tile_start, const int32_t* entries,
-                               const int32_t* entry_pair, const float* bg, const float* grad_rgb,
+                               const int32_t* entry_pair, const float* entry_colour, const float* bg,
+                               const float* grad_rgb,
                                const float* grad_alpha, const double* t_final, const int32_t* last,
                                float* pair_grad) noexcept nogil:
     cdef int tx0 = (tile % tiles_x) * TILE, ty0 = (tile // tiles_x) * TILE
@@ -455,6 +498,7 @@ cdef void raster_tile_backward(int tile, int tiles_x, int width, int height, con
     cdef int rowlast[TILE]  # the last contribution of each row
     cdef int start = tile_start[tile], n = tile_start[tile + 1] - start, maxlast = -1
     cdef int le, k, y, x, x0, x1, y0, y1, pix, ch
+    cdef const float* col
     cdef const float* f
     cdef float* out
     cdef float a, raw, gauss, dx, dy, half = 0.5
@@ -487,8 +531,9 @@ cdef void raster_tile_backward(int tile, int tiles_x, int width, int height, con
             if le >= AHEAD:
                 PREFETCH(feat + NF * entries[start + le - AHEAD])
             f = feat + NF * entries[start + le]
-            y0 = <int>dmax(ceil(f[1] - f[12] - 0.5), ty0)
-            y1 = <int>dmin(floor(f[1] + f[12] - 0.5), ty0 + th - 1)
+            col = entry_colour + 3 * (start + le)
+            y0 = first_pixel(f[1] - f[9], ty0, ty0 + th - 1)
+            y1 = last_pixel(f[1] + f[9], ty0, ty0 + th - 1)
             for y in range(y0, y1 + 1):
                 if le > rowlast[y - ty0] or not row_span(f, y, tx0, tx0 + tw - 1, &x0, &x1):
                     continue
@@ -507,8 +552,8 @@ cdef void raster_tile_backward(int tile, int tiles_x, int width, int height, con
                     dlda = dfin[pix] / oma
                     for ch in range(3):
                         gr[6 + ch] += w * dc[3 * pix + ch]
-                        dlda += tb * (f[6 + ch] - rec[3 * pix + ch]) * dc[3 * pix + ch]
-                        rec[3 * pix + ch] = a * f[6 + ch] + oma * rec[3 * pix + ch]
+                        dlda += tb * (col[ch] - rec[3 * pix + ch]) * dc[3 * pix + ch]
+                        rec[3 * pix + ch] = a * col[ch] + oma * rec[3 * pix + ch]
                     trans[pix] = tb
                     if raw <= ALPHA_MAX:  # the clamp passes no gradient
                         gr[5] += dlda * gauss
@@ -524,7 +569,8 @@ cdef void raster_tile_backward(int tile, int tiles_x, int width, int height, con
 
 
 def rasterize_backward(const float[:, ::1] feat, const int32_t[::1] tile_start,
-                       const int32_t[::1] entries, const int32_t[::1] entry_pair, int tiles_x, int width,
+                       const int32_t[::1] entries, const int32_t[::1] entry_pair,
+                       const float[:, ::1] entry_colour, int tiles_x, int width,
                        int height, const float[::1] bg, const float[:, :, ::1] grad_rgb,
                        const float[:, ::1] grad_alpha, const double[:, ::1] t_final,
                        const int32_t[:, ::1] last, float[:, ::1] pair_grad):
@@ -535,7 +581,7 @@ def rasterize_backward(const float[:, ::1] feat, const int32_t[::1] tile_start,
         return
     for tile in prange(tiles, nogil=True, schedule="dynamic"):
         raster_tile_backward(tile, tiles_x, width, height, &feat[0, 0], &tile_start[0], &entries[0],
-                             &entry_pair[0], &bg[0], &grad_rgb[0, 0, 0], &grad_alpha[0, 0],
+                             &entry_pair[0], &entry_colour[0, 0], &bg[0], &grad_rgb[0, 0, 0], &grad_alpha[0, 0],
                              &t_final[0, 0], &last[0, 0], &pair_grad[0, 0])
 
 
@@ -565,7 +611,8 @@ cdef void project_backward_one(const float* mean, const float* quat, const float
     cdef double ga1[3]
     cdef double gj0[3]
     cdef double gj1[3]
-    cdef double inv_n, x, y, z, ca, cb, cc, det, det2, gca, gcb, gcc, nd, col, gc, dot, m, w
+    cdef double gcol[3]
+    cdef double inv_n, x, y, z, iz, ca, cb, cc, idet, idet2, gca, gcb, gcc, nd, col, dot, m, w
     cdef int64_t p
     cdef int k, j, ch
     for k in range(9):
@@ -574,6 +621,17 @@ cdef void project_backward_one(const float* mean, const float* quat, const float
         for k in range(9):
             gs[k] += pair_grad[9 * p + k]
     g_opacity[0] = <float>gs[5]
+    if gs[0] == 0 and gs[1] == 0 and gs[2] == 0 and gs[3] == 0 and gs[4] == 0 and gs[6] == 0 and gs[7] == 0 \
+            and gs[8] == 0:  # hidden behind others (or transparent): nothing to take back
+        for k in range(3 * nc):
+            g_sh[k] = 0
+        if geometry:
+            for k in range(3):
+                g_mean[k] = 0
+                g_scale[k] = 0
+            for k in range(4):
+                g_quat[k] = 0
+        return
     # colour: clamp at 0 (gradient where the argument is >= 0), SH basis, direction
     for k in range(3):
         d[k] = mean[k] - cam[12 + k]
@@ -586,14 +644,17 @@ cdef void project_backward_one(const float* mean, const float* quat, const float
         col = 0.5
         for k in range(nc):
             col += b[k] * sh[3 * k + ch]
-        gc = gs[6 + ch] if col >= 0 else 0.0
-        for k in range(nc):
-            g_sh[3 * k + ch] = <float>(b[k] * gc)
-            gd[0] += gc * sh[3 * k + ch] * bx[k]
-            gd[1] += gc * sh[3 * k + ch] * by[k]
-            gd[2] += gc * sh[3 * k + ch] * bz[k]
+        gcol[ch] = gs[6 + ch] if col >= 0 else 0.0
+    for k in range(nc):
+        for ch in range(3):
+            g_sh[3 * k + ch] = <float>(b[k] * gcol[ch])
     if not geometry:
         return
+    for k in range(nc):  # the colour's dependence on the view direction
+        w = gcol[0] * sh[3 * k] + gcol[1] * sh[3 * k + 1] + gcol[2] * sh[3 * k + 2]
+        gd[0] += w * bx[k]
+        gd[1] += w * by[k]
+        gd[2] += w * bz[k]
     dot = d[0] * gd[0] + d[1] * gd[1] + d[2] * gd[2]
     for k in range(3):
         gd[k] = (gd[k] - d[k] * dot) / nd
@@ -603,10 +664,11 @@ cdef void project_backward_one(const float* mean, const float* quat, const float
     x = t[0]
     y = t[1]
     z = t[2]
+    iz = 1.0 / z
     quat_rotmat(quat, q, &inv_n, r)
     for k in range(3):
-        jw0[k] = fx / z * cam[k] - fx * x / (z * z) * cam[6 + k]
-        jw1[k] = fy / z * cam[3 + k] - fy * y / (z * z) * cam[6 + k]
+        jw0[k] = fx * iz * cam[k] - fx * x * iz * iz * cam[6 + k]
+        jw1[k] = fy * iz * cam[3 + k] - fy * y * iz * iz * cam[6 + k]
     for j in range(3):
         a0[j] = 0.0
         a1[j] = 0.0
@@ -617,12 +679,12 @@ cdef void project_backward_one(const float* mean, const float* quat, const float
     ca = a0[0] * a0[0] + a0[1] * a0[1] + a0[2] * a0[2] + DILATION
     cb = a0[0] * a1[0] + a0[1] * a1[1] + a0[2] * a1[2]
     cc = a1[0] * a1[0] + a1[1] * a1[1] + a1[2] * a1[2] + DILATION
-    det = ca * cc - cb * cb
-    det2 = det * det
+    idet = 1.0 / (ca * cc - cb * cb)
+    idet2 = idet * idet
     # conic (cc, -cb, ca) / det back to the 2D covariance
-    gca = gs[2] * (-cc * cc / det2) + gs[3] * (cb * cc / det2) + gs[4] * (1 / det - ca * cc / det2)
-    gcc = gs[2] * (1 / det - cc * ca / det2) + gs[3] * (cb * ca / det2) + gs[4] * (-ca * ca / det2)
-    gcb = gs[2] * (2 * cc * cb / det2) + gs[3] * (-1 / det - 2 * cb * cb / det2) + gs[4] * (2 * ca * cb / det2)
+    gca = gs[2] * (-cc * cc * idet2) + gs[3] * (cb * cc * idet2) + gs[4] * (idet - ca * cc * idet2)
+    gcc = gs[2] * (idet - cc * ca * idet2) + gs[3] * (cb * ca * idet2) + gs[4] * (-ca * ca * idet2)
+    gcb = gs[2] * (2 * cc * cb * idet2) + gs[3] * (-idet - 2 * cb * cb * idet2) + gs[4] * (2 * ca * cb * idet2)
     for j in range(3):
         ga0[j] = 2 * gca * a0[j] + gcb * a1[j]
         ga1[j] = 2 * gcc * a1[j] + gcb * a0[j]
@@ -638,14 +700,14 @@ cdef void project_backward_one(const float* mean, const float* quat, const float
             gr[3 * k + j] = m * scale[j]
         g_scale[j] = <float>w
     # J W's rows and the centre's projection, by camera-space x, y, z
-    gt[0] = gs[0] * fx / z
-    gt[1] = gs[1] * fy / z
-    gt[2] = -gs[0] * fx * x / (z * z) - gs[1] * fy * y / (z * z)
+    gt[0] = gs[0] * fx * iz
+    gt[1] = gs[1] * fy * iz
+    gt[2] = -(gs[0] * fx * x + gs[1] * fy * y) * iz * iz
     for k in range(3):
-        gt[0] -= gj0[k] * fx / (z * z) * cam[6 + k]
-        gt[1] -= gj1[k] * fy / (z * z) * cam[6 + k]
-        gt[2] += gj0[k] * (-fx / (z * z) * cam[k] + 2 * fx * x / (z * z * z) * cam[6 + k])
-        gt[2] += gj1[k] * (-fy / (z * z) * cam[3 + k] + 2 * fy * y / (z * z * z) * cam[6 + k])
+        gt[0] -= gj0[k] * fx * iz * iz * cam[6 + k]
+        gt[1] -= gj1[k] * fy * iz * iz * cam[6 + k]
+        gt[2] += gj0[k] * (-fx * cam[k] + 2 * fx * x * iz * cam[6 + k]) * iz * iz
+        gt[2] += gj1[k] * (-fy * cam[3 + k] + 2 * fy * y * iz * cam[6 + k]) * iz * iz
     for k in range(3):
         g_mean[k] = <float>(cam[k] * gt[0] + cam[3 + k] * gt[1] + cam[6 + k] * gt[2] + gd[k])
     # rotation matrix back to the unit quaternion (w, x, y, z), then through the normalisation

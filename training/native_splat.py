@@ -9,7 +9,10 @@ transmittance and the last contribution. The backward pass walks each pixel's co
 to front from there, recomputing alpha, so no (pixel, Gaussian) pair is ever stored.
 
 Differentiable w.r.t. means, quats, scales, opacities and sh through rgb and alpha. The depth
-output is forward-only (its gradient is not propagated), and the background is a constant.
+output is forward-only (its gradient is not propagated), and the background is a constant. When
+means, quats and scales need no gradient (frozen geometry) the projection's backward is skipped.
+Threads: OpenMP's (``OMP_NUM_THREADS``, default every core). Work and gradient arrays are kept
+and reused between calls (:func:`release_memory` drops them).
 """
 
 from __future__ import annotations
@@ -33,7 +36,7 @@ except ImportError:  # not built: render() says how to build it
     _raster = None
 
 TILE = 16  # tile side in pixels, as in _raster.pyx
-FEATURES = 13  # per-Gaussian features the kernel keeps, as NF in _raster.pyx
+FEATURES = 10  # per-Gaussian features the kernel keeps, as NF in _raster.pyx
 
 
 class NativeSplatterMissing(CghError, ImportError):
@@ -80,6 +83,11 @@ class _Pool:
 _POOL = _Pool()
 
 
+def release_memory() -> None:
+    """Drop the reused arrays (at paper scale about 1 GB per view kept alive at once)."""
+    _POOL.free.clear()
+
+
 def _camera_vector(camera: Camera) -> np.ndarray:
     """World-to-camera rotation (row-major) and translation, camera centre, fx, fy, cx, cy."""
     w2c = np.asarray(camera.world_to_camera, np.float64)
@@ -107,7 +115,7 @@ class _Frame:
         self.feat = _POOL.take((g, FEATURES), np.float32)
         rect = _POOL.take((g, 4), np.int32)
         ntiles = _POOL.take((g,), np.int64)
-        _raster.project(means, quats, scales, opac, sh, self.cam, self.width, self.height, self.feat, rect, ntiles)
+        _raster.project(means, quats, scales, opac, self.cam, self.width, self.height, self.feat, rect, ntiles)
         pairs = int(ntiles.sum())
         self.pair_start = _POOL.take((g + 1,), np.int64)
         self.tile_start = np.empty(tiles + 1, np.int32)
@@ -122,8 +130,10 @@ class _Frame:
         alpha, depth = np.empty((h, w), np.float32), np.empty((h, w), np.float32)
         self.t_final = np.empty((h, w), np.float64)
         self.last = np.empty((h, w), np.int32)
-        _raster.rasterize(self.feat, self.tile_start, self.entries, self.tiles_x, w, h, self.background, rgb,
-                          alpha, depth, self.t_final, self.last)
+        means, sh = self.inputs[0], self.inputs[4]
+        self.entry_colour = _POOL.take((len(self.entries), 3), np.float32)
+        _raster.rasterize(self.feat, self.tile_start, self.entries, means, sh, self.cam, self.tiles_x, w, h,
+                          self.background, rgb, alpha, depth, self.t_final, self.last, self.entry_colour)
         return rgb, alpha, depth
 
     def backward(self, grad_rgb: np.ndarray, grad_alpha: np.ndarray, geometry: bool = True) -> list[np.ndarray]:
@@ -131,8 +141,8 @@ class _Frame:
         are not computed (and the arrays returned for them hold garbage)."""
         means, quats, scales, _, sh = self.inputs
         pair_grad = _POOL.take((len(self.entries), 9), np.float32)
-        _raster.rasterize_backward(self.feat, self.tile_start, self.entries, self.entry_pair, self.tiles_x,
-                                   self.width, self.height, self.background, grad_rgb, grad_alpha,
+        _raster.rasterize_backward(self.feat, self.tile_start, self.entries, self.entry_pair, self.entry_colour,
+                                   self.tiles_x, self.width, self.height, self.background, grad_rgb, grad_alpha,
                                    self.t_final, self.last, pair_grad)
         grads = [_POOL.take(a.shape, np.float32) for a in self.inputs]
         _raster.project_backward(means, quats, scales, sh, self.cam, self.pair_start, pair_grad, geometry, *grads)

@@ -1,9 +1,9 @@
 """The reference 3D Gaussian splatter: pure torch, differentiable, CPU and CUDA.
 
 This is the source of truth for the image model shared with the viewer and the native splatter
-(the rendering contract, spec/rendering.md): EWA projection with a 0.3 px^2 dilation, alpha = min(0.99, o exp(-q/2)) with
-contributions under 1/255 skipped, a 3-sigma square support, colour from SH per Gaussian and
-front-to-back compositing in camera-depth order.
+(the rendering contract, spec/rendering.md): EWA projection with a 0.3 px^2 dilation,
+alpha = min(0.99, o exp(-q/2)) with contributions under 1/255 skipped, a 3-sigma square support,
+colour from SH per Gaussian and front-to-back compositing in camera-depth order.
 
 Cost grows with the pixels each Gaussian covers, not with pixels x Gaussians: every Gaussian's
 support square is expanded into (pixel, Gaussian) pairs, the pairs are sorted by one key
