@@ -1,12 +1,14 @@
 """The compiled CPU splatter: the image contract of spec/rendering.md, as the reference
 :func:`training.splatter.render`, forward and backward in :mod:`training._raster` on every core.
 
-Tile-based as the original 3DGS rasterizer: per Gaussian the EWA projection and SH colour, the
-16 x 16 tiles its tight footprint (3-sigma square AND the ellipse where alpha can reach 1/255)
-touches; per tile the Gaussians front to back (a stable depth sort, the reference's tie order);
-per pixel front-to-back compositing with early termination at T < 1e-4, keeping only the final
-transmittance and the last contribution. The backward pass walks each pixel's contributions back
-to front from there, recomputing alpha, so no (pixel, Gaussian) pair is ever stored.
+Tile-based as the original 3DGS rasterizer: per Gaussian the EWA projection and the 16 x 16 tiles
+its tight footprint (3-sigma square AND the ellipse where alpha can reach 1/255) touches; per tile
+the Gaussians front to back (a stable depth sort, the reference's tie order); per pixel
+front-to-back compositing with early termination at T < 1e-4, keeping only the final
+transmittance and the last contribution, with SH colours evaluated only for the Gaussians that
+contribute. The backward pass walks each pixel's contributions back to front from there,
+recomputing alpha, so no (pixel, Gaussian) pair is ever stored, and skips the Gaussians that
+received no gradient (most of them in dense hair).
 
 Differentiable w.r.t. means, quats, scales, opacities and sh through rgb and alpha. The depth
 output is forward-only (its gradient is not propagated), and the background is a constant. When
@@ -54,6 +56,16 @@ def _require() -> None:
                                     "`make venv`, or `python setup.py build_ext --inplace` in the repository")
 
 
+def _idle_refs() -> int:
+    """What sys.getrefcount says, in the comprehension of _Pool.take, of an array only a list holds
+    (measured: interpreters differ in the references they count)."""
+    arrays = [np.empty(1)]
+    return [sys.getrefcount(a) for a in arrays][0]
+
+
+_IDLE_REFS = _idle_refs()
+
+
 class _Pool:
     """Reused work and gradient arrays: writing a fresh 480 MB array (the SH gradient at paper scale)
     costs more in page faults than the whole rasterization. An array is handed out again only once
@@ -70,8 +82,8 @@ class _Pool:
         size, arrays = int(np.prod(shape)), self.free.setdefault(np.dtype(dtype), [])
         if size < self.SMALL:
             return np.empty(shape, dtype)
-        # the smallest idle array that fits; idle: referred to by the list, `a` and the call only
-        fits = [a for a in arrays if a.size >= size and sys.getrefcount(a) == 3]
+        # the smallest idle array that fits: one referred to as often as an array only the pool holds
+        fits = [a for a in arrays if a.size >= size and sys.getrefcount(a) == _IDLE_REFS]
         if fits:
             return min(fits, key=lambda a: a.size)[:size].reshape(shape)
         base = np.empty(size, dtype)
