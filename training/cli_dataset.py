@@ -11,6 +11,8 @@ import argparse
 
 from cghair_format.cli.argtypes import int_at_least, positive_float
 
+from .cli_train import add_backend_argument
+
 ENGINES = ("splat", "cycles")
 PRESETS = ("brown", "black", "blonde", "red")
 
@@ -41,6 +43,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--denoise", action="store_true", help="Cycles: run OpenImageDenoise on every view")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--device", default="cpu", help="torch device of the splat engine, e.g. cpu or cuda (default: cpu)")
+    add_backend_argument(p)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -54,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
     ds = render_dataset(strands, args.output, views=args.views, res=args.res, engine=args.engine,
                         preset=args.preset, seed=args.seed, samples=args.samples, thickness=args.thickness,
                         progress=not args.no_progress, device=args.device, multitone=args.multitone,
-                        denoise=args.denoise)
+                        denoise=args.denoise, backend=args.backend)
     print(f"wrote {len(ds.train)} train + {len(ds.test)} test views ({args.res} x {args.res}, "
           f"engine {args.engine}, {strands.count} strands) to {args.output}")
     return 0
