@@ -81,12 +81,14 @@ def _config(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
+    from .backends import resolve_backend
     from .capture import detect_layout
     from .train import TrainError, train
 
     if not (args.strands or args.cards or args.resume):
         raise TrainError("give --strands (to build cards) or --cards (a .cgh), or --resume a checkpoint")
     cfg = _config(args)
+    resolve_backend(args.backend, args.device)  # a backend that cannot run here fails before the dataset is read
     print(f"reading {args.dataset}: {detect_layout(args.dataset).describe()}")
     result = train(args.dataset, strands=args.strands, cards=args.cards, out=args.output, config=cfg,
                    resume=args.resume, profile=args.profile, progress=not args.no_progress,
