@@ -96,3 +96,19 @@ class StrandLod:
 
     def release(self) -> None:
         self.buffer.release()
+
+
+_SUFFIXES = {"": 1, "k": 1_000, "m": 1_000_000}
+
+
+def parse_budget(text: str) -> int:
+    """A splat budget from the command line: ``250000``, ``250k`` or ``2.5M`` Gaussians."""
+    s = str(text).strip().lower().replace("_", "").replace(",", "")
+    suffix = s[-1:] if s[-1:] in ("k", "m") else ""
+    try:
+        value = float(s[:len(s) - len(suffix)]) * _SUFFIXES[suffix]
+    except ValueError:
+        raise ValueError(f"a budget is a number of Gaussians such as 250000, 250k or 2.5M, got {text!r}") from None
+    if not value >= 1 or value != value or value == float("inf"):
+        raise ValueError(f"a budget must be at least 1 Gaussian, got {text!r}")
+    return int(value)

@@ -12,13 +12,12 @@ import warnings
 
 import numpy as np
 import pytest
+from test_splat_vs_reference import MIN_PSNR, _random_gaussians, psnr
 
 from cghair_format import decode_gaussians
 from cghair_format.camera import Camera
 from cghair_format.examples import example_asset
 from viewer.renderer import Renderer, ViewSettings
-
-from test_splat_vs_reference import MIN_PSNR, _random_gaussians, psnr
 
 splatter = pytest.importorskip("training.splatter", reason="the reference splatter needs torch")
 
