@@ -132,7 +132,7 @@ class Renderer:
         self.sorter = GpuRadixSort(ctx, self.programs, n) if self.sort_mode == "gpu" else None
         self.lod = StrandLod(ctx, scene)
         self.plan: LodPlan = self.lod.plan(None)  # what the last preprocess drew
-        self.binner = TileBinner(ctx, self.programs, n, capacity=block_limit(ctx) // 4)
+        self.binner = TileBinner(ctx, self.programs, n, capacity=block_limit(ctx) // 4, sort_mode=self.sort_mode)
         self.frame_rasterizer = self.rasterizer  # the last frame's: raster where the tiles overflowed
         self._size = (0, 0)
         self._targets: dict[tuple[int, int], tuple[Any, Any, Any, Any]] = {}
@@ -178,7 +178,9 @@ class Renderer:
         self.plan = plan = self.lod.plan(self.budget)
         self._size = (int(camera.width), int(camera.height))
         set_uniforms(prog, u_indexed=not plan.full, u_lod_opacity=float(plan.opacity_power),
-                     u_lod_width=float(plan.width))
+                     u_lod_width=float(plan.width), u_write_records=self.rasterizer == "compute")
+        if self.rasterizer == "compute":
+            self.binner.records.bind_to_image(1, read=False, write=True)
         self.visible_count.clear()
         for k, chunk in enumerate(scene.sh):
             bind(scene.means, scene.rotations, scene.scales, chunk.buffer, self.center, self.conic,
@@ -246,7 +248,7 @@ class Renderer:
         triangles = self.triangles if triangles is None else triangles
         accum_tex, accum_fbo = self._target(width, height)[:2]
         if bare is None and self.frame_rasterizer == "compute":
-            self.binner.blend(self.center, self.conic, self.color, self.axes, accum_tex, width, height)
+            self.binner.blend(accum_tex, width, height)
             return
         accum_fbo.use()
         accum_fbo.clear(0.0, 0.0, 0.0, 0.0)

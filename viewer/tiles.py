@@ -3,11 +3,14 @@
 After the preprocess and the depth sort (:class:`viewer.renderer.Renderer`), every visible splat
 is duplicated into the 16 x 16 tiles its oriented footprint touches (``tile_count``, a scan of the
 block totals, ``tile_emit``: entries in depth order), the entries are sorted by tile with the
-stable GPU radix sort (so each tile's entries stay in depth order), and each tile's range is
-found (``tile_ranges``). ``tile_blend`` then runs one work group per tile, blending the tile's
-splats front to back in shared memory and stopping each pixel at T < 1e-4: the cost follows the
-visible splats, not all the splats over a pixel as fixed-function blending does. Same image
-contract as the raster path and the reference splatter.
+stable GPU radix sort, or numpy's where the renderer sorts on the CPU (so each tile's entries
+stay in depth order), and each tile's range is
+found (``tile_ranges``, which also copies the entries into an image). ``tile_blend`` then runs
+one work group per tile, blending the tile's splats front to back and stopping each pixel at
+T < 1e-4: the cost follows the visible splats, not all the splats over a pixel as fixed-function
+blending does. The blend reads splats as texels (the preprocess writes a record image next to its
+buffers): llvmpipe fetches texels as vectors but loads storage and shared memory one invocation
+at a time. Same image contract as the raster path and the reference splatter.
 
 The entry buffers grow on demand up to :attr:`TileBinner.capacity` entries (one storage block);
 a view that needs more (very close views of dense hair) is reported by :meth:`TileBinner.bin`
@@ -22,9 +25,11 @@ from typing import Any
 import numpy as np
 
 from .pipeline import Programs, bind, dispatch, set_uniforms
-from .sort import GpuRadixSort
+from .sort import GpuRadixSort, cpu_sort
 
 TILE = 16  # pixels per tile side (tile_common.glsl)
+TEXELS_PER_ROW = 4096  # width of the record and entry images
+RECORD_TEXELS = 4  # texels per splat record (preprocess.comp.glsl)
 BLOCK = 256 * 16  # sorted splats per binning work group (tile_common.glsl)
 MIN_ENTRIES = 1 << 20  # first allocation of the entry buffers
 GROWTH = 1.25  # head room when the entry buffers grow
@@ -37,33 +42,44 @@ def tile_grid(width: int, height: int) -> tuple[int, int]:
 class TileBinner:
     """Buffers and passes of the compute rasterizer for one renderer."""
 
-    def __init__(self, ctx: Any, programs: Programs, splats: int, capacity: int):
+    def __init__(self, ctx: Any, programs: Programs, splats: int, capacity: int, sort_mode: str = "gpu"):
         self.ctx = ctx
         self.programs = programs
-        self.capacity = int(capacity)  # most entries one frame may need
+        self.sort_mode = sort_mode  # of the tile entries: the renderer's ("cpu" on llvmpipe, measured faster)
+        max_rows = int(ctx.info.get("GL_MAX_TEXTURE_SIZE") or 16384)
+        self.capacity = min(int(capacity), TEXELS_PER_ROW * max_rows)  # most entries one frame may need
         n = max(splats, 1)
+        self.records = self._image(RECORD_TEXELS * n, 4, "f4")
         self.counts = ctx.buffer(reserve=4 * n)
         self.block_sums = ctx.buffer(reserve=4 * max(1, math.ceil(n / BLOCK)))
         self.total = ctx.buffer(reserve=4)
         self.entries = 0  # entries of the last bin()
         self.entries_needed = 0  # entries the last bin() needed (more than entries if over capacity)
         self.allocated = 0
-        self.keys = self.values = self.sorter = None
+        self.keys = self.values = self.sorter = self.entry_image = None
         self.ranges = None
         self.tiles = (0, 0)
+
+    def _image(self, texels: int, components: int, dtype: str) -> Any:
+        """A ``TEXELS_PER_ROW``-wide 2D texture holding at least ``texels`` texels, fetched exactly."""
+        tex = self.ctx.texture((TEXELS_PER_ROW, max(1, math.ceil(texels / TEXELS_PER_ROW))), components,
+                               dtype=dtype)
+        tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
+        return tex
 
     def _reserve(self, entries: int) -> None:
         if entries <= self.allocated and self.keys is not None:
             return
         size = min(self.capacity, max(MIN_ENTRIES, int(entries * GROWTH)))
-        for buf in (self.keys, self.values):
-            if buf is not None:
-                buf.release()
+        for obj in (self.keys, self.values, self.entry_image):
+            if obj is not None:
+                obj.release()
         if self.sorter is not None:
             self.sorter.release()
         self.keys = self.ctx.buffer(reserve=4 * size)
         self.values = self.ctx.buffer(reserve=4 * size)
-        self.sorter = GpuRadixSort(self.ctx, self.programs, size)
+        self.entry_image = self._image(size, 1, "u4")
+        self.sorter = GpuRadixSort(self.ctx, self.programs, size) if self.sort_mode == "gpu" else None
         self.allocated = size
 
     def _ranges(self, width: int, height: int) -> None:
@@ -106,27 +122,35 @@ class TileBinner:
         set_uniforms(prog, u_count=visible, u_viewport=viewport, u_tiles_x=tiles_x)
         prog.run(blocks, 1, 1)
         self.ctx.memory_barrier()
-        self.sorter.sort(self.keys, self.values, entries, key_bits=max(1, (tiles_x * tiles_y - 1).bit_length()))
+        key_bits = max(1, (tiles_x * tiles_y - 1).bit_length())
+        if self.sorter is not None:
+            self.sorter.sort(self.keys, self.values, entries, key_bits=key_bits)
+        else:
+            cpu_sort(self.keys, self.values, entries, key_bits=key_bits)
         self.ranges.clear()
         prog = self.programs.compute("tile_ranges")
-        bind(self.keys, self.ranges)
+        bind(self.keys, self.ranges, self.values)
+        self.entry_image.bind_to_image(2, read=False, write=True)
         set_uniforms(prog, u_count=entries)
         dispatch(self.ctx, prog, entries)
         return True
 
-    def blend(self, center: Any, conic: Any, color: Any, axes: Any, image: Any, width: int, height: int) -> None:
+    def blend(self, image: Any, width: int, height: int) -> None:
         """Blend every tile into ``image`` (an RGBA32F texture of ``width`` x ``height``)."""
         tiles_x, tiles_y = self.tiles
         prog = self.programs.compute("tile_blend")
-        bind(self.values, self.ranges, center, conic, color, axes)
+        bind(None, self.ranges)
         image.bind_to_image(0, read=False, write=True)
-        set_uniforms(prog, u_size=(width, height), u_tiles_x=tiles_x)
+        self.entry_image.use(0)
+        self.records.use(1)
+        set_uniforms(prog, u_size=(width, height), u_tiles_x=tiles_x, u_entries=0, u_records=1)
         prog.run(tiles_x, tiles_y, 1)
         self.ctx.memory_barrier()
 
     def release(self) -> None:
-        for buf in (self.counts, self.block_sums, self.total, self.keys, self.values, self.ranges):
-            if buf is not None:
-                buf.release()
+        for obj in (self.counts, self.block_sums, self.total, self.keys, self.values, self.ranges, self.records,
+                    self.entry_image):
+            if obj is not None:
+                obj.release()
         if self.sorter is not None:
             self.sorter.release()

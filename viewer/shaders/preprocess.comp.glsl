@@ -23,6 +23,9 @@ layout(std430, binding = 10) readonly buffer CardGroup { uint card_group[]; };
 layout(std430, binding = 11) writeonly buffer Axes { vec4 axes[]; };  // quad half-axes, see below
 layout(std430, binding = 12) buffer Visible { uint visible; };  // number of Gaussians not culled
 layout(std430, binding = 13) readonly buffer LodStrands { uint lod_strands[]; };  // per chunk, by priority
+// The compute rasterizer's splat records, 4 texels from texel 4 * slot (viewer/tiles.py): llvmpipe
+// fetches texels as vectors, but loads storage and shared memory one invocation at a time.
+layout(rgba32f, binding = 1) uniform writeonly image2D u_records;
 
 uniform uint u_base;
 uniform uint u_count;
@@ -41,6 +44,7 @@ uniform uint u_list_base;    // this chunk's first entry in lod_strands
 uniform uint u_out_base;     // this chunk's first output slot
 uniform float u_lod_opacity; // drawn strands' opacity o -> 1 - (1 - o)^u_lod_opacity (1: as stored)
 uniform float u_lod_width;   // drawn strands' thickness (scales x, y) multiplier (1: as stored)
+uniform bool u_write_records; // also write u_records (compute rasterizer)
 
 const float NEAR_PLANE = 0.01;
 const float DILATION = 0.3;
@@ -153,10 +157,21 @@ void main() {
     v1 = dot(v1, v1) > 0.0 ? normalize(v1) : vec2(1.0, 0.0);
     float e1 = sqrt(q * lam1) * 1.0001 + 0.01, e2 = sqrt(q * lam2) * 1.0001 + 0.01;
     float disc = 1.41421357 * (radius + 0.5);
-    if (e1 * e2 < disc * disc) axes[slot] = vec4(v1 * e1, vec2(-v1.y, v1.x) * e2);
-    else axes[slot] = vec4(disc, 0.0, 0.0, disc);
+    vec4 ax = e1 * e2 < disc * disc ? vec4(v1 * e1, vec2(-v1.y, v1.x) * e2) : vec4(disc, 0.0, 0.0, disc);
+    axes[slot] = ax;
     vec3 rgb;
     if (u_color_mode == 1) rgb = group_color(card_group[strand_card[g / u_segments]]);
     else rgb = eval_sh((g - u_base) * u_coeffs * 3u, normalize(mo.xyz - u_cam_center));
     color[slot] = vec4(rgb, 1.0);
+    if (u_write_records) {
+        // (mx, my, radius, opacity), conic, the half-axes over their squared lengths (|dot(d, .)|
+        // <= 1 inside the rectangle they span), colour
+        int k = int(4u * slot);
+        int w = imageSize(u_records).x;
+        imageStore(u_records, ivec2(k % w, k / w), vec4(m2, radius, mo.w));
+        imageStore(u_records, ivec2((k + 1) % w, (k + 1) / w), vec4(cc / det, -cb / det, ca / det, 0.0));
+        imageStore(u_records, ivec2((k + 2) % w, (k + 2) / w),
+                   vec4(ax.xy / dot(ax.xy, ax.xy), ax.zw / dot(ax.zw, ax.zw)));
+        imageStore(u_records, ivec2((k + 3) % w, (k + 3) / w), vec4(rgb, 0.0));
+    }
 }
