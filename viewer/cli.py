@@ -34,8 +34,8 @@ def add_raster_arguments(parser: argparse.ArgumentParser, budget_help: str, rast
     """``--rasterizer`` and ``--budget``, shared by ``view``, ``render`` and ``bench-viewer``."""
     parser.add_argument("--rasterizer", choices=rasterizers, default=default,
                         help="compute: tiles in compute shaders with early termination; raster: one triangle per "
-                             "splat, fixed-function blending (also OpenGL 3.3); auto: compute, except raster on "
-                             f"software renderers such as llvmpipe, where it is faster (default {default})")
+                             "splat, fixed-function blending; auto: compute where OpenGL 4.3 compute shaders exist, "
+                             f"else raster (default {default})")
     parser.add_argument("--budget", type=budget_type, default=None, metavar="N", nargs="+" if many_budgets else None,
                         help=budget_help)
 

@@ -49,17 +49,7 @@ def run(args: argparse.Namespace) -> int:
     for name, value in zip(("W", "H"), args.reference_size, strict=True):
         if not 1 <= value <= 16384:
             raise CghError(f"--reference-size {name} must be between 1 and 16384, got {value}")
-    if args.rasterizer == "both":
-        rasterizers = ("compute", "raster")
-    else:
-        rasterizers = (args.rasterizer,)
-        if args.rasterizer == "auto":
-            from .context import create_headless_context
-            from .renderer import default_rasterizer
-
-            ctx = create_headless_context()
-            rasterizers = (default_rasterizer(ctx),)
-            ctx.release()
+    rasterizers = {"both": ("compute", "raster"), "auto": ("compute",)}.get(args.rasterizer, (args.rasterizer,))
     result = benchmark(path=args.file, synthetic=args.synthetic, points=args.points, width=args.width,
                        height=args.height, frames=args.frames, sort=args.sort, rasterizers=rasterizers,
                        budgets=tuple(args.budget) if args.budget else None,

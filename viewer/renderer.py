@@ -63,13 +63,6 @@ def default_sort_mode(ctx: Any) -> str:
     return "cpu" if any(s in name for s in SOFTWARE_RENDERERS) else "gpu"
 
 
-def default_rasterizer(ctx: Any) -> str:
-    """``compute`` on hardware; ``raster`` on software renderers, where llvmpipe's fixed-function
-    triangles are measured faster than its compute shaders (README, viewer figures)."""
-    name = str(ctx.info.get("GL_RENDERER", "")).lower()
-    return "raster" if any(s in name for s in SOFTWARE_RENDERERS) else "compute"
-
-
 def projection_matrix(camera: Camera) -> np.ndarray:
     """OpenCV camera coordinates to clip space, keeping image row j at framebuffer row j."""
     w, h = camera.width, camera.height
@@ -97,7 +90,7 @@ class Renderer:
     """Draws one :class:`GpuScene` from any camera.
 
     ``sort``: ``"gpu"``, ``"cpu"`` or ``"auto"``; ``rasterizer``: ``"compute"`` (tiles, early
-    termination), ``"raster"`` or ``"auto"`` (:func:`default_rasterizer`);
+    termination), ``"raster"`` or ``"auto"`` (compute);
     ``primitive`` (raster path): ``"triangles"`` (one triangle per splat, fewer primitives: faster
     on llvmpipe at the paper's scale) or ``"quads"`` (instanced). ``budget``: at most this many
     Gaussians per frame (level of detail), ``None`` for all; it may change between frames.
@@ -115,7 +108,7 @@ class Renderer:
         self.scene = scene
         self.programs = programs or Programs(ctx)
         self.sort_mode = default_sort_mode(ctx) if sort == "auto" else sort
-        self.rasterizer = default_rasterizer(ctx) if rasterizer == "auto" else rasterizer
+        self.rasterizer = "compute" if rasterizer == "auto" else rasterizer  # this renderer has compute shaders
         self.triangles = primitive == "triangles"
         self.budget = check_budget(budget)
         n = max(scene.count, 1)
