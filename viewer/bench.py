@@ -2,8 +2,9 @@
 
 Stages are separated by ``glFinish`` so each time is the stage's own. Load = read (file to
 :class:`HairAsset`) + decode and upload (GPU decode of geometry and MLP). Every frame is the
-default view (``cgh render``'s: the asset framed, azimuth 0, elevation 10). For each rasterizer
-and each budget the frame is timed by stage: preprocess (projection, SH colour, keys), sort, then
+default view (``cgh render``'s: the asset framed, azimuth 0, elevation 10). Each rasterizer first
+draws one untimed frame (shader compilation, first use of buffers); then for each budget the frame
+is timed by stage: preprocess (projection, SH colour, keys), sort, then
 gather (raster: draw records in sorted order; compute: tile binning) and draw (raster: one pulled
 triangle per splat; compute: per-tile blending). Quality: the PSNR (RGB) of each image against
 the same rasterizer's full-quality image, and against the reference splatter's full-quality render
@@ -112,8 +113,10 @@ def benchmark(path: str | None = None, synthetic: int | None = None, points: int
     runs = []
     for rasterizer in rasterizers:
         full_image = None
+        renderer.rasterizer, renderer.budget = rasterizer, None
+        renderer.render(cam, settings)  # warm-up, untimed: shader compilation, buffers' first use
         for budget in (None, *budgets):
-            renderer.rasterizer, renderer.budget = rasterizer, budget
+            renderer.budget = budget
             rows: dict[str, list[float]] = {k: [] for k in ("preprocess", "sort", "gather", "draw")}
             for _ in range(frames):
                 rows["preprocess"].append(_timed(ctx, lambda: renderer.preprocess(cam, settings)))
