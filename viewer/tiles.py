@@ -49,7 +49,8 @@ class TileBinner:
         max_rows = int(ctx.info.get("GL_MAX_TEXTURE_SIZE") or 16384)
         self.capacity = min(int(capacity), TEXELS_PER_ROW * max_rows)  # most entries one frame may need
         n = max(splats, 1)
-        self.records = self._image(RECORD_TEXELS * n, 4, "f4")
+        self.splats = n
+        self._records = None
         self.counts = ctx.buffer(reserve=4 * n)
         self.block_sums = ctx.buffer(reserve=4 * max(1, math.ceil(n / BLOCK)))
         self.total = ctx.buffer(reserve=4)
@@ -59,6 +60,13 @@ class TileBinner:
         self.keys = self.values = self.sorter = self.entry_image = None
         self.ranges = None
         self.tiles = (0, 0)
+
+    @property
+    def records(self) -> Any:
+        """The splat record image the preprocess writes (allocated on first use: 64 bytes a splat)."""
+        if self._records is None:
+            self._records = self._image(RECORD_TEXELS * self.splats, 4, "f4")
+        return self._records
 
     def _image(self, texels: int, components: int, dtype: str) -> Any:
         """A ``TEXELS_PER_ROW``-wide 2D texture holding at least ``texels`` texels, fetched exactly."""
@@ -148,7 +156,7 @@ class TileBinner:
         self.ctx.memory_barrier()
 
     def release(self) -> None:
-        for obj in (self.counts, self.block_sums, self.total, self.keys, self.values, self.ranges, self.records,
+        for obj in (self.counts, self.block_sums, self.total, self.keys, self.values, self.ranges, self._records,
                     self.entry_image):
             if obj is not None:
                 obj.release()
