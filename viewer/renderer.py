@@ -206,7 +206,7 @@ class Renderer:
         self.visible = int(np.frombuffer(self.visible_count.read(), np.uint32)[0])
         self.frame_rasterizer = self.rasterizer
         if self.rasterizer == "compute":
-            if self.binner.bin(self.values, self.center, self.axes, self.visible, *self._size):
+            if self.binner.bin(self.values, self.visible, *self._size):
                 return
             self.frame_rasterizer = "raster"
             if not self._warned:

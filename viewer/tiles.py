@@ -98,8 +98,9 @@ class TileBinner:
             self.ranges = self.ctx.buffer(reserve=8 * tiles[0] * tiles[1])
             self.tiles = tiles
 
-    def bin(self, order: Any, center: Any, axes: Any, visible: int, width: int, height: int) -> bool:
-        """Tile entries of the first ``visible`` splats of ``order``; ``False`` if over capacity."""
+    def bin(self, order: Any, visible: int, width: int, height: int) -> bool:
+        """Tile entries of the first ``visible`` splats of ``order`` (their records written by the
+        preprocess); ``False`` if over capacity."""
         self._ranges(width, height)
         tiles_x, tiles_y = self.tiles
         self.total.clear()
@@ -111,8 +112,9 @@ class TileBinner:
             return True
         viewport = (float(width), float(height))
         prog = self.programs.compute("tile_count")
-        bind(order, center, axes, self.counts, self.block_sums, self.total)
-        set_uniforms(prog, u_count=visible, u_viewport=viewport, u_tiles_x=tiles_x)
+        bind(order, self.counts, self.block_sums, self.total)
+        self.records.use(0)
+        set_uniforms(prog, u_count=visible, u_viewport=viewport, u_tiles_x=tiles_x, u_records=0)
         prog.run(blocks, 1, 1)
         self.ctx.memory_barrier()
         scan = self.programs.compute("radix_scan")  # exclusive scan in place, one work group
@@ -126,8 +128,9 @@ class TileBinner:
         self._reserve(entries)
         self.entries = entries
         prog = self.programs.compute("tile_emit")
-        bind(order, center, axes, self.counts, self.block_sums, self.keys, self.values)
-        set_uniforms(prog, u_count=visible, u_viewport=viewport, u_tiles_x=tiles_x)
+        bind(order, self.counts, self.block_sums, self.keys, self.values)
+        self.records.use(0)
+        set_uniforms(prog, u_count=visible, u_viewport=viewport, u_tiles_x=tiles_x, u_records=0)
         prog.run(blocks, 1, 1)
         self.ctx.memory_barrier()
         key_bits = max(1, (tiles_x * tiles_y - 1).bit_length())

@@ -25,11 +25,7 @@ const float ALPHA_MIN = 1.0 / 255.0;
 const float T_MIN = 1e-4;
 const uint ROWS = 16u;  // pixels per invocation: the tile's column
 
-const int ROW_SHIFT = 12;  // the images are 4096 texels wide (viewer/tiles.py TEXELS_PER_ROW)
-
-ivec2 texel(int k) {
-    return ivec2(k & ((1 << ROW_SHIFT) - 1), k >> ROW_SHIFT);
-}
+#include "tile_texel.glsl"
 
 void main() {
     uvec2 tile = gl_WorkGroupID.xy;

@@ -1,5 +1,5 @@
-// Tile binning, shared by tile_count and tile_emit (included after their Center, Axes buffers and
-// the u_viewport, u_tiles_x uniforms). A splat touches tile (tx, ty) when some pixel centre of the
+// Tile binning, shared by tile_count and tile_emit (included after their u_records sampler, the
+// splat records written by preprocess.comp.glsl, and the u_viewport, u_tiles_x uniforms). A splat touches tile (tx, ty) when some pixel centre of the
 // tile lies in both its 3-sigma support square and the oriented rectangle spanned by its
 // half-axes (preprocess.comp.glsl), which contains every pixel where alpha >= 1/255: the tiles
 // found by the separating-axis test below are a superset of the tiles with a visible pixel.
@@ -10,14 +10,17 @@ const uint BLOCK = 256u * ITEMS;     // splats per work group
 struct Footprint { ivec2 lo; ivec2 hi; vec2 m; vec2 a1; vec2 a2; };
 
 // The tiles of the splat's bounding box (hi < lo: none) and what the per-tile test needs.
+#include "tile_texel.glsl"
+
 Footprint footprint(uint slot) {
-    vec4 c = center[slot];  // mx, my, z, radius
-    vec4 ax = axes[slot];
+    ivec2 at = texel(4 * int(slot));
+    vec4 c = texelFetch(u_records, at, 0);  // mx, my, radius, opacity
+    vec4 ax = texelFetch(u_records, at + ivec2(2, 0), 0);  // the half-axes over their squared lengths
     Footprint f;
     f.m = c.xy;
-    f.a1 = ax.xy;
-    f.a2 = ax.zw;
-    vec2 ext = min(abs(ax.xy) + abs(ax.zw), vec2(c.w));
+    f.a1 = ax.xy / dot(ax.xy, ax.xy);
+    f.a2 = ax.zw / dot(ax.zw, ax.zw);
+    vec2 ext = min(abs(f.a1) + abs(f.a2), vec2(c.z));
     // pixels k with k + 0.5 in [m - ext, m + ext], clipped to the image
     vec2 k0 = max(ceil(c.xy - ext - 0.5), vec2(0.0));
     vec2 k1 = min(floor(c.xy + ext - 0.5), u_viewport - 1.0);

@@ -4,15 +4,14 @@
 layout(local_size_x = 256) in;
 
 layout(std430, binding = 0) readonly buffer Order { uint order[]; };  // depth-sorted slots
-layout(std430, binding = 1) readonly buffer Center { vec4 center[]; };
-layout(std430, binding = 2) readonly buffer Axes { vec4 axes[]; };
-layout(std430, binding = 3) writeonly buffer Counts { uint counts[]; };
-layout(std430, binding = 4) writeonly buffer BlockSums { uint block_sums[]; };
-layout(std430, binding = 5) buffer Total { uint total; };
+layout(std430, binding = 1) writeonly buffer Counts { uint counts[]; };
+layout(std430, binding = 2) writeonly buffer BlockSums { uint block_sums[]; };
+layout(std430, binding = 3) buffer Total { uint total; };
 
 uniform uint u_count;      // visible splats
 uniform vec2 u_viewport;
 uniform uint u_tiles_x;
+uniform sampler2D u_records;  // 4 texels a slot (preprocess.comp.glsl)
 
 #include "tile_common.glsl"
 

@@ -6,16 +6,15 @@
 layout(local_size_x = 256) in;
 
 layout(std430, binding = 0) readonly buffer Order { uint order[]; };
-layout(std430, binding = 1) readonly buffer Center { vec4 center[]; };
-layout(std430, binding = 2) readonly buffer Axes { vec4 axes[]; };
-layout(std430, binding = 3) readonly buffer Counts { uint counts[]; };
-layout(std430, binding = 4) readonly buffer BlockSums { uint block_sums[]; };  // scanned
-layout(std430, binding = 5) writeonly buffer TileKeys { uint tile_keys[]; };
-layout(std430, binding = 6) writeonly buffer TileValues { uint tile_values[]; };
+layout(std430, binding = 1) readonly buffer Counts { uint counts[]; };
+layout(std430, binding = 2) readonly buffer BlockSums { uint block_sums[]; };  // scanned
+layout(std430, binding = 3) writeonly buffer TileKeys { uint tile_keys[]; };
+layout(std430, binding = 4) writeonly buffer TileValues { uint tile_values[]; };
 
 uniform uint u_count;
 uniform vec2 u_viewport;
 uniform uint u_tiles_x;
+uniform sampler2D u_records;  // 4 texels a slot (preprocess.comp.glsl)
 
 #include "tile_common.glsl"
 
