@@ -29,11 +29,11 @@ from cghair_format import Gaussians, HairAsset
 from cghair_format.camera import Camera
 
 from .context import check_gl, park_framebuffer
-from .decode import GpuScene, block_limit, upload_asset, upload_gaussians
+from .decode import GpuScene, SceneTooLargeError, block_limit, upload_asset, upload_gaussians
 from .lod import LodPlan, StrandLod
 from .pipeline import Programs, bind, dispatch, set_uniforms
 from .sort import SORT_MODES, GpuRadixSort, cpu_sort
-from .tiles import TileBinner
+from .tiles import TileBinner, max_splats
 
 NEAR, FAR = 0.01, 1.0e4  # clip planes of the overlays (the splats use the contract's near plane)
 SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast")
@@ -90,7 +90,7 @@ class Renderer:
     """Draws one :class:`GpuScene` from any camera.
 
     ``sort``: ``"gpu"``, ``"cpu"`` or ``"auto"``; ``rasterizer``: ``"compute"`` (tiles, early
-    termination), ``"raster"`` or ``"auto"`` (compute);
+    termination), ``"raster"`` or ``"auto"`` (compute, unless the scene exceeds its record image);
     ``primitive`` (raster path): ``"triangles"`` (one triangle per splat, fewer primitives: faster
     on llvmpipe at the paper's scale) or ``"quads"`` (instanced). ``budget``: at most this many
     Gaussians per frame (level of detail), ``None`` for all; it may change between frames.
@@ -104,11 +104,17 @@ class Renderer:
             raise ValueError(f"primitive must be one of {PRIMITIVES}, got {primitive!r}")
         if rasterizer not in (*RASTERIZERS, "auto"):
             raise ValueError(f"rasterizer must be one of {(*RASTERIZERS, 'auto')}, got {rasterizer!r}")
+        fits = scene.count <= max_splats(ctx)
+        if rasterizer == "compute" and not fits:
+            scene.release()  # the renderer owns its scene (see release)
+            raise SceneTooLargeError(
+                f"the compute rasterizer's record image holds {max_splats(ctx):,} Gaussians (GL_MAX_TEXTURE_SIZE); "
+                f"this asset has {scene.count:,}: use --rasterizer raster")
+        self.rasterizer = ("compute" if fits else "raster") if rasterizer == "auto" else rasterizer
         self.ctx = ctx
         self.scene = scene
         self.programs = programs or Programs(ctx)
         self.sort_mode = default_sort_mode(ctx) if sort == "auto" else sort
-        self.rasterizer = "compute" if rasterizer == "auto" else rasterizer  # this renderer has compute shaders
         self.triangles = primitive == "triangles"
         self.budget = check_budget(budget)
         n = max(scene.count, 1)

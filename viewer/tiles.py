@@ -35,6 +35,11 @@ MIN_ENTRIES = 1 << 20  # first allocation of the entry buffers
 GROWTH = 1.25  # head room when the entry buffers grow
 
 
+def max_splats(ctx: Any) -> int:
+    """Most splats the record image of this context holds (GL_MAX_TEXTURE_SIZE rows)."""
+    return TEXELS_PER_ROW * int(ctx.info.get("GL_MAX_TEXTURE_SIZE") or 16384) // RECORD_TEXELS
+
+
 def tile_grid(width: int, height: int) -> tuple[int, int]:
     return math.ceil(width / TILE), math.ceil(height / TILE)
 

@@ -116,3 +116,18 @@ def test_resize_between_frames(gl_ctx):
         want = splatter.render_gaussians(decode_gaussians(asset), cam)
         assert psnr(got[..., 3], want["alpha"]) >= AGREEMENT_PSNR
     renderer.release()
+
+
+def test_scene_beyond_the_record_image(gl_ctx, monkeypatch):
+    """More Gaussians than the record image holds: auto takes the raster path, compute says why."""
+    from viewer import renderer as renderer_module
+
+    monkeypatch.setattr(renderer_module, "max_splats", lambda ctx: 40)
+    g = _random_gaussians(50, seed=2)
+    auto = Renderer.from_gaussians(gl_ctx, g)
+    assert auto.rasterizer == "raster"
+    auto.release()
+    from viewer.decode import SceneTooLargeError
+
+    with pytest.raises(SceneTooLargeError, match="holds 40 Gaussians.*has 50: use --rasterizer raster"):
+        Renderer.from_gaussians(gl_ctx, g, rasterizer="compute")
