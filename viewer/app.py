@@ -12,9 +12,11 @@ import numpy as np
 from cghair_format import HairAsset
 from cghair_format.atomic import atomic_path
 
-from .camera_control import HELP, OrbitController, ViewerState
+from .camera_control import HELP, BudgetControl, OrbitController, ViewerState
 from .context import create_window
-from .fallback import create_renderer
+from .fallback import FallbackRenderer, create_renderer
+
+IDLE_WAIT_S = 0.05  # how long a resting window waits for input before looking again
 
 
 def save_png(image: np.ndarray, path: str | Path) -> Path:
@@ -40,21 +42,34 @@ def _key_name(glfw: Any, key: int) -> str:
     return ""
 
 
+def window_title(title: str, fps: float, drawn: str, budget: str, file_size: int, status: str) -> str:
+    """The window's title: the last drawn frame's rate, what it drew (rasterizer, Gaussians,
+    strands), the budget mode."""
+    return f"{title} | {fps:.1f} fps | {drawn} | budget {budget} | {file_size / 1e6:.2f} MB | {status}"
+
+
 def run_viewer(asset: HairAsset, *, title: str, file_size: int, width: int = 1280, height: int = 720,
-               sort: str = "auto", screenshot_dir: str | Path = ".", max_frames: int | None = None,
-               press: tuple[str, ...] = ()) -> int:
+               sort: str = "auto", rasterizer: str = "auto", budget: int | None = None,
+               screenshot_dir: str | Path = ".", max_frames: int | None = None, press: tuple[str, ...] = ()) -> int:
     """Open a window on ``asset`` and run until it is closed; returns the number of frames drawn.
 
-    ``max_frames`` closes the window after that many frames and ``press`` replays key presses
-    before the first frame (scripted sessions and tests).
+    ``budget``: a fixed splat budget; by default it adapts while the camera moves (see
+    :class:`BudgetControl`). The splats are drawn again only when the view, the settings or the
+    budget change, so a resting camera costs one full-quality frame. ``max_frames`` closes the
+    window after that many frames and ``press`` replays key presses before the first frame
+    (scripted sessions and tests).
     """
     import glfw
 
     window, ctx = create_window(width, height, title)
     try:
-        renderer = create_renderer(ctx, asset, sort=sort)
+        renderer = create_renderer(ctx, asset, sort=sort, rasterizer=rasterizer, budget=budget)
         lo, hi = renderer.scene.bounds
         state = ViewerState(OrbitController.framing(lo, hi, asset.up_axis), max_sh_degree=asset.appearance.sh_degree)
+        budgets = BudgetControl(renderer.scene.count, fixed=budget)
+        has_lod = not isinstance(renderer, FallbackRenderer)  # OpenGL 3.3 draws every splat
+        drawn = None  # what the accumulation target holds: (view, budget)
+        last_view = None
         held: set[str] = set()
         mouse = {"pos": None, "buttons": set(), "shift": False}
         pending: list[str] = list(press)
@@ -91,12 +106,15 @@ def run_viewer(asset: HairAsset, *, title: str, file_size: int, width: int = 128
         glfw.set_scroll_callback(window, lambda _w, _dx, dy: state.controller.zoom(dy))
         print(HELP)
         last = time.perf_counter()
-        fps = 0.0
+        fps = 0.0  # of the frames that drew the splats
+        idle = False
         while not glfw.window_should_close(window) and (max_frames is None or frames < max_frames):
-            glfw.poll_events()
+            if idle:  # nothing changed last time: sleep until an event (or a moment) instead of spinning
+                glfw.wait_events_timeout(IDLE_WAIT_S)
+            else:
+                glfw.poll_events()
             now = time.perf_counter()
             dt, last = now - last, now
-            fps = 0.9 * fps + 0.1 / max(dt, 1e-6) if fps else 1.0 / max(dt, 1e-6)
             state.fly(held, dt)
             fb_w, fb_h = glfw.get_framebuffer_size(window)
             if fb_w == 0 or fb_h == 0:
@@ -106,15 +124,29 @@ def run_viewer(asset: HairAsset, *, title: str, file_size: int, width: int = 128
                 action = state.press(key)
                 if action == "quit":
                     glfw.set_window_should_close(window, True)
+                elif action == "budget":
+                    budgets.cycle()
                 elif action == "screenshot":
                     shot = Path(screenshot_dir) / f"cgh_view_{time.strftime('%Y%m%d_%H%M%S')}_{frames}.png"
             pending.clear()
             s = state.settings
-            if not s.hide_splats:
+            view = (fb_w, fb_h, camera.world_to_camera.tobytes(), s)
+            moving = last_view is not None and view != last_view
+            last_view = view
+            frame_budget = budgets.budget(moving) if has_lod else None
+            idle = (view, frame_budget) == drawn and not held and not mouse["buttons"]
+            if not s.hide_splats and (view, frame_budget) != drawn:
+                renderer.budget = frame_budget
+                t0 = time.perf_counter()
                 renderer.preprocess(camera, s)
                 renderer.sort()
                 renderer.gather()
                 renderer.draw(fb_w, fb_h)
+                ctx.finish()
+                seconds = time.perf_counter() - t0
+                budgets.record(seconds, renderer.drawn, moving)
+                fps = 1.0 / max(seconds, 1e-6)
+                drawn = (view, frame_budget)
             ctx.screen.viewport = (0, 0, fb_w, fb_h)
             renderer.composite(camera, s, target=ctx.screen, flip_y=True)
             if shot is not None:  # what the window shows, overlays included
@@ -122,8 +154,8 @@ def run_viewer(asset: HairAsset, *, title: str, file_size: int, width: int = 128
                 save_png(raw.reshape(fb_h, fb_w, 3)[::-1] / 255.0, shot)
                 print(f"screenshot: {shot}")
                 shot = None
-            glfw.set_window_title(window, f"{title} | {fps:.1f} fps | {renderer.scene.count:,} Gaussians | "
-                                          f"{file_size / 1e6:.2f} MB | {state.status()}")
+            glfw.set_window_title(window, window_title(title, fps, renderer.describe(), budgets.label(), file_size,
+                                                      state.status()))
             glfw.swap_buffers(window)
             frames += 1
         renderer.release()

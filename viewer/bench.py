@@ -1,22 +1,33 @@
-"""Viewer timings (the API behind ``cgh bench-viewer``).
+"""Viewer timings and image quality (the API behind ``cgh bench-viewer``).
 
 Stages are separated by ``glFinish`` so each time is the stage's own. Load = read (file to
-:class:`HairAsset`) + decode and upload (GPU decode of geometry and MLP). Per frame: preprocess
-(projection, SH colour, keys), sort, gather (draw records in sorted order) and draw, the splats
-drawn as one pulled triangle each (faster on llvmpipe; the same splats as instanced quads are
-timed too). The baseline draws instanced quads of the same positions and sizes with a
-constant-colour fragment shader, straight from the preprocess buffers, with no sort or gather;
-a second, stricter baseline draws those quads from the gathered records (sequential reads).
+:class:`HairAsset`) + decode and upload (GPU decode of geometry and MLP). Every frame is the
+default view (``cgh render``'s: the asset framed, azimuth 0, elevation 10). Each rasterizer first
+draws one untimed frame (shader compilation, first use of buffers); then for each budget the frame
+is timed by stage: preprocess (projection, SH colour, keys), sort, then
+gather (raster: draw records in sorted order; compute: tile binning) and draw (raster: one pulled
+triangle per splat; compute: per-tile blending). Quality: the PSNR (RGB) of each image against
+the same rasterizer's full-quality image, and against the reference splatter's full-quality render
+of the same view at ``reference_size`` (the torch reference takes minutes at the paper's scale
+and 1080p on a CPU, so it is compared at a smaller size, the viewer rendering that size too).
+The raster path's baselines: the same splats as instanced quads, a bare instanced-quad draw with
+a constant-colour fragment shader straight from the preprocess buffers, and one from the records.
 """
 
 from __future__ import annotations
 
+import math
 import statistics
 import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from .sort import GpuRadixSort, cpu_sort
+
+BUDGET_FRACTIONS = (1 / 4, 1 / 8, 1 / 16)  # default budgets, as fractions of the Gaussians
+REFERENCE_SIZE = (480, 270)
 
 
 def _timed(ctx: Any, fn) -> float:
@@ -27,12 +38,37 @@ def _timed(ctx: Any, fn) -> float:
     return time.perf_counter() - t0
 
 
+def psnr(a: np.ndarray, b: np.ndarray) -> float:
+    """PSNR in dB of two images in [0, 1] (``inf`` when equal)."""
+    mse = float(np.mean((np.asarray(a, np.float64) - np.asarray(b, np.float64)) ** 2))
+    return math.inf if mse == 0 else 10 * math.log10(1.0 / mse)
+
+
+def _reference_rgb(asset: Any, camera: Any) -> np.ndarray | None:
+    """The torch reference splatter's image, or ``None`` without torch."""
+    try:
+        from training.splatter import render_gaussians
+    except ImportError:
+        return None
+    from cghair_format import decode_gaussians
+
+    return render_gaussians(decode_gaussians(asset), camera)["rgb"]
+
+
 def benchmark(path: str | None = None, synthetic: int | None = None, points: int = 101, width: int = 1920,
-              height: int = 1080, frames: int = 3, sort: str = "auto", ctx: Any = None) -> dict:
-    """Figures in seconds (medians over ``frames``), plus counts and the GL renderer's name."""
+              height: int = 1080, frames: int = 3, sort: str = "auto",
+              rasterizers: tuple[str, ...] = ("compute", "raster"),
+              budgets: tuple[int, ...] | None = None, reference_size: tuple[int, int] | None = REFERENCE_SIZE,
+              ctx: Any = None) -> dict:
+    """Figures in seconds (medians over ``frames``) and dB, plus counts and the GL renderer's name.
+
+    ``budgets``: Gaussians per frame of the level-of-detail runs (default: 1/4, 1/8 and 1/16 of
+    the asset's); ``reference_size``: ``None`` skips the reference splatter.
+    """
     import cghair_format
     from cghair_format.camera import Camera
 
+    from .camera_control import OrbitController
     from .context import create_headless_context
     from .renderer import Renderer, ViewSettings
 
@@ -62,64 +98,108 @@ def benchmark(path: str | None = None, synthetic: int | None = None, points: int
 
     t_upload = _timed(ctx, load)
     scene = renderer.scene
+    if budgets is None:
+        budgets = tuple(max(1, int(scene.count * f)) for f in BUDGET_FRACTIONS)
     lo, hi = scene.bounds
-    from .camera_control import OrbitController
-
     ctl = OrbitController.framing(lo, hi, asset.up_axis)
+    cam = Camera.orbit(ctl.target, ctl.distance, 0.0, 10.0, width, height, asset.up_axis)
     settings = ViewSettings()
-    gpu_sorter = renderer.sorter or GpuRadixSort(ctx, renderer.programs, scene.count)
-    keys = ("preprocess", "sort", "gather", "draw", "sort_gpu", "sort_cpu", "bare", "bare_records", "draw_quads")
-    rows: dict[str, list[float]] = {k: [] for k in keys}
-    for i in range(frames):
-        cam = Camera.orbit(ctl.target, ctl.distance, 360.0 * i / frames, 10.0, width, height, asset.up_axis)
-        # the other sort first, on freshly preprocessed keys, so both sorts see the same input
-        renderer.preprocess(cam, settings)
-        if renderer.sort_mode == "gpu":
-            rows["sort_cpu"].append(_timed(ctx, lambda: cpu_sort(renderer.keys, renderer.values, scene.count)))
-        else:
-            rows["sort_gpu"].append(_timed(ctx, lambda: gpu_sorter.sort(renderer.keys, renderer.values,
-                                                                        scene.count)))
-        rows["preprocess"].append(_timed(ctx, lambda c=cam: renderer.preprocess(c, settings)))
-        rows["sort"].append(_timed(ctx, renderer.sort))
-        rows["sort_" + renderer.sort_mode].append(rows["sort"][-1])
-        rows["gather"].append(_timed(ctx, renderer.gather))
-        rows["draw"].append(_timed(ctx, lambda: renderer.draw(width, height)))
-        rows["bare"].append(_timed(ctx, lambda: renderer.draw(width, height, bare="sorted")))
-        rows["bare_records"].append(_timed(ctx, lambda: renderer.draw(width, height, bare="records")))
-        rows["draw_quads"].append(_timed(ctx, lambda: renderer.draw(width, height, triangles=False)))
-    med = {k: statistics.median(v) for k, v in rows.items() if v}
-    frame = med["preprocess"] + med["sort"] + med["gather"] + med["draw"]
+    reference = small = None
+    if reference_size is not None:
+        small = Camera.orbit(ctl.target, ctl.distance, 0.0, 10.0, *reference_size, asset.up_axis)
+        t0 = time.perf_counter()
+        reference = _reference_rgb(asset, small)
+        t_reference = time.perf_counter() - t0
+    runs = []
+    for rasterizer in rasterizers:
+        full_image = None
+        renderer.rasterizer, renderer.budget = rasterizer, None
+        renderer.render(cam, settings)  # warm-up, untimed: shader compilation, buffers' first use
+        for budget in (None, *budgets):
+            renderer.budget = budget
+            rows: dict[str, list[float]] = {k: [] for k in ("preprocess", "sort", "gather", "draw")}
+            for _ in range(frames):
+                rows["preprocess"].append(_timed(ctx, lambda: renderer.preprocess(cam, settings)))
+                rows["sort"].append(_timed(ctx, renderer.sort))
+                rows["gather"].append(_timed(ctx, renderer.gather))
+                rows["draw"].append(_timed(ctx, lambda: renderer.draw(width, height)))
+            med = {k: statistics.median(v) for k, v in rows.items()}
+            renderer.composite(cam, settings)
+            image = np.frombuffer(renderer._target(width, height)[2].read(), np.float32)
+            image = image.reshape(height, width, 4)[..., :3].copy()
+            full_image = image if full_image is None else full_image
+            run = {"rasterizer": renderer.frame_rasterizer, "budget": budget, "gaussians_drawn": renderer.drawn,
+                   "strands_drawn": renderer.plan.strands, "visible": renderer.visible,
+                   "tile_entries": renderer.binner.entries if renderer.frame_rasterizer == "compute" else None,
+                   **{f"{k}_s": v for k, v in med.items()}, "frame_s": sum(med.values()),
+                   "psnr_vs_full_db": psnr(image, full_image) if budget is not None else None,
+                   "psnr_vs_reference_db": None}
+            if reference is not None:
+                run["psnr_vs_reference_db"] = psnr(renderer.render(small, settings)[..., :3], reference)
+            runs.append(run)
     result = {
-        "source": source, "file_bytes": file_bytes, "gaussians": scene.count, "width": width, "height": height,
-        "frames": frames, "renderer": ctx.info.get("GL_RENDERER"), "sort_mode": renderer.sort_mode,
-        "read_s": t_read, "decode_upload_s": t_upload, "preprocess_s": med["preprocess"], "sort_s": med["sort"],
-        "gather_s": med["gather"],
-        "sort_gpu_s": med.get("sort_gpu"), "sort_cpu_s": med.get("sort_cpu"), "draw_s": med["draw"],
-        "draw_instanced_quads_s": med["draw_quads"],
-        "frame_s": frame, "bare_quads_s": med["bare"], "frame_over_bare": frame / med["bare"],
-        "bare_quads_records_s": med["bare_records"], "frame_over_bare_records": frame / med["bare_records"],
+        "source": source, "file_bytes": file_bytes, "gaussians": scene.count, "strands": renderer.lod.n_strands,
+        "width": width, "height": height, "frames": frames, "renderer": ctx.info.get("GL_RENDERER"),
+        "sort_mode": renderer.sort_mode, "read_s": t_read, "decode_upload_s": t_upload,
+        "reference_size": list(reference_size) if reference is not None else None,
+        "reference_s": t_reference if reference is not None else None, "runs": runs,
     }
-    if gpu_sorter is not renderer.sorter:
-        gpu_sorter.release()
+    if "raster" in rasterizers:
+        result.update(_raster_baselines(ctx, renderer, cam, settings, frames))
     renderer.release()
     if own_ctx:
         ctx.release()
     return result
 
 
+def _raster_baselines(ctx: Any, renderer: Any, cam: Any, settings: Any, frames: int) -> dict:
+    """The raster path at full quality against cheaper draws of the same splats, and both sorts."""
+    renderer.rasterizer, renderer.budget = "raster", None
+    count, (width, height) = renderer.scene.count, (cam.width, cam.height)
+    gpu_sorter = renderer.sorter or GpuRadixSort(ctx, renderer.programs, count)
+    rows: dict[str, list[float]] = {k: [] for k in ("sort_gpu", "sort_cpu", "draw", "bare", "bare_records",
+                                                    "draw_quads")}
+    for _ in range(frames):
+        for mode, fn in (("gpu", lambda: gpu_sorter.sort(renderer.keys, renderer.values, count)),
+                         ("cpu", lambda: cpu_sort(renderer.keys, renderer.values, count))):
+            renderer.preprocess(cam, settings)
+            rows["sort_" + mode].append(_timed(ctx, fn))
+        renderer.gather()
+        rows["draw"].append(_timed(ctx, lambda: renderer.draw(width, height)))
+        rows["bare"].append(_timed(ctx, lambda: renderer.draw(width, height, bare="sorted")))
+        rows["bare_records"].append(_timed(ctx, lambda: renderer.draw(width, height, bare="records")))
+        rows["draw_quads"].append(_timed(ctx, lambda: renderer.draw(width, height, triangles=False)))
+    if gpu_sorter is not renderer.sorter:
+        gpu_sorter.release()
+    med = {k: statistics.median(v) for k, v in rows.items()}
+    return {"sort_gpu_s": med["sort_gpu"], "sort_cpu_s": med["sort_cpu"], "draw_instanced_quads_s": med["draw_quads"],
+            "bare_quads_s": med["bare"], "bare_quads_records_s": med["bare_records"],
+            "draw_over_bare": med["draw"] / med["bare"], "draw_over_bare_records": med["draw"] / med["bare_records"]}
+
+
 def format_report(r: dict) -> str:
-    ms = lambda s: f"{1000 * s:9.1f} ms" if s is not None else "      n/a"  # noqa: E731
+    ms = lambda s: f"{1000 * s:8.1f}" if s is not None else "     n/a"  # noqa: E731
+    db = lambda x: "       -" if x is None else ("     inf" if math.isinf(x) else f"{x:8.2f}")  # noqa: E731
     size = f", {r['file_bytes'] / 1e6:.2f} MB" if r["file_bytes"] else ""
-    return "\n".join([
+    ref = (f"reference splatter at {r['reference_size'][0]}x{r['reference_size'][1]} "
+           f"({r['reference_s']:.1f} s)" if r["reference_size"] else "no reference splatter (needs torch)")
+    lines = [
         f"viewer benchmark: {r['source']}{size}, {r['gaussians']:,} Gaussians, {r['width']}x{r['height']}, "
-        f"{r['renderer']}, median of {r['frames']} frames",
-        f"load     read {ms(r['read_s'])}   decode+upload (GPU) {ms(r['decode_upload_s'])}",
-        f"frame    preprocess {ms(r['preprocess_s'])}   sort ({r['sort_mode']}) {ms(r['sort_s'])}   "
-        f"gather {ms(r['gather_s'])}   draw {ms(r['draw_s'])}",
-        f"         total {ms(r['frame_s'])}  ({1 / r['frame_s']:.2f} fps)",
-        f"draw     as instanced quads instead of triangles {ms(r['draw_instanced_quads_s'])}",
-        f"sorts    gpu radix {ms(r['sort_gpu_s'])}   cpu numpy {ms(r['sort_cpu_s'])}",
-        f"baseline bare instanced quads {ms(r['bare_quads_s'])}   frame / bare = {r['frame_over_bare']:.2f}x",
-        f"         bare instanced quads from the gathered records {ms(r['bare_quads_records_s'])}   "
-        f"frame / that = {r['frame_over_bare_records']:.2f}x",
-    ])
+        f"{r['renderer']}, default view, median of {r['frames']} frames, sort {r['sort_mode']}",
+        f"load     read {ms(r['read_s'])} ms   decode+upload (GPU) {ms(r['decode_upload_s'])} ms",
+        f"quality  PSNR (RGB) against the same rasterizer at full quality, and against the {ref}",
+        "rasterizer     budget      drawn  preproc     sort gath/bin draw/blnd    frame ms    fps  vs full  vs ref",
+    ]
+    for run in r["runs"]:
+        budget = "full" if run["budget"] is None else f"{run['budget']:,}"
+        lines.append(f"{run['rasterizer']:<8} {budget:>12} {run['gaussians_drawn']:>10,} {ms(run['preprocess_s'])} "
+                     f"{ms(run['sort_s'])} {ms(run['gather_s'])}  {ms(run['draw_s'])}  {ms(run['frame_s'])}   "
+                     f"{1 / run['frame_s']:5.2f} {db(run['psnr_vs_full_db'])} {db(run['psnr_vs_reference_db'])}")
+    if "bare_quads_s" in r:
+        lines += [
+            f"raster   sorts: gpu radix {ms(r['sort_gpu_s'])} ms, cpu numpy {ms(r['sort_cpu_s'])} ms; "
+            f"draw as instanced quads {ms(r['draw_instanced_quads_s'])} ms",
+            f"baseline bare instanced quads {ms(r['bare_quads_s'])} ms (draw / bare = {r['draw_over_bare']:.2f}x), "
+            f"from the gathered records {ms(r['bare_quads_records_s'])} ms ({r['draw_over_bare_records']:.2f}x)",
+        ]
+    return "\n".join(lines)

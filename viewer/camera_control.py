@@ -3,6 +3,7 @@
 :class:`OrbitController` holds an orbit camera (target, distance, azimuth, elevation) and applies
 mouse orbit, pan and zoom, WASD fly and reset. :class:`ViewerState` maps key presses to the
 viewer's toggles (cards, strands, group colours, SH degree, splat scale) and actions.
+:class:`BudgetControl` chooses each frame's splat budget (level of detail).
 """
 
 from __future__ import annotations
@@ -90,7 +91,8 @@ KEYMAP: dict[str, tuple[str, object]] = {
     "H": ("toggle", "hide_splats"), "0": ("sh_degree", 0), "1": ("sh_degree", 1), "2": ("sh_degree", 2),
     "3": ("sh_degree", 3), "=": ("scale", 1.25), "+": ("scale", 1.25), "]": ("scale", 1.25),
     "-": ("scale", 0.8), "[": ("scale", 0.8),
-    "R": ("reset", None), "P": ("screenshot", None), "F12": ("screenshot", None), "ESCAPE": ("quit", None),
+    "B": ("budget", None), "R": ("reset", None), "P": ("screenshot", None), "F12": ("screenshot", None),
+    "ESCAPE": ("quit", None),
 }
 # held keys -> (forward, right, up) flight direction
 FLY_KEYS: dict[str, tuple[float, float, float]] = {
@@ -98,7 +100,60 @@ FLY_KEYS: dict[str, tuple[float, float, float]] = {
 }
 HELP = ("drag: orbit | right/middle drag or shift-drag: pan | scroll: zoom | WASD QE: fly | R: reset | "
         "C: cards | L: strands | G: group colours | H: hide splats | 0-3: SH degree | [/] or -/+: splat scale | "
-        "P: screenshot | Esc: quit")
+        "B: splat budget (adaptive, full, 1/2 ... 1/16) | P: screenshot | Esc: quit")
+TARGET_FRAME_S = 0.3  # the adaptive budget's frame time while the camera moves (about 3 fps)
+MIN_BUDGET_FRACTION = 1 / 64  # the adaptive budget's floor, as a fraction of the Gaussians
+BUDGET_FRACTIONS = (1 / 2, 1 / 4, 1 / 8, 1 / 16)  # the fixed budgets key B cycles through
+
+
+@dataclass
+class BudgetControl:
+    """The splat budget of each frame: ``"adaptive"`` (while the camera moves, as many Gaussians as
+    keep a frame near :data:`TARGET_FRAME_S`; all of them when it rests), ``"full"``, or a fixed
+    number. Key B cycles adaptive, full, then fixed fractions of the Gaussians (and ``fixed``,
+    the command line's ``--budget``, if given)."""
+
+    total: int  # Gaussians in the scene
+    fixed: int | None = None
+    mode: str | int = "adaptive"
+    moving_budget: float = 0.0  # the adaptive budget while moving, learned from frame times
+
+    def __post_init__(self) -> None:
+        if self.fixed is not None:
+            self.mode = min(int(self.fixed), self.total)
+        self.moving_budget = float(self.total)
+
+    def modes(self) -> list[str | int]:
+        fixed = [max(1, int(self.total * f)) for f in BUDGET_FRACTIONS]
+        if self.fixed is not None and min(int(self.fixed), self.total) not in fixed:
+            fixed = sorted({*fixed, min(int(self.fixed), self.total)}, reverse=True)
+        return ["adaptive", "full", *fixed]
+
+    def cycle(self) -> None:
+        modes = self.modes()
+        self.mode = modes[(modes.index(self.mode) + 1) % len(modes)] if self.mode in modes else modes[0]
+
+    def budget(self, moving: bool) -> int | None:
+        """The budget of the next frame (``None``: every Gaussian)."""
+        if self.mode == "full" or (self.mode == "adaptive" and not moving):
+            return None
+        if self.mode == "adaptive":
+            return None if self.moving_budget >= self.total else int(self.moving_budget)
+        return int(self.mode)
+
+    def record(self, seconds: float, drawn: int, moving: bool) -> None:
+        """Learn from a frame's time: the adaptive budget scales with the frame time's error,
+        halfway each frame (frame time is close to proportional to the Gaussians drawn)."""
+        if self.mode != "adaptive" or not moving or seconds <= 0 or drawn <= 0:
+            return
+        want = drawn * TARGET_FRAME_S / seconds
+        self.moving_budget = float(np.clip(np.sqrt(self.moving_budget * want),
+                                           self.total * MIN_BUDGET_FRACTION, self.total))
+
+    def label(self) -> str:
+        if self.mode in ("adaptive", "full"):
+            return str(self.mode)
+        return f"{int(self.mode):,}"
 
 
 @dataclass
@@ -110,7 +165,7 @@ class ViewerState:
     max_sh_degree: int = 3
 
     def press(self, key: str) -> str | None:
-        """Apply a key press; returns ``"screenshot"`` or ``"quit"`` when the app must act."""
+        """Apply a key press; returns ``"screenshot"``, ``"budget"`` or ``"quit"`` when the app must act."""
         action, arg = KEYMAP.get(key.upper(), (None, None))
         s = self.settings
         if action == "toggle":
@@ -119,6 +174,8 @@ class ViewerState:
             self.settings = replace(s, sh_degree=min(int(arg), self.max_sh_degree))
         elif action == "scale":
             self.settings = replace(s, splat_scale=float(np.clip(s.splat_scale * float(arg), 0.05, 20.0)))
+        elif action == "budget":
+            return action
         elif action == "reset":
             self.controller.reset()
             self.settings = replace(s, splat_scale=1.0, sh_degree=None)

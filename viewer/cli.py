@@ -11,10 +11,33 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--height", type=int, default=720, help="window height in pixels (default 720)")
     parser.add_argument("--sort", choices=("auto", "gpu", "cpu"), default="auto",
                         help="depth sort: GPU radix sort, numpy, or auto (GPU except on software renderers)")
+    add_raster_arguments(parser, budget_help="a fixed splat budget, e.g. 500k (default: adaptive, full quality "
+                         "when the camera rests; key B cycles budgets)")
     parser.add_argument("--screenshots", default=".", help="folder for screenshots (key P)")
     parser.add_argument("--frames", type=int, default=None, help="close after this many frames (scripted runs)")
     parser.add_argument("--press", default="", metavar="KEYS",
                         help="key presses to replay before the first frame, e.g. 'LGP' (scripted runs)")
+
+
+def budget_type(text: str) -> int:
+    """argparse type of ``--budget``: a positive number of Gaussians (``250000``, ``250k``, ``2.5M``)."""
+    from .lod import parse_budget
+
+    try:
+        return parse_budget(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def add_raster_arguments(parser: argparse.ArgumentParser, budget_help: str, rasterizers=("auto", "compute", "raster"),
+                         default: str = "auto", many_budgets: bool = False) -> None:
+    """``--rasterizer`` and ``--budget``, shared by ``view``, ``render`` and ``bench-viewer``."""
+    parser.add_argument("--rasterizer", choices=rasterizers, default=default,
+                        help="compute: tiles in compute shaders with early termination; raster: one triangle per "
+                             "splat, fixed-function blending; auto: compute where OpenGL 4.3 compute shaders exist, "
+                             f"else raster (default {default})")
+    parser.add_argument("--budget", type=budget_type, default=None, metavar="N", nargs="+" if many_budgets else None,
+                        help=budget_help)
 
 
 def positive(parser_name: str, value: int) -> None:
@@ -40,6 +63,7 @@ def run(args: argparse.Namespace) -> int:
         raise CghError(f"screenshot folder {args.screenshots} does not exist")
     asset = cghair_format.read(args.file)
     run_viewer(asset, title=f"cgh view {Path(args.file).name}", file_size=Path(args.file).stat().st_size,
-               width=args.width, height=args.height, sort=args.sort, screenshot_dir=args.screenshots,
+               width=args.width, height=args.height, sort=args.sort, rasterizer=args.rasterizer,
+               budget=args.budget, screenshot_dir=args.screenshots,
                max_frames=args.frames, press=tuple(args.press))
     return 0

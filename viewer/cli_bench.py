@@ -1,9 +1,11 @@
-"""``cgh bench-viewer``: the viewer's load time and per-frame preprocess, sort and draw times,
-next to a bare instanced-quad draw of the same splats in the same run."""
+"""``cgh bench-viewer``: the viewer's load time, and for each rasterizer and a few splat budgets
+the per-stage frame times and the PSNR against full quality and the reference splatter."""
 
 from __future__ import annotations
 
 import argparse
+
+from .cli import add_raster_arguments
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -17,6 +19,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--frames", type=int, default=3, help="frames to time (default 3)")
     parser.add_argument("--sort", choices=("auto", "gpu", "cpu"), default="auto",
                         help="sort used in the frame time (both are timed and reported)")
+    add_raster_arguments(parser, rasterizers=("both", "compute", "raster", "auto"), default="both", many_budgets=True,
+                         budget_help="splat budgets to time besides full quality (default: 1/4, 1/8 and 1/16 of "
+                                     "the Gaussians)")
+    parser.add_argument("--reference-size", type=int, nargs=2, default=(480, 270), metavar=("W", "H"),
+                        help="size of the reference splatter's render for the PSNR (default 480 270)")
+    parser.add_argument("--no-reference", action="store_true", help="skip the reference splatter (needs torch)")
     parser.add_argument("--json", default=None, metavar="PATH", help="also write the figures as JSON")
 
 
@@ -38,8 +46,14 @@ def run(args: argparse.Namespace) -> int:
     for name in ("width", "height"):
         if not 1 <= getattr(args, name) <= 16384:
             raise CghError(f"--{name} must be between 1 and 16384, got {getattr(args, name)}")
+    for name, value in zip(("W", "H"), args.reference_size, strict=True):
+        if not 1 <= value <= 16384:
+            raise CghError(f"--reference-size {name} must be between 1 and 16384, got {value}")
+    rasterizers = {"both": ("compute", "raster"), "auto": ("compute",)}.get(args.rasterizer, (args.rasterizer,))
     result = benchmark(path=args.file, synthetic=args.synthetic, points=args.points, width=args.width,
-                       height=args.height, frames=args.frames, sort=args.sort)
+                       height=args.height, frames=args.frames, sort=args.sort, rasterizers=rasterizers,
+                       budgets=tuple(args.budget) if args.budget else None,
+                       reference_size=None if args.no_reference else tuple(args.reference_size))
     print(format_report(result))
     if args.json:
         with open(args.json, "w", encoding="utf-8") as f:

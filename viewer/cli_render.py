@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from .cli import add_raster_arguments
+
 IMAGE_EXTS = (".png",)
 ANIMATION_EXTS = (".gif", ".mp4")
 
@@ -35,6 +37,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     look.add_argument("--cards", action="store_true", help="overlay the card strips")
     look.add_argument("--strands", action="store_true", help="overlay the strands as lines")
     parser.add_argument("--sort", choices=("auto", "gpu", "cpu"), default="auto", help="depth sort (default auto)")
+    add_raster_arguments(parser, budget_help="draw at most N Gaussians (whole strands, compensated; e.g. 500k); "
+                                             "default: all")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -62,7 +66,8 @@ def run(args: argparse.Namespace) -> int:
                     distance=args.distance, target=args.target, fov=args.fov, transforms=args.camera,
                     frame=args.frame, turntable=args.turntable, fps=args.fps, background=tuple(args.background),
                     sh_degree=args.sh_degree, splat_scale=args.splat_scale,
-                    color_by_group=args.color_by_group, cards=args.cards, strands=args.strands, sort=args.sort)
+                    color_by_group=args.color_by_group, cards=args.cards, strands=args.strands, sort=args.sort,
+                    rasterizer=args.rasterizer, budget=args.budget)
     written = render_job(asset, job, out)
     print(f"wrote {written}")
     return 0

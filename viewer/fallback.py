@@ -110,6 +110,8 @@ class FallbackRenderer(Renderer):
         self.groups = groups  # card group of each Gaussian, for colour by group
         self.programs = Programs(ctx, version=FALLBACK_GLSL)
         self.sort_mode = "cpu"
+        self.rasterizer = self.frame_rasterizer = "raster"
+        self.budget = None
         self.triangles = True
         lo, hi = gaussians.means.min(axis=0), gaussians.means.max(axis=0)
         self.scene = SimpleNamespace(count=gaussians.count, points=None, bounds=(lo, hi),
@@ -122,6 +124,13 @@ class FallbackRenderer(Renderer):
         self._empty_vao = {}
         self._camera: Camera | None = None
         self._settings = ViewSettings()
+
+    @property
+    def drawn(self) -> int:
+        return self.visible
+
+    def describe(self) -> str:
+        return f"raster (OpenGL 3.3) | {self.gaussians.count:,} Gaussians"
 
     @classmethod
     def from_asset(cls, ctx: Any, asset: HairAsset, sort: str = "cpu", primitive: str = "triangles"):
@@ -182,8 +191,22 @@ class FallbackRenderer(Renderer):
         self._targets.clear()
 
 
-def create_renderer(ctx: Any, asset: HairAsset, sort: str = "auto", primitive: str = "triangles") -> Renderer:
-    """The GPU renderer where compute shaders exist (OpenGL 4.3), else the numpy fallback."""
+def create_renderer(ctx: Any, asset: HairAsset, sort: str = "auto", primitive: str = "triangles",
+                    rasterizer: str = "auto", budget: int | None = None) -> Renderer:
+    """The GPU renderer where compute shaders exist (OpenGL 4.3), else the numpy fallback.
+
+    The compute rasterizer and splat budgets need compute shaders: asking for them on OpenGL 3.3
+    is a :class:`GLContextError` that says so.
+    """
     if ctx.version_code >= 430:
-        return Renderer.from_asset(ctx, asset, sort=sort, primitive=primitive)
+        return Renderer.from_asset(ctx, asset, sort=sort, primitive=primitive, rasterizer=rasterizer,
+                                   budget=budget)
+    from .context import GLContextError
+
+    offered = f"this OpenGL offers {ctx.version_code / 100:.1f}"
+    if rasterizer == "compute":
+        raise GLContextError(f"--rasterizer compute needs OpenGL 4.3 compute shaders; {offered}: "
+                             "use --rasterizer raster or auto")
+    if budget is not None:
+        raise GLContextError(f"--budget needs OpenGL 4.3 compute shaders; {offered}: leave --budget out")
     return FallbackRenderer.from_asset(ctx, asset)

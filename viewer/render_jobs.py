@@ -50,6 +50,8 @@ class RenderJob:
     cards: bool = False
     strands: bool = False
     sort: str = "auto"
+    rasterizer: str = "auto"
+    budget: int | None = None  # Gaussians drawn (level of detail); None: all
 
     def settings(self) -> ViewSettings:
         return ViewSettings(sh_degree=self.sh_degree, splat_scale=self.splat_scale,
@@ -165,7 +167,7 @@ def render_job(asset: HairAsset, job: RenderJob, out: str | Path, ctx=None) -> P
     ctx = ctx or create_headless_context()
     ctx.__enter__()  # make it current: another context may have been created since
     try:
-        renderer = create_renderer(ctx, asset, sort=job.sort)
+        renderer = create_renderer(ctx, asset, sort=job.sort, rasterizer=job.rasterizer, budget=job.budget)
         try:
             cameras = job_cameras(job, renderer.scene.bounds, asset.up_axis)
             settings = job.settings()

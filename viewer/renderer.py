@@ -1,17 +1,25 @@
-"""The splatting renderer: per-frame preprocess, depth sort, gather and splat draw (headless or window).
+"""The splatting renderer: per-frame preprocess, depth sort, gather and splat (headless or window).
 
 Image model: the rendering contract shared with ``training/splatter.py``. Per frame a compute
-shader projects every Gaussian (EWA 2D covariance, conic, 3-sigma radius, SH colour, depth key,
-the primitive's half-axes) and counts the visible ones; the keys are sorted (GPU radix sort, or
-numpy); a gather pass writes the visible splats' draw records in sorted order; one triangle (or
-instanced quad) per splat is drawn front to back into an RGBA32F target with the "under"
-operator (``dst += (1 - dst.a) * (c a, a)``), giving ``C = sum c_i a_i T_i`` and
-``alpha = 1 - T``; a last pass adds the background and the overlays. Framebuffer row ``j`` holds
-image row ``j`` (image y points down), so reads need no flip.
+shader projects every drawn Gaussian (EWA 2D covariance, conic, 3-sigma radius, SH colour, depth
+key, the primitive's half-axes) and counts the visible ones; the keys are sorted (GPU radix sort,
+or numpy). Then one of two rasterizers writes ``C = sum c_i a_i T_i`` and ``alpha = 1 - T`` into
+an RGBA32F target:
+
+- ``compute`` (:mod:`viewer.tiles`): the visible splats are binned into 16 x 16 tiles and each
+  tile blends its splats front to back in a compute shader, stopping at T < 1e-4;
+- ``raster``: a gather pass writes the visible splats' draw records in sorted order and one
+  triangle (or instanced quad) per splat is drawn front to back with the "under" operator
+  (``dst += (1 - dst.a) * (c a, a)``).
+
+A last pass adds the background and the overlays. Row ``j`` of the target holds image row ``j``
+(image y points down), so reads need no flip. A splat budget (:mod:`viewer.lod`) draws a stable
+subset of the strands, compensated to keep the hair's coverage and colour.
 """
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from typing import Any
 
@@ -21,9 +29,11 @@ from cghair_format import Gaussians, HairAsset
 from cghair_format.camera import Camera
 
 from .context import check_gl, park_framebuffer
-from .decode import GpuScene, block_limit, upload_asset, upload_gaussians
+from .decode import GpuScene, SceneTooLargeError, block_limit, upload_asset, upload_gaussians
+from .lod import LodPlan, StrandLod
 from .pipeline import Programs, bind, dispatch, set_uniforms
 from .sort import SORT_MODES, GpuRadixSort, cpu_sort
+from .tiles import TileBinner, max_splats
 
 NEAR, FAR = 0.01, 1.0e4  # clip planes of the overlays (the splats use the contract's near plane)
 SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast")
@@ -31,6 +41,7 @@ SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast")
 PRIMITIVES = ("triangles", "quads")
 MAX_TARGET_SIZES = 2  # render target sizes kept allocated at once
 RECORD_BYTES = 64  # per sorted splat: 4 vec4s (splat_records.comp.glsl)
+RASTERIZERS = ("compute", "raster")
 
 
 @dataclass
@@ -67,51 +78,85 @@ def _mat_bytes(m: np.ndarray) -> bytes:
     return np.ascontiguousarray(np.asarray(m, np.float64).T, np.float32).tobytes()
 
 
+def check_budget(budget: int | None) -> int | None:
+    """A splat budget (Gaussians per frame) or ``None`` (all); raises ``ValueError`` otherwise."""
+    if budget is not None and (isinstance(budget, bool) or not isinstance(budget, (int, np.integer))
+                               or budget < 1):
+        raise ValueError(f"the splat budget must be a positive number of Gaussians, got {budget!r}")
+    return None if budget is None else int(budget)
+
+
 class Renderer:
     """Draws one :class:`GpuScene` from any camera.
 
-    ``sort``: ``"gpu"``, ``"cpu"`` or ``"auto"``; ``primitive``: ``"triangles"`` (one triangle per
-    splat, fewer primitives: faster on llvmpipe at the paper's scale) or ``"quads"`` (instanced).
+    ``sort``: ``"gpu"``, ``"cpu"`` or ``"auto"``; ``rasterizer``: ``"compute"`` (tiles, early
+    termination), ``"raster"`` or ``"auto"`` (compute, unless the scene exceeds its record image);
+    ``primitive`` (raster path): ``"triangles"`` (one triangle per splat, fewer primitives: faster
+    on llvmpipe at the paper's scale) or ``"quads"`` (instanced). ``budget``: at most this many
+    Gaussians per frame (level of detail), ``None`` for all; it may change between frames.
     """
 
     def __init__(self, ctx: Any, scene: GpuScene, sort: str = "auto", programs: Programs | None = None,
-                 primitive: str = "triangles"):
+                 primitive: str = "triangles", rasterizer: str = "auto", budget: int | None = None):
         if sort not in (*SORT_MODES, "auto"):
             raise ValueError(f"sort must be one of {(*SORT_MODES, 'auto')}, got {sort!r}")
         if primitive not in PRIMITIVES:
             raise ValueError(f"primitive must be one of {PRIMITIVES}, got {primitive!r}")
+        if rasterizer not in (*RASTERIZERS, "auto"):
+            raise ValueError(f"rasterizer must be one of {(*RASTERIZERS, 'auto')}, got {rasterizer!r}")
+        fits = scene.count <= max_splats(ctx)
+        if rasterizer == "compute" and not fits:
+            scene.release()  # the renderer owns its scene (see release)
+            raise SceneTooLargeError(
+                f"the compute rasterizer's record image holds {max_splats(ctx):,} Gaussians (GL_MAX_TEXTURE_SIZE); "
+                f"this asset has {scene.count:,}: use --rasterizer raster")
+        self.rasterizer = ("compute" if fits else "raster") if rasterizer == "auto" else rasterizer
         self.ctx = ctx
         self.scene = scene
         self.programs = programs or Programs(ctx)
         self.sort_mode = default_sort_mode(ctx) if sort == "auto" else sort
         self.triangles = primitive == "triangles"
+        self.budget = check_budget(budget)
         n = max(scene.count, 1)
         self.center = ctx.buffer(reserve=16 * n)
         self.conic = ctx.buffer(reserve=16 * n)
         self.color = ctx.buffer(reserve=16 * n)
         self.axes = ctx.buffer(reserve=16 * n)
         self.visible_count = ctx.buffer(reserve=4)
-        self.visible = 0  # splats in front of the camera and on screen, after sort()
-        limit = block_limit(ctx)
-        self.records_per_chunk = max(1, min(n, limit // RECORD_BYTES))
-        self.records = [ctx.buffer(reserve=RECORD_BYTES * min(self.records_per_chunk, n - first))
-                        for first in range(0, n, self.records_per_chunk)]
+        self.visible = 0  # splats in front of the camera and on screen, after gather()
+        self.records_per_chunk = max(1, min(n, block_limit(ctx) // RECORD_BYTES))
+        self.records: list[Any] = []  # the raster path's draw records, allocated on first use
         self.keys = ctx.buffer(reserve=4 * n)
         self.values = ctx.buffer(reserve=4 * n)
         self.sorter = GpuRadixSort(ctx, self.programs, n) if self.sort_mode == "gpu" else None
+        self.lod = StrandLod(ctx, scene)
+        self.plan: LodPlan = self.lod.plan(None)  # what the last preprocess drew
+        self.binner = TileBinner(ctx, self.programs, n, capacity=block_limit(ctx) // 4, sort_mode=self.sort_mode)
+        self.frame_rasterizer = self.rasterizer  # the last frame's: raster where the tiles overflowed
+        self._size = (0, 0)
         self._targets: dict[tuple[int, int], tuple[Any, Any, Any, Any]] = {}
         self._empty_vao: dict[str, Any] = {}
         self._mesh_vao = None
+        self._warned = False
 
     @classmethod
-    def from_asset(cls, ctx: Any, asset: HairAsset, sort: str = "auto", primitive: str = "triangles") -> Renderer:
+    def from_asset(cls, ctx: Any, asset: HairAsset, sort: str = "auto", primitive: str = "triangles",
+                   rasterizer: str = "auto", budget: int | None = None) -> Renderer:
         programs = Programs(ctx)
-        return cls(ctx, upload_asset(ctx, programs, asset), sort, programs, primitive)
+        return cls(ctx, upload_asset(ctx, programs, asset), sort, programs, primitive, rasterizer, budget)
 
     @classmethod
-    def from_gaussians(cls, ctx: Any, gaussians: Gaussians, sort: str = "auto",
-                       primitive: str = "triangles") -> Renderer:
-        return cls(ctx, upload_gaussians(ctx, gaussians), sort, primitive=primitive)
+    def from_gaussians(cls, ctx: Any, gaussians: Gaussians, sort: str = "auto", primitive: str = "triangles",
+                       rasterizer: str = "auto", budget: int | None = None) -> Renderer:
+        return cls(ctx, upload_gaussians(ctx, gaussians), sort, primitive=primitive, rasterizer=rasterizer,
+                   budget=budget)
+
+    def describe(self) -> str:
+        """What the last frame drew, for the window title: rasterizer, Gaussians, strands."""
+        p, total = self.plan, self.scene.count
+        drawn = f"{total:,} Gaussians" if p.full else (
+            f"{p.gaussians:,} of {total:,} Gaussians ({100 * p.strands / self.lod.n_strands:.0f} % of strands)")
+        return f"{self.frame_rasterizer} | {drawn}"
 
     # -- the per-frame stages, separable for timing ------------------------------------------------
 
@@ -129,25 +174,59 @@ class Renderer:
                      u_degree=degree, u_scale=float(s.splat_scale), u_color_mode=int(s.color_by_group),
                      u_segments=scene.segments)
         prog["u_rot"].write(_mat_bytes(w2c[:3, :3]))
+        self.plan = plan = self.lod.plan(self.budget)
+        self._size = (int(camera.width), int(camera.height))
+        set_uniforms(prog, u_indexed=not plan.full, u_lod_opacity=float(plan.opacity_power),
+                     u_lod_width=float(plan.width), u_write_records=self.rasterizer == "compute")
+        if self.rasterizer == "compute":
+            self.binner.records.bind_to_image(1, read=False, write=True)
         self.visible_count.clear()
-        for chunk in scene.sh:
+        for k, chunk in enumerate(scene.sh):
             bind(scene.means, scene.rotations, scene.scales, chunk.buffer, self.center, self.conic,
                  self.color, self.keys, self.values, scene.strand_card, scene.card_group, self.axes,
-                 self.visible_count)
-            set_uniforms(prog, u_base=chunk.first, u_count=chunk.count)
-            dispatch(self.ctx, prog, chunk.count)
+                 self.visible_count, self.lod.buffer)
+            if plan.full:
+                set_uniforms(prog, u_base=chunk.first, u_count=chunk.count)
+                dispatch(self.ctx, prog, chunk.count)
+            else:
+                list_base, count, out_base = plan.chunks[k]
+                set_uniforms(prog, u_base=chunk.first, u_count=count, u_list_base=list_base, u_out_base=out_base)
+                dispatch(self.ctx, prog, count)
+
+    @property
+    def drawn(self) -> int:
+        """Gaussians the last preprocess wrote (all, or the budget's strands')."""
+        return self.plan.gaussians
 
     def sort(self) -> None:
         """Order the splats front to back (values become the draw order)."""
         if self.sorter is not None:
-            self.sorter.sort(self.keys, self.values, self.scene.count)
+            self.sorter.sort(self.keys, self.values, self.drawn)
         else:
-            cpu_sort(self.keys, self.values, self.scene.count)
+            cpu_sort(self.keys, self.values, self.drawn)
 
     def gather(self) -> None:
-        """Write the visible splats' draw records in sorted order (after :meth:`sort`)."""
+        """After :meth:`sort`: bin the visible splats into tiles (compute rasterizer), or write
+        their draw records in sorted order (raster path, and views whose tiles overflow)."""
         # culled splats carry the largest key, so the visible ones are the first slots
         self.visible = int(np.frombuffer(self.visible_count.read(), np.uint32)[0])
+        self.frame_rasterizer = self.rasterizer
+        if self.rasterizer == "compute":
+            if self.binner.bin(self.values, self.visible, *self._size):
+                return
+            self.frame_rasterizer = "raster"
+            if not self._warned:
+                warnings.warn(f"this view needs {self.binner.entries_needed:,} tile entries, more than the compute "
+                              f"rasterizer's {self.binner.capacity:,}: drawing it with the raster path instead",
+                              RuntimeWarning, stacklevel=2)
+                self._warned = True
+        self._gather_records()
+
+    def _gather_records(self) -> None:
+        if not self.records:
+            n = max(self.scene.count, 1)
+            self.records = [self.ctx.buffer(reserve=RECORD_BYTES * min(self.records_per_chunk, n - first))
+                            for first in range(0, n, self.records_per_chunk)]
         prog = self.programs.compute("splat_records")
         for k, records in enumerate(self.records):
             first = k * self.records_per_chunk
@@ -157,7 +236,8 @@ class Renderer:
             dispatch(self.ctx, prog, count)
 
     def draw(self, width: int, height: int, bare: str | None = None, triangles: bool | None = None) -> None:
-        """Splat the gathered records into the accumulation target of this size (cleared first).
+        """Splat the gathered splats into the accumulation target of this size (overwritten): blend
+        the tiles (compute rasterizer) or draw the records (raster path).
 
         ``bare`` draws the benchmark's baselines instead: instanced quads of the same positions and
         sizes with a constant-colour fragment shader, either ``"sorted"`` (read through the sort
@@ -165,11 +245,16 @@ class Renderer:
         records, read sequentially: the cheapest instanced-quad draw of these splats).
         """
         triangles = self.triangles if triangles is None else triangles
-        accum_fbo = self._target(width, height)[1]
+        accum_tex, accum_fbo = self._target(width, height)[:2]
+        if bare is None and self.frame_rasterizer == "compute":
+            self.binner.blend(accum_tex, width, height)
+            return
         accum_fbo.use()
         accum_fbo.clear(0.0, 0.0, 0.0, 0.0)
         if self.scene.count == 0:
             return
+        if not self.records:
+            raise ValueError("draw the raster path after a raster gather (rasterizer='raster')")
         self.ctx.enable_only(self.ctx.BLEND)
         if bare not in (None, "sorted", "records"):
             raise ValueError(f"bare must be None, 'sorted' or 'records', got {bare!r}")
@@ -283,6 +368,8 @@ class Renderer:
         for buf in (self.center, self.conic, self.color, self.axes, self.keys, self.values, self.visible_count,
                     *self.records):
             buf.release()
+        self.lod.release()
+        self.binner.release()
         if self.sorter is not None:
             self.sorter.release()
         if self._targets:

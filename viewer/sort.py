@@ -63,11 +63,12 @@ class GpuRadixSort:
             buf.release()
 
 
-def cpu_sort(keys: Any, values: Any, count: int) -> None:
-    """The fallback: read the keys back, sort them stably with numpy, upload keys and values."""
+def cpu_sort(keys: Any, values: Any, count: int, key_bits: int = 32) -> None:
+    """The fallback: read the keys back, sort them stably with numpy, upload keys and values.
+    Keys below ``2 ** key_bits``; up to 16 bits take one radix pass."""
     k = np.frombuffer(keys.read(size=4 * count), np.uint32)
     v = np.frombuffer(values.read(size=4 * count), np.uint32)
-    order = stable_order(k)
+    order = np.argsort(k.astype(np.uint16), kind="stable") if key_bits <= 16 else stable_order(k)
     keys.write(k[order].tobytes())
     values.write(v[order].tobytes())
 

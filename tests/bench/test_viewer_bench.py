@@ -1,4 +1,6 @@
-"""Viewer timings at the paper's scale (25,000 strands x 100 Gaussians = 2.5 M, 1920 x 1080).
+"""Viewer timings at the paper's scale (25,000 strands x 100 Gaussians = 2.5 M, 1920 x 1080): both
+rasterizers at full quality and three splat budgets, by stage, with PSNR against full quality and
+against the reference splatter (at 480 x 270).
 
 Reports figures (printed and in the benchmark's extra_info); never asserts times. Run with
 ``make bench`` or ``cgh bench-viewer --synthetic 25000``.
@@ -32,4 +34,6 @@ def test_viewer_paper_scale(benchmark):
     benchmark.extra_info.update({k: v for k, v in result.items() if v is not None})
     print("\n" + format_report(result))
     assert result["gaussians"] == PAPER_STRANDS * (PAPER_POINTS - 1)
+    assert {(r["rasterizer"], r["budget"] is None) for r in result["runs"]} == {
+        (ras, full) for ras in ("compute", "raster") for full in (True, False)}
     assert ctx.error == "GL_NO_ERROR"

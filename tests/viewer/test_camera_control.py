@@ -6,10 +6,14 @@ import numpy as np
 import pytest
 
 from viewer.camera_control import (
+    BUDGET_FRACTIONS,
     MAX_ELEVATION,
+    MIN_BUDGET_FRACTION,
     MIN_DISTANCE,
     ORBIT_DEG_PER_PIXEL,
+    TARGET_FRAME_S,
     ZOOM_PER_STEP,
+    BudgetControl,
     OrbitController,
     ViewerState,
 )
@@ -132,3 +136,54 @@ def test_held_keys_fly():
     moved = state.controller.target.copy()
     state.fly({"W", "S"}, 0.1)  # opposite keys cancel
     np.testing.assert_allclose(state.controller.target, moved)
+
+
+def test_key_b_cycles_budgets():
+    state = ViewerState(_ctl())
+    assert state.press("b") == "budget"
+    control = BudgetControl(1_000_000)
+    seen = [control.label()]
+    for _ in range(2 + len(BUDGET_FRACTIONS)):
+        control.cycle()
+        seen.append(control.label())
+    assert seen == ["adaptive", "full", "500,000", "250,000", "125,000", "62,500", "adaptive"]
+    assert [control.budget(moving) for moving in (False, True)] == [None, None]  # nothing learned yet
+    control.mode = 250_000
+    assert control.budget(False) == control.budget(True) == 250_000
+    control.mode = "full"
+    assert control.budget(True) is None
+
+
+def test_command_line_budget_joins_the_cycle():
+    control = BudgetControl(1_000_000, fixed=300_000)
+    assert control.label() == "300,000" and control.budget(False) == 300_000
+    assert control.modes() == ["adaptive", "full", 500_000, 300_000, 250_000, 125_000, 62_500]
+    control.cycle()
+    assert control.label() == "250,000"
+    assert BudgetControl(1000, fixed=5000).budget(False) == 1000  # at most every Gaussian
+
+
+def test_adaptive_budget_follows_frame_time_while_moving():
+    control = BudgetControl(2_500_000)
+    for _ in range(30):  # frames take 4 us per Gaussian drawn: the target needs 75,000 Gaussians
+        budget = control.budget(moving=True) or control.total
+        control.record(budget * 4e-6, budget, moving=True)
+    assert control.budget(moving=True) == pytest.approx(TARGET_FRAME_S / 4e-6, rel=0.01)
+    assert control.budget(moving=False) is None  # full quality at rest
+    control.record(100.0, 2_500_000, moving=False)  # a full frame at rest teaches nothing
+    assert control.budget(moving=True) == pytest.approx(TARGET_FRAME_S / 4e-6, rel=0.01)
+    for _ in range(30):  # a very slow machine: the floor
+        control.record(1000.0, control.budget(moving=True), moving=True)
+    assert control.budget(moving=True) == int(2_500_000 * MIN_BUDGET_FRACTION)
+    for _ in range(60):  # a fast one: every Gaussian
+        control.record(1e-3, control.budget(moving=True) or control.total, moving=True)
+    assert control.budget(moving=True) is None
+
+
+def test_window_title_says_what_is_drawn():
+    from viewer.app import window_title
+
+    title = window_title("cgh view hair.cgh", 2.5, "compute | 500,000 of 2,500,000 Gaussians (20 % of strands)",
+                         "adaptive", 3_400_000, "SH file, scale 1.00")
+    assert title == ("cgh view hair.cgh | 2.5 fps | compute | 500,000 of 2,500,000 Gaussians (20 % of strands) | "
+                     "budget adaptive | 3.40 MB | SH file, scale 1.00")

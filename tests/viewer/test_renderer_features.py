@@ -20,7 +20,7 @@ pytestmark = pytest.mark.gl
 @pytest.fixture
 def scene(gl_ctx):
     asset = example_asset(seed=4, strands=80, points=10, sh_degree=3, groups=3)
-    renderer = Renderer.from_asset(gl_ctx, asset)
+    renderer = Renderer.from_asset(gl_ctx, asset, rasterizer="raster")
     lo, hi = renderer.scene.bounds
     cam = Camera.orbit((lo + hi) / 2, 0.45, 30.0, 10.0, 64, 64)
     yield asset, renderer, cam

@@ -130,16 +130,75 @@ def test_view_without_display_suggests_render(cgh_file, capsys, monkeypatch):
 def test_bench_viewer_small(gl_ctx, cgh_file, tmp_path, capsys):
     out = tmp_path / "bench.json"
     rc, stdout, _ = _run(capsys, "bench-viewer", "--synthetic", 200, "--points", 11, "--width", 64,
-                         "--height", 48, "--frames", 2, "--json", out)
+                         "--height", 48, "--frames", 2, "--budget", 500, "1k", "--reference-size", 48, 36,
+                         "--json", out)
     assert rc == 0
-    assert "decode+upload" in stdout and "bare instanced quads" in stdout and "frame / bare" in stdout
+    assert "decode+upload" in stdout and "bare instanced quads" in stdout and "reference splatter at 48x36" in stdout
     figures = json.loads(out.read_text())
-    assert figures["gaussians"] == 2000
-    for key in ("read_s", "decode_upload_s", "preprocess_s", "sort_s", "gather_s", "draw_s", "bare_quads_s",
-                "bare_quads_records_s", "sort_gpu_s", "sort_cpu_s", "draw_instanced_quads_s"):
+    assert figures["gaussians"] == 2000 and figures["strands"] == 200
+    for key in ("read_s", "decode_upload_s", "bare_quads_s", "bare_quads_records_s", "sort_gpu_s", "sort_cpu_s",
+                "draw_instanced_quads_s", "reference_s"):
         assert figures[key] > 0
-    rc, stdout, _ = _run(capsys, "bench-viewer", cgh_file, "--width", 32, "--height", 32, "--frames", 1)
-    assert rc == 0 and "hair.cgh" in stdout and "MB" in stdout
+    runs = figures["runs"]
+    assert [(r["rasterizer"], r["budget"]) for r in runs] == [
+        (ras, b) for ras in ("compute", "raster") for b in (None, 500, 1000)]
+    for run in runs:
+        assert all(run[k] > 0 for k in ("preprocess_s", "sort_s", "gather_s", "draw_s", "frame_s"))
+        assert run["psnr_vs_reference_db"] > (35.0 if run["budget"] is None else 20.0)
+        assert (run["psnr_vs_full_db"] is None) == (run["budget"] is None)
+        assert run["gaussians_drawn"] == (2000 if run["budget"] is None else run["budget"])
+        assert (run["tile_entries"] is not None) == (run["rasterizer"] == "compute")
+    rc, stdout, _ = _run(capsys, "bench-viewer", cgh_file, "--width", 32, "--height", 32, "--frames", 1,
+                         "--rasterizer", "compute", "--no-reference")
+    assert rc == 0 and "hair.cgh" in stdout and "MB" in stdout and "no reference splatter" in stdout
+    assert "raster " not in stdout and "bare instanced" not in stdout
+
+
+def test_render_rasterizers_and_budget(gl_ctx, cgh_file, tmp_path, capsys):
+    images = {}
+    for name, args in (("compute", ["--rasterizer", "compute"]), ("raster", ["--rasterizer", "raster"]),
+                       ("budget", ["--budget", "270"])):  # 30 of the 60 strands, 9 Gaussians each
+        out = tmp_path / f"{name}.png"
+        rc, _, _ = _run(capsys, "render", cgh_file, "-o", out, "--width", 64, "--height", 48, *args)
+        assert rc == 0
+        images[name] = np.asarray(Image.open(out)).astype(int)
+    assert images["raster"].max() > 60
+    assert np.abs(images["compute"] - images["raster"]).max() <= 1  # the same image to 8 bits
+    assert np.abs(images["budget"] - images["raster"]).max() > 10  # fewer, thicker strands
+
+
+@pytest.mark.parametrize("command, args, message", [
+    ("render", ["-o", "x.png", "--budget", "abc"], "a budget is a number of Gaussians"),
+    ("render", ["-o", "x.png", "--budget", "0"], "at least 1 Gaussian"),
+    ("render", ["-o", "x.png", "--rasterizer", "gpu"], "invalid choice: 'gpu'"),
+    ("view", ["--budget=-5k"], "at least 1 Gaussian"),
+    ("view", ["--rasterizer", "tiles"], "invalid choice: 'tiles'"),
+    ("bench-viewer", ["--synthetic", "5", "--budget", "1x"], "a budget is a number of Gaussians"),
+    ("bench-viewer", ["--synthetic", "5", "--rasterizer", "fast"], "invalid choice: 'fast'"),
+    ("bench-viewer", ["--synthetic", "5", "--reference-size", "0", "10"], "--reference-size W must be between"),
+])
+def test_rasterizer_and_budget_errors(capsys, cgh_file, command, args, message):
+    argv = [command, *([] if command == "bench-viewer" else [cgh_file]), *args]
+    try:
+        rc = main([str(a) for a in argv])
+    except SystemExit as exc:  # argparse's usage errors
+        rc = exc.code
+    _, err = capsys.readouterr()
+    assert rc == 2 and message in err and "Traceback" not in err
+
+
+def test_compute_on_opengl_33_says_what_to_do(gl_ctx):
+    from types import SimpleNamespace
+
+    from viewer.context import GLContextError
+    from viewer.fallback import create_renderer
+
+    old = SimpleNamespace(version_code=330)
+    asset = example_asset(seed=1, strands=4, points=4)
+    with pytest.raises(GLContextError, match="--rasterizer compute needs OpenGL 4.3.*use --rasterizer raster"):
+        create_renderer(old, asset, rasterizer="compute")
+    with pytest.raises(GLContextError, match="--budget needs OpenGL 4.3"):
+        create_renderer(old, asset, budget=1000)
 
 
 @pytest.mark.parametrize("args, message", [

@@ -69,3 +69,12 @@ def test_window_toggles_run(xvfb_display, tmp_path):
     assert done.returncode == 0, done.stderr
     assert "Traceback" not in done.stderr
     assert len(list(tmp_path.glob("cgh_view_*.png"))) == 1
+
+
+@pytest.mark.parametrize("args", [["--rasterizer", "compute", "--press", "BBB"], ["--budget", "100", "--press", "B"]])
+def test_window_budgets_and_rasterizers_run(xvfb_display, tmp_path, args):
+    path = tmp_path / "hair.cgh"
+    cghair_format.write(example_asset(seed=9, strands=30, points=8, sh_degree=2), path)
+    done = _view(xvfb_display, path, "--width", 64, "--height", 48, "--frames", 3, *args, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert "Traceback" not in done.stderr

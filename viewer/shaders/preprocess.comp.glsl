@@ -2,7 +2,10 @@
 // Per frame, per Gaussian (rendering contract steps 1-4): camera-space depth, EWA 2D covariance
 // with 0.3 px^2 dilation, its inverse (conic), the 3-sigma support radius, colour from SH in the
 // direction camera -> mean, and the depth sort key (culled Gaussians get the largest key).
-// Dispatched once per SH chunk: Gaussians [u_base, u_base + u_count).
+// Dispatched once per SH chunk: Gaussians [u_base, u_base + u_count), each written to slot g; or,
+// with level of detail (viewer/lod.py), the first u_count Gaussians of the chunk's strands in
+// priority order (lod_strands[u_list_base...]), written to slots u_out_base + i, with opacity and
+// thickness compensated for the strands left out.
 layout(local_size_x = 256) in;
 #include "common.glsl"
 
@@ -19,6 +22,10 @@ layout(std430, binding = 9) readonly buffer StrandCard { uint strand_card[]; }; 
 layout(std430, binding = 10) readonly buffer CardGroup { uint card_group[]; };
 layout(std430, binding = 11) writeonly buffer Axes { vec4 axes[]; };  // quad half-axes, see below
 layout(std430, binding = 12) buffer Visible { uint visible; };  // number of Gaussians not culled
+layout(std430, binding = 13) readonly buffer LodStrands { uint lod_strands[]; };  // per chunk, by priority
+// The compute rasterizer's splat records, 4 texels from texel 4 * slot (viewer/tiles.py): llvmpipe
+// fetches texels as vectors, but loads storage and shared memory one invocation at a time.
+layout(rgba32f, binding = 1) uniform writeonly image2D u_records;
 
 uniform uint u_base;
 uniform uint u_count;
@@ -32,6 +39,12 @@ uniform int u_degree;        // SH degree to evaluate, <= stored degree
 uniform float u_scale;       // splat scale multiplier (1 = as stored)
 uniform int u_color_mode;    // 0: SH colour, 1: colour by card group
 uniform uint u_segments;     // Gaussians per strand, P - 1
+uniform bool u_indexed;      // level of detail: Gaussians through lod_strands, compacted slots
+uniform uint u_list_base;    // this chunk's first entry in lod_strands
+uniform uint u_out_base;     // this chunk's first output slot
+uniform float u_lod_opacity; // drawn strands' opacity o -> 1 - (1 - o)^u_lod_opacity (1: as stored)
+uniform float u_lod_width;   // drawn strands' thickness (scales x, y) multiplier (1: as stored)
+uniform bool u_write_records; // also write u_records (compute rasterizer)
 
 const float NEAR_PLANE = 0.01;
 const float DILATION = 0.3;
@@ -93,18 +106,23 @@ mat3 quat_to_mat(vec4 q) {
 void main() {
     uint local = global_index();
     if (local >= u_count) return;
-    uint g = u_base + local;
+    uint g = u_base + local, slot = g;
+    if (u_indexed) {
+        g = lod_strands[u_list_base + local / u_segments] * u_segments + local % u_segments;
+        slot = u_out_base + local;
+    }
     vec4 mo = means[g];
+    if (u_lod_opacity != 1.0) mo.w = 1.0 - pow(max(1.0 - mo.w, 0.0), u_lod_opacity);
     vec3 t = u_rot * mo.xyz + u_trans;
-    values[g] = g;
+    values[slot] = slot;
     if (t.z <= NEAR_PLANE) {
-        keys[g] = 0xFFFFFFFFu;
-        center[g] = vec4(0.0);
+        keys[slot] = 0xFFFFFFFFu;
+        center[slot] = vec4(0.0);
         return;
     }
     float fx = u_intrinsics.x, fy = u_intrinsics.y;
-    mat3 m = quat_to_mat(rotations[g]) * mat3(
-        scales[g].x * u_scale, 0.0, 0.0, 0.0, scales[g].y * u_scale, 0.0, 0.0, 0.0, scales[g].z * u_scale);
+    vec3 sc = scales[g].xyz * u_scale * vec3(u_lod_width, u_lod_width, 1.0);
+    mat3 m = quat_to_mat(rotations[g]) * mat3(sc.x, 0.0, 0.0, 0.0, sc.y, 0.0, 0.0, 0.0, sc.z);
     // J as a 3x2 (3 columns, 2 rows) matrix
     mat3x2 jac = mat3x2(fx / t.z, 0.0, 0.0, fy / t.z, -fx * t.x / (t.z * t.z), -fy * t.y / (t.z * t.z));
     mat3x2 a = jac * u_rot * m;
@@ -118,14 +136,14 @@ void main() {
     bool offscreen = m2.x + radius < 0.0 || m2.x - radius > u_viewport.x
         || m2.y + radius < 0.0 || m2.y - radius > u_viewport.y;
     if (offscreen || !(det > 0.0) || mo.w < ALPHA_MIN) {
-        keys[g] = 0xFFFFFFFFu;
-        center[g] = vec4(0.0);
+        keys[slot] = 0xFFFFFFFFu;
+        center[slot] = vec4(0.0);
         return;
     }
-    keys[g] = floatBitsToUint(t.z);  // positive floats order like their bit patterns
+    keys[slot] = floatBitsToUint(t.z);  // positive floats order like their bit patterns
     atomicAdd(visible, 1u);
-    center[g] = vec4(m2, t.z, radius);
-    conic[g] = vec4(cc / det, -cb / det, ca / det, mo.w);
+    center[slot] = vec4(m2, t.z, radius);
+    conic[slot] = vec4(cc / det, -cb / det, ca / det, mo.w);
     // The primitive's half-axes (a triangle circumscribes the unit disc in these units; a quad
     // is the unit square): alpha >= 1/255 only inside the ellipse q <= 2 ln(255 o), whose
     // half-axes are sqrt(q lambda) along the eigenvectors; thin hair splats cover far fewer
@@ -139,10 +157,21 @@ void main() {
     v1 = dot(v1, v1) > 0.0 ? normalize(v1) : vec2(1.0, 0.0);
     float e1 = sqrt(q * lam1) * 1.0001 + 0.01, e2 = sqrt(q * lam2) * 1.0001 + 0.01;
     float disc = 1.41421357 * (radius + 0.5);
-    if (e1 * e2 < disc * disc) axes[g] = vec4(v1 * e1, vec2(-v1.y, v1.x) * e2);
-    else axes[g] = vec4(disc, 0.0, 0.0, disc);
+    vec4 ax = e1 * e2 < disc * disc ? vec4(v1 * e1, vec2(-v1.y, v1.x) * e2) : vec4(disc, 0.0, 0.0, disc);
+    axes[slot] = ax;
     vec3 rgb;
     if (u_color_mode == 1) rgb = group_color(card_group[strand_card[g / u_segments]]);
-    else rgb = eval_sh(local * u_coeffs * 3u, normalize(mo.xyz - u_cam_center));
-    color[g] = vec4(rgb, 1.0);
+    else rgb = eval_sh((g - u_base) * u_coeffs * 3u, normalize(mo.xyz - u_cam_center));
+    color[slot] = vec4(rgb, 1.0);
+    if (u_write_records) {
+        // (mx, my, radius, opacity), conic, the half-axes over their squared lengths (|dot(d, .)|
+        // <= 1 inside the rectangle they span), colour
+        int k = int(4u * slot);
+        int w = imageSize(u_records).x;
+        imageStore(u_records, ivec2(k % w, k / w), vec4(m2, radius, mo.w));
+        imageStore(u_records, ivec2((k + 1) % w, (k + 1) / w), vec4(cc / det, -cb / det, ca / det, 0.0));
+        imageStore(u_records, ivec2((k + 2) % w, (k + 2) / w),
+                   vec4(ax.xy / dot(ax.xy, ax.xy), ax.zw / dot(ax.zw, ax.zw)));
+        imageStore(u_records, ivec2((k + 3) % w, (k + 3) / w), vec4(rgb, 0.0));
+    }
 }

@@ -1,0 +1,86 @@
+"""The window loop of ``cgh view`` (viewer/app.py) on the headless context, with glfw replaced by a
+stand-in that records titles: the budget key, the title, and redrawing only what changed. The
+real window runs in tests/viewer/test_viewer_window.py where Xvfb exists."""
+
+from __future__ import annotations
+
+import sys
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from cghair_format.examples import example_asset
+
+pytestmark = pytest.mark.gl
+
+
+class _Context:
+    """The headless context with a texture framebuffer standing in for the window's."""
+
+    def __init__(self, ctx, width, height):
+        self._ctx = ctx
+        self.screen = ctx.framebuffer([ctx.texture((width, height), 4)])
+
+    def __getattr__(self, name):
+        return getattr(self._ctx, name)
+
+
+def _fake_glfw(width, height):
+    titles: list[str] = []
+    names = ("KEY_ESCAPE", "KEY_F12", "KEY_EQUAL", "KEY_MINUS", "KEY_KP_ADD", "KEY_KP_SUBTRACT",
+             "KEY_LEFT_BRACKET", "KEY_RIGHT_BRACKET", "KEY_0", "KEY_9", "KEY_A", "KEY_Z", "MOUSE_BUTTON_RIGHT",
+             "MOUSE_BUTTON_MIDDLE", "MOD_SHIFT", "PRESS", "RELEASE")
+    glfw = SimpleNamespace(**{n: i for i, n in enumerate(names)}, titles=titles)
+    for name in ("set_key_callback", "set_mouse_button_callback", "set_cursor_pos_callback", "set_scroll_callback",
+                 "poll_events", "wait_events_timeout", "swap_buffers", "destroy_window", "terminate",
+                 "set_window_should_close"):
+        setattr(glfw, name, lambda *a: None)
+    glfw.window_should_close = lambda w: False
+    glfw.get_framebuffer_size = lambda w: (width, height)
+    glfw.set_window_title = lambda w, title: titles.append(title)
+    return glfw
+
+
+def test_budget_key_and_title(gl_ctx, monkeypatch, capsys):
+    from viewer import app
+
+    glfw = _fake_glfw(64, 48)
+    monkeypatch.setitem(sys.modules, "glfw", glfw)
+    monkeypatch.setattr(app, "create_window", lambda w, h, t: ("window", _Context(gl_ctx, w, h)))
+    asset = example_asset(seed=9, strands=40, points=6, sh_degree=1)
+    draws = []
+    real_create = app.create_renderer
+
+    def counting_renderer(*args, **kwargs):
+        renderer = real_create(*args, **kwargs)
+        original = renderer.preprocess
+        renderer.preprocess = lambda *a, **k: (draws.append(renderer.budget), original(*a, **k))
+        return renderer
+
+    monkeypatch.setattr(app, "create_renderer", counting_renderer)
+    frames = app.run_viewer(asset, title="cgh view t.cgh", file_size=1234, width=64, height=48,
+                            rasterizer="compute", max_frames=4, press=("B", "B"))
+    assert frames == 4
+    assert "B: splat budget" in capsys.readouterr().out
+    # B twice: adaptive -> full -> 1/2 of the 200 Gaussians; the camera rests, so one frame is drawn
+    # and the others only presented
+    assert draws == [100]
+    assert glfw.titles[0].startswith("cgh view t.cgh | ")
+    assert "| compute | 100 of 200 Gaussians (50 % of strands) | budget 100 | 0.00 MB |" in glfw.titles[0]
+    assert len(set(t.split(" | ", 2)[2] for t in glfw.titles)) == 1
+
+
+def test_fixed_budget_and_raster(gl_ctx, monkeypatch):
+    from viewer import app
+
+    glfw = _fake_glfw(48, 40)
+    monkeypatch.setitem(sys.modules, "glfw", glfw)
+    ctx = _Context(gl_ctx, 48, 40)
+    monkeypatch.setattr(app, "create_window", lambda w, h, t: ("window", ctx))
+    asset = example_asset(seed=9, strands=40, points=6, sh_degree=1)
+    app.run_viewer(asset, title="v", file_size=0, width=48, height=40, rasterizer="raster", budget=60,
+                   max_frames=2)
+    assert "| raster | 60 of 200 Gaussians (30 % of strands) | budget 60 |" in glfw.titles[-1]
+    image = np.frombuffer(ctx.screen.read(components=3), np.uint8)
+    assert image.max() > 40  # hair on the stand-in window
