@@ -14,6 +14,7 @@ takes 256 MB above the resident memory before it (the peak, ``VmHWM``, reset for
 from __future__ import annotations
 
 import inspect
+import resource
 import struct
 import sys
 import tempfile
@@ -133,7 +134,10 @@ def main(argv: list[str]) -> None:
         for i, seed in enumerate(seeds()):
             (corpus / f"seed{i}.cgh").write_bytes(seed)
     if not any(a.startswith("-rss_limit_mb") for a in args):  # a guard for the process; inputs: test_one_input
-        args.append(f"-rss_limit_mb={int(_rss_mb('VmRSS:')) + 4 * PEAK_MB}")
+        # libFuzzer compares the limit with getrusage's peak, which Linux carries over an exec from the
+        # parent (a large pytest process): start from that peak, not from this process's own memory
+        start = max(_rss_mb("VmRSS:"), resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
+        args.append(f"-rss_limit_mb={int(start) + 4 * PEAK_MB}")
     if not any(a.startswith("-timeout") for a in args):
         args.append("-timeout=1")
     instrument()
