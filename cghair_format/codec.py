@@ -82,7 +82,7 @@ REQUIRED_CHUNKS = ("META", "CARD", "STRD", "OPAC", "LOGT", "CBKS", "MLPW")
 OPTIONAL_CHUNKS = ("SIDS", "ROOT", "SCOL", "XMET")
 FAMILY_CHUNK = "CHLD"  # required where META quant.children > 0 (spec 4.5), absent otherwise
 MIN_CHILD_SHARE = 0.1  # interpolated strands are stored where at least this share of the strands are (below
-# it they cost more than they save: harolongo's own strands, 287 children of 7,905, +0.3 %)
+# it the guides' chains lose more than the few children save; COMPRESSION.md, "Interpolated strands")
 KNOWN_CHUNKS = frozenset(REQUIRED_CHUNKS + OPTIONAL_CHUNKS + (FAMILY_CHUNK,))
 LIMITS = {"strands": 1 << 24, "points": 4096, "cards": 1 << 20, "segments": 1024, "groups": 1 << 16,
           "k": 256, "latent_dim": 4096, "mlp_layers": 16, "mlp_width": 1 << 20, "meta_bytes": 1 << 20}
@@ -95,8 +95,8 @@ STEP_START = 1.0  # first step, as a fraction of the position tolerance
 TIGHTEN_TARGET = 0.97  # a retry aims the measured error at this fraction of the tolerance ...
 GROW_BELOW = 0.9  # ... and a first step whose error is below this fraction is retried larger, once
 NUDGE, NUDGE_RARE = 0.99, 100_000  # where one point, or one in NUDGE_RARE, misses the tolerance, the step is
-# first made 1 % smaller instead: the lattices align anew, and isolated misses seldom recur (harolongo with
-# base order 2 for u: one point of 2.5 M at 1.08 tol; 0.99 q passes, 0.90 q costs 1.1 % of the file)
+# first made 1 % smaller instead: the lattices align anew, and isolated misses seldom recur, while shrinking
+# the step with the error would cost the whole file for one point (COMPRESSION.md, "The writer's per-file choices")
 DEAD_ZONE = 0.97  # a refinement residual stays zero where the prediction is this close to the input (x tol)
 BASE_SAMPLE_CARDS = 100  # the base stride and guide are chosen on this many cards
 
@@ -174,7 +174,7 @@ def _encode(asset: HairAsset, prof: Profile, keep_order: bool) -> tuple[bytes, E
     if kids is not None and np.count_nonzero(kids.child) < MIN_CHILD_SHARE * len(points):
         kids = None  # a few children cost their guides more than they save
     arranged = _arrange(input_asset, input_points, kids) if reorder else (asset, points, None, None)
-    # measured, the largest point error is about 1.0 step (half a step on each of u, v, delta): start
+    # the largest point error is typically about 1.0 step (half a step on each of u, v, delta): start
     # where it usually meets the bound at once, then tighten or grow
     step = None if prof.lossless else STEP_START * tol
     passed = None  # (step, error, quantized geometry, arrangement) of the largest step that met the bound so far
@@ -227,7 +227,8 @@ def decode(data: bytes, limits: ReadLimits | None = None) -> HairAsset:
 def read_with_gaussians(source: str | os.PathLike | bytes | bytearray | memoryview | BinaryIO,
                         limits: ReadLimits | None = None) -> tuple[HairAsset, Gaussians]:
     """``read(source)`` and its ``decode_gaussians``, in one go and quicker: while a quantized file's
-    strands decode, the kernel faults in the memory for their SH (475 MB at the paper's scale)."""
+    strands decode, the kernel faults in the memory for their SH (hundreds of MB for a large asset;
+    COMPRESSION.md, "Decode straight to Gaussians")."""
     asset, sh_out = _decode(_read_bytes(source), sh_ahead=True, limits=limits)
     return asset, decode_gaussians(asset, sh_out)
 
@@ -790,15 +791,14 @@ def _prediction(q: dict) -> Prediction:
 
 def _choose_base_samples(asset: HairAsset, q: dict, zone: DeadZone, strides: tuple[int, ...]) -> tuple[int, int]:
     """The base stride (spec 4.1, 4.3) of ``strides`` (the profile's: 16 or 8) and the base samples'
-    guide (0: none, 1: the card neighbour's steps, 2: those scaled as the strands' previous steps
-    compare): of both guides at each stride and none at the first, whichever codes the strands of a
-    sample of cards smallest (4-point interpolation, the dead zone trying the neighbour's residual; on
-    the input's cards, before they are quantized at the stride chosen). Wavy strands want base samples
-    closer together (harolongo at the paper's scale: 8, 1.8 % off the whole file), straighter ones
-    fewer (straight.hair: 16; 8 would cost 2.3 %), and straight strands of unequal lengths the scaled
-    guide (straight.hair: 1.6 % off; harolongo, whose waves set its steps' lengths, 1). Without the
-    neighbour's residual in the dead zone the sample misranks straight.hair's strides (by 0.2 %, for a
-    file 2.3 % larger); with it the margins are 2-3 % either way."""
+    guide (0: none, 2: the card neighbour's steps scaled as the strands' previous steps compare, 3: the
+    steps of the most alike earlier strand): of both guides at each stride and none at the first,
+    whichever codes the strands of a sample of cards smallest (4-point interpolation, the dead zone
+    trying the neighbour's residual; on the input's cards, before they are quantized at the stride
+    chosen). Wavy strands want base samples closer together, straighter ones fewer, and straight
+    strands of unequal lengths the scaled guide. The sample is coded with the neighbour's residual in
+    the dead zone, as the file is: without it the sample can rank the strides the wrong way round
+    (COMPRESSION.md, "The writer's per-file choices")."""
     cmap = CardMap(asset.cards)
     scale = _uvd_scale(*card_scales(asset.cards, q["step"]), asset.strand_card, q["step"])
     y = asset.uvd * scale[:, None, :]
@@ -850,8 +850,7 @@ def _choose_neighbour_zone(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray
                            plan: Prediction, zone: DeadZone) -> bool:
     """Whether the dead zone first tries the card neighbour's residual: whichever codes the strands of
     a sample of cards smaller. It pays where a card's strands are much alike (strands densified from
-    fewer, 10-18 % off STRD at the paper's scale) and costs a little where they are not (the Ratboy
-    model: 1.5 %)."""
+    fewer) and costs a little where they are not (COMPRESSION.md, "Dead zone")."""
     tried = [True, False]
     sizes = map_threads(lambda neighbour: sum(map(_estimate, _sample_residuals(
         cmap, strand_card, y, scale, plan, zone._replace(neighbour=neighbour), 64))), tried)
@@ -860,16 +859,14 @@ def _choose_neighbour_zone(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray
 
 def _choose_level_taps(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.ndarray,
                        plan: Prediction, zone: DeadZone) -> tuple[int, ...]:
-    """Per refinement level, the interpolation width (2, 4 or 6; the format allows 8 too, which never
-    beat 6 on harolongo or straight.hair) whose residuals the estimate finds smallest on the strands
-    of a sample of cards, each width tried on every level at once; kept if the strand coder then codes
-    that sample smaller than with 4 everywhere. Wavy strands want wide
-    interpolation at the middle levels (harolongo at the paper's scale: 2, 6, 6, 6, 4 % off the whole
-    file); the coarsest level, whose neighbours lie B points apart, is often best linear. The widths
+    """Per refinement level, the interpolation width (2, 4 or 6; the format allows 8 too, which did
+    not beat 6 on real hair) whose residuals the estimate finds smallest on the strands of a sample
+    of cards, each width tried on every level at once; kept if the strand coder then codes that
+    sample smaller than with 4 everywhere. Wavy strands want wide interpolation at the middle levels;
+    the coarsest level, whose neighbours lie B points apart, is often best linear. The widths
     interact (the dead zone leaves a coarser level's reconstruction on its prediction, from which
     the finer levels predict) and the estimate ignores the coder's contexts, so close calls can come
-    out the other way (Ratboy: 2 at h = 1, 0.5 % smaller estimated, 0.08 % larger coded): hence the
-    check."""
+    out the other way: hence the check (COMPRESSION.md, "The writer's per-file choices")."""
     levels = len(level_plan(y.shape[1], plan.base_stride)[1])
     widths = (2, 4, 6)
     trial = dict(zip(widths, map_threads(lambda t: _sample_residuals(
@@ -886,8 +883,8 @@ def _choose_level_guide(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, s
     """Whether each base segment's refinement residuals are stored as differences from those of the
     most alike strand before it on the card (spec 4.3, ``level_guide``) rather than the card
     neighbour's: whichever codes the strands of a sample of cards smaller. Wavy strands densified from
-    fewer pay (harolongo at the paper's scale: 1.7 % off the whole file; straight.hair 0.5 %;
-    harolongo's own strands 0.3 %); the Ratboy model's would cost 1.3 %."""
+    fewer gain most, real strands a little, and some models lose (COMPRESSION.md, "The most alike
+    strand")."""
     unguided, guided = map_threads(lambda g: coded_bytes(_sample_residuals(
         cmap, strand_card, y, scale, replace(plan, level_guide=g), zone, BASE_SAMPLE_CARDS)), [False, True])
     return guided < unguided
@@ -897,8 +894,8 @@ def _sample_residuals(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, sca
                       zone: DeadZone, cards: int = 200) -> list[np.ndarray]:
     """The residual arrays as stored (base, then each level; after neighbour prediction) of the strands
     of ``cards`` evenly spaced cards (whole cards: neighbour prediction works within them), coded with
-    ``plan`` and ``zone``. 64 cards tell the neighbour zone's choice (10-18 % either way) but not
-    interpolation widths that differ by 1-3 %, as on straight.hair: those take 200."""
+    ``plan`` and ``zone``. 64 cards tell the neighbour zone's choice, whose margins are wide, but not
+    interpolation widths whose sizes differ by a few per cent: those take 200."""
     ids = np.unique(strand_card)
     picked = ids[np.linspace(0, len(ids) - 1, min(cards, len(ids))).astype(np.int64)]
     pick = np.flatnonzero(np.isin(strand_card, picked))

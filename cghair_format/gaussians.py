@@ -92,9 +92,9 @@ def strand_latents(appearance: Appearance, strand_group: np.ndarray) -> np.ndarr
 
 def run_mlp(appearance: Appearance, latents: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """The global MLP applied to latents ``[S, D]``, in float32; ``[S, out]``. Each layer is one matrix
-    product over all strands, its bias included (a column of ones on the input: the paper-scale
-    model's last layer writes its 475 MB output once, in :func:`.memory.empty`); BLAS runs it on every
-    core, measured steadier than our threads calling BLAS on blocks. A ReLU then runs in place, by
+    product over all strands, its bias included (a column of ones on the input: a large model's last
+    layer writes its output of hundreds of MB once, in :func:`.memory.empty`); BLAS runs it on every
+    core, which runs steadier than our threads calling BLAS on blocks. A ReLU then runs in place, by
     blocks of strands on every core. ``out``: the last layer's output ``[S, out]``, where made already."""
     h = latents.astype(np.float32)
     for i, layer in enumerate(appearance.mlp):

@@ -24,8 +24,8 @@ GAUSSIAN_FLOATS = 3 + 4 + 3 + 1  # mean, rotation, scale, opacity; plus 3 per SH
 @dataclass(frozen=True)
 class ReadLimits:
     """The largest file a reader decodes without being asked to (``cgh --max-gaussians N
-    --max-decoded-mb M VERB ...``, or ``read(path, limits=ReadLimits(...))``). The defaults take 6.7 times
-    the paper's scale (2.5 M Gaussians, about 0.65 GB decoded with their SH)."""
+    --max-decoded-mb M VERB ...``, or ``read(path, limits=ReadLimits(...))``). The defaults leave room
+    for several times the paper's largest asset (docs/format.md, "Profiles and storage")."""
 
     max_gaussians: int = 1 << 24
     max_decoded_bytes: int = 1 << 31

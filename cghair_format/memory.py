@@ -1,20 +1,19 @@
 """Large output arrays, mapped and faulted in by the kernel ahead of the writes.
 
-A fresh array of hundreds of MB costs more to fault in than to fill: decoding the paper-scale asset
-to Gaussians writes 475 MB of SH, a matrix product of about 0.1 s. numpy's own allocation asks for
-transparent huge pages, which are quick once the process has freed some, but the first such array
-of a process (and, now and then, a later one) stalls while the kernel finds them: 1.05 s, then
-0.05-0.22 s, for 475 MB on this project's 2-core machine (COMPRESSION.md, "Decode time, earlier
-runs"). An anonymous mapping that the kernel populates ahead takes 0.13-0.20 s every time, page by
-page faulting 0.27-0.33 s.
+A fresh array of hundreds of MB costs more to fault in than to fill: decoding a large asset to
+Gaussians writes its SH with one matrix product, which is quicker than faulting that memory in.
+numpy's own allocation asks for transparent huge pages, which are quick once the process has freed
+some, but the first such array of a process (and, now and then, a later one) stalls while the kernel
+finds them. An anonymous mapping that the kernel populates ahead costs the same every time, and less
+than faulting it in page by page (COMPRESSION.md, "Decode time, earlier runs").
 
 On Linux 5.14 and later the kernel populates it a chunk at a time (``madvise(MADV_POPULATE_WRITE)``,
 called through ctypes, which lets go of the GIL), so that other threads go on meanwhile:
 :func:`.codec.read_with_gaussians` faults the SH in while its strands decode on another thread.
 ``mmap.madvise`` keeps the GIL (so does the ``mmap`` call itself in some Python versions), and one
 populate of the whole mapping (``MAP_POPULATE``) holds the process's memory-map lock throughout, so
-that a thread that maps memory meanwhile waits; either cost that decode 0.06-0.10 s a round
-(COMPRESSION.md, "Decode straight to Gaussians"). Older kernels get ``MAP_POPULATE``; other systems a
+that a thread that maps memory meanwhile waits; either slows that decode down (COMPRESSION.md,
+"Decode straight to Gaussians"). Older kernels get ``MAP_POPULATE``; other systems a
 plain mapping.
 """
 
@@ -101,11 +100,10 @@ def without_huge_pages() -> Iterator[None]:
 
     numpy asks the kernel for transparent huge pages for its arrays of 4 MB and more. Where the kernel
     compacts memory to find them (``defrag=madvise``, a common default), a process's first fresh GB
-    stalls: harolongo's first high encode in a process took 4.59-5.50 s with them and 4.22-4.72 s
-    without; a second one, with the pages the first freed at hand, 3.74-4.55 s and 4.28-4.57 s (seven
-    fresh processes each; COMPRESSION.md, "Encode time"). The encoder does without, for the first
-    encode (the command line's only one) and the slowest; a decode keeps them (0.67-0.69 s a round
-    against 0.70-0.74 s without)."""
+    stalls, so a process's first encode is quicker without them and only a later one, with the pages
+    the first freed at hand, gains from them. The encoder does without, for the first encode (the
+    command line's only one) and the slowest; a decode keeps them, as it is a little quicker with
+    them (COMPRESSION.md, "Encode time" and "Decode straight to Gaussians")."""
     global _huge_pages_users, _huge_pages_were
     if _set_madvise_hugepage is None:
         yield

@@ -28,9 +28,8 @@ PREV_CLASSES, OTHER_CLASSES = 8, 4
 CONTEXTS = PREV_CLASSES * OTHER_CLASSES
 # Classes of the card neighbour's token (META quant.neighbour_classes, 1..8; 1: no such context; class 0
 # is for strands with no card neighbour before them). The writer takes 5 or 1, whichever its cost
-# estimate finds smaller: 5 takes 4.1 % off straight.hair's and 2.4 % off harolongo's strand points at
-# the paper's scale (with 12-bit tables 3 classes paid best, and less); on small files the larger
-# tables cost more.
+# estimate finds smaller: 5 pays on large files of many alike strands; on small files the larger tables
+# cost more than the context saves (COMPRESSION.md, "Neighbour classes").
 NEIGHBOUR_CLASSES = 5
 MAX_NEIGHBOUR_CLASSES = 8
 

@@ -67,8 +67,8 @@ _IDLE_REFS = _idle_refs()
 
 
 class _Pool:
-    """Reused work and gradient arrays: writing a fresh 480 MB array (the SH gradient at paper scale)
-    costs more in page faults than the whole rasterization. An array is handed out again only once
+    """Reused work and gradient arrays: writing a fresh array of hundreds of MB (the SH gradient of a
+    large asset) costs more in page faults than the whole rasterization. An array is handed out again only once
     nothing but the pool refers to it (a torch tensor made with ``torch.from_numpy`` holds a
     reference to its array until the tensor's storage dies), so reuse never aliases live data."""
 
@@ -96,7 +96,7 @@ _POOL = _Pool()
 
 
 def release_memory() -> None:
-    """Drop the reused arrays (at paper scale about 1 GB per view kept alive at once)."""
+    """Drop the reused arrays (for a large asset, about a GB per view kept alive at once)."""
     _POOL.free.clear()
 
 

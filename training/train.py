@@ -173,7 +173,7 @@ def choose_export(model: HairModel, base: HairAsset, views: list[View], config: 
 def heap_kept() -> Iterator[None]:
     """Freed memory stays in the process heap, for the next iteration's tensors of the same sizes.
 
-    glibc serves each large tensor (a paper-scale iteration makes several of 475 MB) with a fresh
+    glibc serves each large tensor (a large asset's iteration makes several of hundreds of MB) with a fresh
     mmap and unmaps it on free, so every iteration page-faults and zeroes them anew. Here large
     blocks come from the heap and the heap is not trimmed while training; afterwards glibc's
     defaults come back and the heap is trimmed. A no-op where the C library is not glibc.
@@ -238,7 +238,8 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
     check_strands_in_views(decode_points(base), ds.train)  # strands in another frame: refuse now, not after hours
     torch.manual_seed(config.seed)
     model = HairModel(base, config, mean_hair_colour(ds.train)).to(device)
-    # fused: one kernel per parameter for the whole update (5-10 x faster than the loop on the CPU)
+    # fused: one kernel per parameter for the whole update, several times faster than the loop on the
+    # CPU (training/ABLATION.md, "Around the rasterizer")
     optimizer = torch.optim.Adam(model.param_groups(config, _scene_scale(base)), eps=1e-15, fused=True)
     base_lr = {g["name"]: g["lr"] for g in optimizer.param_groups}
     history: list[dict] = []

@@ -8,8 +8,8 @@ is timed by stage: preprocess (projection, SH colour, keys), sort, then
 gather (raster: draw records in sorted order; compute: tile binning) and draw (raster: one pulled
 triangle per splat; compute: per-tile blending). Quality: the PSNR (RGB) of each image against
 the same rasterizer's full-quality image, and against the reference splatter's full-quality render
-of the same view at ``reference_size`` (the torch reference takes minutes at the paper's scale
-and 1080p on a CPU, so it is compared at a smaller size, the viewer rendering that size too).
+of the same view at ``reference_size`` (the torch reference takes minutes for millions of Gaussians
+at 1080p on a CPU, so it is compared at a smaller size, the viewer rendering that size too).
 The raster path's baselines: the same splats as instanced quads, a bare instanced-quad draw with
 a constant-colour fragment shader straight from the preprocess buffers, and one from the records.
 """

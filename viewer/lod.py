@@ -23,9 +23,9 @@ import numpy as np
 
 from .decode import GpuScene
 
-# Share of the compensation taken by the thickness, the rest by the opacity. Measured on the
-# synthetic paper-scale hair (5,000 strands, 480 x 270, PSNR against the full render): 20 % of the
-# strands 34.9 / 36.0 / 37.5 / 39.2 dB for 0 / 0.5 / 0.75 / 1, 10 % 30.5 / 32.2 / 34.8 / 33.8 dB.
+# Share of the compensation taken by the thickness, the rest by the opacity: the share whose reduced
+# renders came closest to the full one at a tenth of the strands, and close at a fifth
+# (docs/viewer.md, "Level-of-detail compensation").
 WIDTH_EXPONENT = 0.75
 
 

@@ -92,7 +92,7 @@ class Renderer:
     ``sort``: ``"gpu"``, ``"cpu"`` or ``"auto"``; ``rasterizer``: ``"compute"`` (tiles, early
     termination), ``"raster"`` or ``"auto"`` (compute, unless the scene exceeds its record image);
     ``primitive`` (raster path): ``"triangles"`` (one triangle per splat, fewer primitives: faster
-    on llvmpipe at the paper's scale) or ``"quads"`` (instanced). ``budget``: at most this many
+    on llvmpipe with many splats) or ``"quads"`` (instanced). ``budget``: at most this many
     Gaussians per frame (level of detail), ``None`` for all; it may change between frames.
     """
 

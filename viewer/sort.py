@@ -75,7 +75,7 @@ def cpu_sort(keys: Any, values: Any, count: int, key_bits: int = 32) -> None:
 
 def stable_order(keys: np.ndarray) -> np.ndarray:
     """``numpy.argsort(keys, kind="stable")`` for uint32 keys, as two 16-bit radix passes (numpy
-    sorts 16-bit keys by radix: about twice as fast as one 32-bit stable argsort)."""
+    sorts 16-bit keys by radix: faster than one 32-bit stable argsort; docs/viewer.md)."""
     keys = np.asarray(keys, np.uint32)
     low = np.argsort((keys & 0xFFFF).astype(np.uint16), kind="stable")
     return low[np.argsort((keys[low] >> 16).astype(np.uint16), kind="stable")]

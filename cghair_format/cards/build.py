@@ -22,8 +22,8 @@ from .normals import card_half_widths, card_normals
 from .textures import card_groups, strand_textures
 
 # One BLAS/OpenMP thread: k-means results then do not depend on the thread count (summation order),
-# and on a shared, loaded 2-core machine scikit-learn's 2-thread k-means spins: measured 4 s with
-# one thread against 50-90 s with two for 25,000 strands and 800 clusters.
+# and on a shared, loaded machine scikit-learn's multi-threaded k-means spins, many times slower than
+# one thread (docs/format.md, "Card builder").
 BUILD_THREADS = 1
 DEFAULT_SEGMENTS = 32  # M: 33 spine points per card; with P = 100 about 3 strand points per segment
 STAGES = ("resample", "cluster", "guide", "normals", "uv", "textures", "appearance", "verify")

@@ -1,7 +1,7 @@
 #version 430
 // After sorting: gather each visible splat's draw data into a record in draw order, so the
-// vertex shader reads memory sequentially (random reads cost llvmpipe's vertex stage a third of
-// its time). Record of sorted slot i, 4 vec4s:
+// vertex shader reads memory sequentially (random reads slow llvmpipe's vertex stage markedly;
+// docs/viewer.md). Record of sorted slot i, 4 vec4s:
 //   [0] mean2d.xy, 1 / radius, opacity   [1] half-axes a1.xy, a2.xy (pixels)
 //   [2] conic a, b, c (Sigma2^-1 = [[a, b], [b, c]]), 0   [3] rgb, 0
 // Dispatched per record chunk: sorted slots [u_first, u_first + u_count).

@@ -1,14 +1,14 @@
 #version 430
 // One work group of 16 invocations per 16 x 16 tile; each owns a column of it, so one fetch of a
-// splat serves 16 pixels (measured on llvmpipe: 16 rows per invocation blend in about half the
-// time of 4 rows). The tile's splats, front to back, are blended with the
+// splat serves 16 pixels (on llvmpipe quicker than 4 rows per invocation; docs/viewer.md).
+// The tile's splats, front to back, are blended with the
 // rendering contract's formula (alpha = min(0.99, o exp(-q/2)) at the pixel centre, zero below
 // 1/255, outside the 3-sigma square or outside the rectangle spanned by the half-axes, which
 // holds every alpha >= 1/255): C += T alpha c, T *= 1 - alpha. A pixel stops once T < 1e-4 (its
 // remaining splats could add at most 1e-4 x colour), an invocation once all its pixels have.
 // Splat data come as texels (u_entries: the tile-sorted slots; u_records: 4 texels per slot,
 // preprocess.comp.glsl): llvmpipe fetches texels as vectors but loads storage and shared memory
-// one invocation at a time, which made a shared-memory batch loop eight times slower there.
+// one invocation at a time, which made a shared-memory batch loop many times slower there.
 // Writes (C, 1 - T) to the accumulation image, row j = image row j.
 layout(local_size_x = 16, local_size_y = 1) in;
 
