@@ -18,6 +18,7 @@ import sys
 import time
 from pathlib import Path
 
+from .cli_train import add_backend_argument
 from .config import VARIANTS, TrainConfig
 
 PAPER_NOTE = ("paper (CGHair, CVPR 2026, as quoted in our brief): latents within 1.6 dB PSNR of unique, "
@@ -37,11 +38,13 @@ def scaled_config(variant: str, iters: int, **overrides) -> TrainConfig:
 
 def run_ablation(strands_path: str, work: Path, iters: int, views: int, res: int, engine: str,
                  variants: list[str], samples: int, threads: int | None, n_cards: int, points: int,
-                 dataset: Path | None = None, log=sys.stderr, device: str = "cpu") -> list[dict]:
+                 dataset: Path | None = None, log=sys.stderr, device: str = "cpu",
+                 backend: str | None = None) -> list[dict]:
     import torch
 
     from cghair_format.exchange import load_strands
 
+    from .backends import resolve_backend
     from .dataset import read_dataset, render_dataset
     from .evaluate import evaluate, evaluate_model
     from .model import tau_at
@@ -49,13 +52,14 @@ def run_ablation(strands_path: str, work: Path, iters: int, views: int, res: int
 
     if threads:
         torch.set_num_threads(threads)
+    backend = resolve_backend(backend, device)
     work.mkdir(parents=True, exist_ok=True)
     ds_dir = dataset if dataset is not None else work / f"dataset_{engine}"
     strands = load_strands(strands_path)
     if not (ds_dir / "transforms_test.json").is_file():
         t = time.perf_counter()
         render_dataset(strands, ds_dir, views=views, res=res, engine=engine, samples=samples, progress=True,
-                       device=device)
+                       device=device, backend=backend)
         print(f"rendered {views} views with {engine} in {time.perf_counter() - t:.1f} s", file=log)
     ds = read_dataset(ds_dir)
     base = base_asset(scaled_config("latents", iters, n_cards=n_cards, points_per_strand=points), strands,
@@ -64,16 +68,16 @@ def run_ablation(strands_path: str, work: Path, iters: int, views: int, res: int
     for variant in variants:
         cfg = scaled_config(variant, iters, n_cards=n_cards, points_per_strand=points)
         out = work / f"{variant}.cgh"
-        result = train(ds, cards=base, out=out, config=cfg, progress=True, log=log, device=device)
+        result = train(ds, cards=base, out=out, config=cfg, progress=True, log=log, device=device, backend=backend)
         tau = tau_at(cfg, cfg.iterations)
         mode = result.weight_mode or "soft"
-        ev = evaluate_model(result.model, ds.test, mode, tau, out_dir=work / f"{variant}_test")
+        ev = evaluate_model(result.model, ds.test, mode, tau, out_dir=work / f"{variant}_test", backend=backend)
         row = {"variant": variant, "psnr": ev.psnr, "ssim": ev.ssim,
                "appearance_bytes": result.model.appearance_bytes(), "seconds": result.seconds,
                "iterations": cfg.iterations, "weight_mode": result.weight_mode,
                "train_psnr": result.history[-1]["psnr"] if result.history else None}
         if result.asset is not None:
-            fev = evaluate(out, ds, use_lpips=False, device=device)
+            fev = evaluate(out, ds, use_lpips=False, device=device, backend=backend)
             row.update(file_psnr=fev.psnr, file_ssim=fev.ssim, file_bytes=out.stat().st_size)
         rows.append(row)
         print(f"{variant}: test PSNR {ev.psnr:.2f} dB, SSIM {ev.ssim:.4f}", file=log)
@@ -81,7 +85,7 @@ def run_ablation(strands_path: str, work: Path, iters: int, views: int, res: int
     for r in rows:
         r["ratio_vs_unique"] = unique["appearance_bytes"] / r["appearance_bytes"] if unique else None
     (work / "ablation.json").write_text(json.dumps({
-        "strands": strands_path, "engine": engine, "views": views, "res": res, "iterations": iters,
+        "strands": strands_path, "engine": engine, "backend": backend, "views": views, "res": res, "iterations": iters,
         "gaussians": base.n_gaussians, "strands_count": base.n_strands, "rows": rows}, indent=2) + "\n")
     return rows
 
@@ -115,6 +119,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--points", type=int, default=32)
     p.add_argument("--threads", type=int, default=None)
     p.add_argument("--device", default="cpu", help="torch device, e.g. cpu or cuda (default: cpu)")
+    add_backend_argument(p)
     args = p.parse_args(argv)
     variants = [v for v in args.variants.split(",") if v]
     bad = [v for v in variants if v not in VARIANTS]
@@ -125,7 +130,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         rows = run_ablation(args.strands, Path(args.work), args.iters, args.views, args.res, args.engine,
                             variants, args.samples, args.threads, args.n_cards, args.points,
-                            Path(args.dataset) if args.dataset else None, device=args.device)
+                            Path(args.dataset) if args.dataset else None, device=args.device, backend=args.backend)
     except CghError as exc:
         print(f"ablation: error: {exc}", file=sys.stderr)
         return 2

@@ -1,83 +1,238 @@
 """Training speed on this machine, with a per-stage breakdown.
 
-    python -m training.bench --strands ../shared/data/hair/Ratboy_mohawk.tfx --iters 2000 \
-        --views 32 --res 128 --points 32 [--threads 1] [--device cuda] [--work bench_out]
+The small config (a real model of about 2,000 strands x 32 points, 128 x 128 views):
 
-Renders a splat dataset if the work folder has none, builds the cards (timed apart), trains the
-latents variant and prints iterations per second and the seconds spent per stage. It reports
-figures only; it asserts nothing about time.
+    python -m training.bench --strands ../shared/data/hair/Ratboy_mohawk.tfx --iters 2000 \
+        [--backend reference|native|gsplat] [--threads 2] [--device cuda] [--json small.json]
+
+The paper's scale (25,000 strands x 100 points densified from a real model exactly as
+tests/bench/paper_scale.py does, 800 cards, N_T 64, K 10, D 64, SH degree 3, 256 x 256 views):
+
+    python -m training.bench --paper-scale [--strands ../shared/data/hair/harolongo.data] \
+        --iters 20 [--reference-iters 4] [--res 256] [--backend ...] [--json paper.json]
+
+Renders a splat dataset into the work folder if it has none, builds the cards (timed apart; cached
+in the work folder at paper scale), trains the latents variant and prints iterations per second,
+milliseconds per stage, peak memory (resident set; on CUDA also the GPU's peak allocation) and
+the GPU's name. The small config then evaluates the written .cgh on the held-out views; the
+paper scale trains the first N of N + 1 scheduled iterations (so nothing is exported) and then a
+few iterations of the ``reference`` backend on the same scene, for the speed-up. ``--json``
+writes every figure. It reports figures only; it asserts nothing about time.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import resource
 import sys
 import time
 from pathlib import Path
 
+from cghair_format.errors import CghError
+
+from .cli_train import add_backend_argument
+
+REPO = Path(__file__).resolve().parents[1]
+PAPER_SCALE_DEFAULT_MODEL = "harolongo.data"
+DEFAULTS = {  # (small config, paper scale)
+    "iters": (2000, 20), "views": (32, 8), "res": (128, 256),
+}
+
+
+class BenchError(CghError, ValueError):
+    """The benchmark cannot run with these arguments."""
+
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m training.bench", description=__doc__.split("\n\n")[0])
-    p.add_argument("--strands", required=True)
-    p.add_argument("--work", default="bench_out")
-    p.add_argument("--iters", type=int, default=2000)
-    p.add_argument("--views", type=int, default=32)
-    p.add_argument("--res", type=int, default=128)
-    p.add_argument("--points", type=int, default=32)
-    p.add_argument("--n-cards", type=int, default=800)
-    p.add_argument("--threads", type=int, default=None)
+    p.add_argument("--strands", default=None, help="a real hair model (required for the small config; at paper "
+                   f"scale default ../shared/data/hair/{PAPER_SCALE_DEFAULT_MODEL})")
+    p.add_argument("--paper-scale", action="store_true",
+                   help="25,000 strands x 100 points, 800 cards, N_T 64, K 10, D 64, SH 3 (tests/bench/paper_scale.py)")
+    p.add_argument("--work", default="bench_out", help="folder for the dataset, cards and outputs")
+    p.add_argument("--iters", type=int, default=None, help="training iterations (default: 2000; paper scale 20)")
+    p.add_argument("--reference-iters", type=int, default=4,
+                   help="paper scale: iterations of the reference backend for the speed-up (default 4; 0 skips)")
+    p.add_argument("--views", type=int, default=None, help="dataset views (default: 32; paper scale 8)")
+    p.add_argument("--res", type=int, default=None, help="view width and height (default: 128; paper scale 256)")
+    p.add_argument("--points", type=int, default=32, help="points per strand of the small config (default 32)")
+    p.add_argument("--n-cards", type=int, default=800, help="cards of the small config (default 800)")
+    p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
     p.add_argument("--device", default="cpu", help="torch device, e.g. cpu or cuda (default: cpu)")
-    p.add_argument("--engine", choices=("splat", "cycles"), default="splat")
+    add_backend_argument(p)
+    p.add_argument("--engine", choices=("splat", "cycles"), default="splat", help="dataset renderer (default splat)")
     p.add_argument("--dataset", default=None, help="use this rendered dataset instead of rendering one")
+    p.add_argument("--json", default=None, metavar="FILE", help="also write the figures to FILE")
     args = p.parse_args(argv)
-    from cghair_format.errors import CghError
-
+    scale = int(args.paper_scale)
+    for name, values in DEFAULTS.items():
+        if getattr(args, name) is None:
+            setattr(args, name, values[scale])
+    if args.strands is None and not args.paper_scale:
+        p.error("--strands is required (or give --paper-scale)")
     try:
-        return _run(args)
+        report = _run(args)
     except CghError as exc:
         print(f"bench: error: {exc}", file=sys.stderr)
         return 2
+    _print(report)
+    if args.json:
+        Path(args.json).write_text(json.dumps(report, indent=2) + "\n")
+    return 0
 
 
-def _run(args: argparse.Namespace) -> int:
+def _paper_scale_module():
+    """tests/bench/paper_scale.py, the one recipe for paper-scale strands and model sizes."""
+    tests = REPO / "tests"
+    if not (tests / "bench" / "paper_scale.py").is_file():
+        raise BenchError(f"--paper-scale needs the repository's tests/bench/paper_scale.py (not found under {REPO})")
+    for path in (str(tests), str(REPO)):
+        if path not in sys.path:
+            sys.path.insert(0, path)
+    from bench import paper_scale
+
+    return paper_scale
+
+
+def _peak_memory(device) -> dict:
+    import torch
+
+    out = {"peak_rss_gib": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20, 2)}
+    if device.type == "cuda":
+        out["cuda_peak_allocated_gib"] = round(torch.cuda.max_memory_allocated(device) / 2**30, 2)
+    return out
+
+
+def _train_run(ds_dir: Path, base, cfg, backend: str, device, out: Path | None, stop_at: int | None) -> dict:
+    import torch
+
+    from .train import train
+
+    if device.type == "cuda":
+        torch.cuda.reset_peak_memory_stats(device)
+    result = train(ds_dir, cards=base, out=out, config=cfg, progress=True, device=str(device), backend=backend,
+                   stop_at=stop_at)
+    n = max(1, result.iterations_run)
+    stage_ms = {k: round(1000 * v / n, 1) for k, v in result.stage_seconds.items()}
+    return {"backend": backend, "iterations": result.iterations_run, "seconds": round(result.seconds, 3),
+            "iterations_per_second": round(result.iterations_run / max(result.seconds, 1e-9), 3),
+            "ms_per_iteration": round(sum(stage_ms.values()), 1), "stage_ms_per_iteration": stage_ms,
+            "geometry_frozen_iterations": min(cfg.geometry_frozen_iters, result.iterations_run),
+            "final": result.history[-1] if result.history else None, **_peak_memory(device)}
+
+
+def _run(args: argparse.Namespace) -> dict:
     import torch
 
     from cghair_format.exchange import load_strands
 
     from .ablation import scaled_config
+    from .backends import resolve_backend
     from .dataset import render_dataset
-    from .evaluate import evaluate
-    from .train import base_asset, train
+    from .splatter import torch_device
+    from .train import base_asset
 
     if args.threads:
         torch.set_num_threads(args.threads)
+    device = torch_device(args.device)
+    backend = resolve_backend(args.backend, device)
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
-    ds_dir = Path(args.dataset) if args.dataset else work / f"dataset_{args.engine}_{args.res}"
-    strands = load_strands(args.strands)
-    if not (ds_dir / "transforms_test.json").is_file():
-        render_dataset(strands, ds_dir, views=args.views, res=args.res, engine=args.engine, device=args.device)
-    cfg = scaled_config("latents", args.iters, n_cards=args.n_cards, points_per_strand=args.points)
+    load_start = os.getloadavg()[0]
     t = time.perf_counter()
-    base = base_asset(cfg, strands, progress=False)
+    if args.paper_scale:
+        ps = _paper_scale_module()
+        path = Path(args.strands or REPO.parent / "shared" / "data" / "hair" / PAPER_SCALE_DEFAULT_MODEL)
+        if not path.is_file():
+            raise BenchError(f"hair model {path} not found (give --strands)")
+        strands = ps.paper_scale_strands(path)
+
+        def config(iters: int):
+            return scaled_config("latents", iters, n_cards=ps.CARDS, n_groups=ps.GROUPS, points_per_strand=ps.POINTS,
+                                 codebook_size=ps.K, latent_dim=ps.D, mlp_hidden=[ps.HIDDEN], sh_degree=ps.SH_DEGREE)
+
+        tag = f"{path.stem}_{ps.STRANDS}x{ps.POINTS}_{ps.CARDS}c{ps.GROUPS}g"
+        cards_file = work / f"{tag}_cards.cgh"
+        if cards_file.is_file():
+            from cghair_format import read
+
+            base = read(cards_file)
+        else:
+            from cghair_format import write
+
+            base = base_asset(config(args.iters + 1), strands, progress=False)
+            write(base, cards_file, "lossless")
+    else:
+        strands = load_strands(args.strands)
+        tag = f"{Path(args.strands).stem}_{args.points}p"
+
+        def config(iters: int):
+            return scaled_config("latents", iters, n_cards=args.n_cards, points_per_strand=args.points)
+
+        base = base_asset(config(args.iters), strands, progress=False)
     cards_s = time.perf_counter() - t
-    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    result = train(ds_dir, cards=base, out=work / "latents.cgh", config=cfg, progress=True, device=args.device)
-    ev = evaluate(work / "latents.cgh", ds_dir, use_lpips=False, device=args.device)
-    total = sum(result.stage_seconds.values())
-    gpu = f", {torch.cuda.get_device_name()}" if args.device.startswith("cuda") else ""
-    print(f"machine: {os.cpu_count()} cores{gpu}, torch threads {torch.get_num_threads()}, load average at start "
-          f"{load:.2f}, at end {os.getloadavg()[0]:.2f}")
-    print(f"scene: {base.n_strands} strands x {base.points_per_strand} points = {base.n_gaussians} Gaussians, "
-          f"{args.views} views at {args.res} x {args.res}")
-    print(f"cards: {cards_s:.1f} s; training: {result.iterations_run} iterations in {result.seconds:.1f} s "
-          f"({result.iterations_run / result.seconds:.2f} it/s)")
-    for name, sec in result.stage_seconds.items():
-        per_it = 1000 * sec / max(1, result.iterations_run)
-        print(f"  {name:<9}{sec:8.1f} s  {100 * sec / total:5.1f} %  {per_it:7.1f} ms/it")
-    print(f"held-out: PSNR {ev.psnr:.2f} dB, SSIM {ev.ssim:.4f} ({args.engine} ground truth)")
-    return 0
+    ds_dir = Path(args.dataset) if args.dataset else work / f"dataset_{tag}_{args.engine}_{args.res}"
+    t = time.perf_counter()
+    rendered = not (ds_dir / "transforms_test.json").is_file()
+    if rendered:
+        render_dataset(strands, ds_dir, views=args.views, res=args.res, engine=args.engine, device=str(device),
+                       backend=backend, progress=True)
+    report = {
+        "machine": {"cores": os.cpu_count(), "torch_threads": torch.get_num_threads(), "device": str(device),
+                    "gpu": torch.cuda.get_device_name(device) if device.type == "cuda" else None,
+                    "load_average_start": load_start},
+        "scene": {"model": args.strands or str(PAPER_SCALE_DEFAULT_MODEL), "paper_scale": args.paper_scale,
+                  "strands": base.n_strands, "points": base.points_per_strand, "gaussians": base.n_gaussians,
+                  "cards": base.cards.count, "views": args.views, "res": args.res, "engine": args.engine},
+        "cards_seconds": round(cards_s, 2), "dataset_seconds": round(time.perf_counter() - t, 2) if rendered else None,
+    }
+    if args.paper_scale:
+        report["run"] = _train_run(ds_dir, base, config(args.iters + 1), backend, device, None, args.iters)
+        if args.reference_iters > 0 and backend != "reference":
+            ref = _train_run(ds_dir, base, config(args.reference_iters + 1), "reference", device, None,
+                             args.reference_iters)
+            report["reference"] = ref
+            report["speedup_over_reference"] = round(ref["ms_per_iteration"] / report["run"]["ms_per_iteration"], 2)
+    else:
+        from .evaluate import evaluate
+
+        out = work / f"{tag}_{backend}.cgh"
+        report["run"] = _train_run(ds_dir, base, config(args.iters), backend, device, out, None)
+        ev = evaluate(out, ds_dir, use_lpips=False, device=str(device), backend=backend)
+        report["held_out"] = {"psnr": round(ev.psnr, 3), "ssim": round(ev.ssim, 4), "views": len(ev.per_view),
+                              "ground_truth": args.engine}
+    report["machine"]["load_average_end"] = os.getloadavg()[0]
+    return report
+
+
+def _print(r: dict) -> None:
+    m, s, run = r["machine"], r["scene"], r["run"]
+    gpu = f", {m['gpu']}" if m["gpu"] else ""
+    print(f"machine: {m['cores']} cores{gpu}, torch threads {m['torch_threads']}, load average at start "
+          f"{m['load_average_start']:.2f}, at end {m['load_average_end']:.2f}")
+    print(f"scene: {s['strands']} strands x {s['points']} points = {s['gaussians']} Gaussians, {s['cards']} cards, "
+          f"{s['views']} views at {s['res']} x {s['res']} ({s['engine']})")
+    print(f"cards: {r['cards_seconds']:.1f} s" + (f"; dataset: {r['dataset_seconds']:.1f} s" if r["dataset_seconds"]
+                                                  else ""))
+    for label, x in (("", run), ("reference ", r.get("reference"))):
+        if x is None:
+            continue
+        mem = f"peak RSS {x['peak_rss_gib']:.2f} GiB" + (f", CUDA peak {x['cuda_peak_allocated_gib']:.2f} GiB"
+                                                         if "cuda_peak_allocated_gib" in x else "")
+        print(f"{label}backend {x['backend']}: {x['iterations']} iterations ({x['geometry_frozen_iterations']} with "
+              f"frozen geometry) in {x['seconds']:.1f} s, {x['iterations_per_second']:.2f} it/s, "
+              f"{x['ms_per_iteration']:.0f} ms/it; {mem}")
+        total = max(x["ms_per_iteration"], 1e-9)
+        for name, ms in x["stage_ms_per_iteration"].items():
+            print(f"  {name:<9}{ms:9.1f} ms/it  {100 * ms / total:5.1f} %")
+    if "speedup_over_reference" in r:
+        print(f"speed-up over reference: {r['speedup_over_reference']:.1f} x")
+    if "held_out" in r:
+        h = r["held_out"]
+        print(f"held-out: PSNR {h['psnr']:.2f} dB, SSIM {h['ssim']:.4f} ({h['views']} views, {h['ground_truth']} "
+              "ground truth)")
 
 
 if __name__ == "__main__":

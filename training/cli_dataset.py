@@ -9,6 +9,8 @@ import argparse
 
 from cghair_format.cli.argtypes import int_at_least, positive_float
 
+from .cli_train import add_backend_argument
+
 ENGINES = ("splat", "cycles")
 PRESETS = ("brown", "black", "blonde", "red")
 
@@ -30,6 +32,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the per-strand colour variation (default: 0)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--device", default="cpu", help="torch device of the splat engine, e.g. cpu or cuda (default: cpu)")
+    add_backend_argument(p)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -40,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
     strands = load_strands(args.strands)
     ds = render_dataset(strands, args.output, views=args.views, res=args.res, engine=args.engine,
                         preset=args.preset, seed=args.seed, samples=args.samples, thickness=args.thickness,
-                        progress=not args.no_progress, device=args.device)
+                        progress=not args.no_progress, device=args.device, backend=args.backend)
     print(f"wrote {len(ds.train)} train + {len(ds.test)} test views ({args.res} x {args.res}, "
           f"engine {args.engine}) to {args.output}")
     return 0

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import argparse
 
+from .cli_train import add_backend_argument
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("file", metavar="FILE.cgh", help="trained .cgh file")
@@ -15,6 +17,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-lpips", action="store_true", help="do not try LPIPS")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads")
     p.add_argument("--device", default="cpu", help="torch device, e.g. cpu or cuda (default: cpu)")
+    add_backend_argument(p)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -28,7 +31,8 @@ def run(args: argparse.Namespace) -> int:
 
         torch.set_num_threads(args.threads)
     out = Path(args.out) if args.out else Path(args.file).with_suffix(".eval")
-    result = evaluate(args.file, args.dataset, out, split=args.split, use_lpips=not args.no_lpips, device=args.device)
+    result = evaluate(args.file, args.dataset, out, split=args.split, use_lpips=not args.no_lpips, device=args.device,
+                      backend=args.backend)
     print(f"read {args.dataset}: {detect_layout(args.dataset).describe()}")
     print(f"{args.file} on {args.dataset} ({args.split}): {result.summary()}")
     for rec in result.per_view:

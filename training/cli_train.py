@@ -12,7 +12,8 @@ import sys
 
 from cghair_format.cli.argtypes import int_at_least
 
-VARIANTS = ("latents", "unique", "single-sh", "multi-sh", "no-card-clustering")
+from .config import BACKENDS, VARIANTS
+
 PROFILE_NAMES = ("compact", "high", "lossless")
 FROZEN_FRACTION = 7_000 / 30_000
 
@@ -42,7 +43,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threads", type=int_at_least(1), default=None,
                    help="torch CPU threads (default: torch's choice; 1 is faster on a busy machine)")
     p.add_argument("--device", default="cpu", help="torch device, e.g. cpu or cuda (default: cpu)")
+    add_backend_argument(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def add_backend_argument(p: argparse.ArgumentParser) -> None:
+    """``--backend``, shared by every command that rasterizes."""
+    p.add_argument("--backend", choices=BACKENDS, default=None,
+                   help="rasterizer (default: native on the CPU when built, gsplat on CUDA when installed, else "
+                        "reference; see the README's 'Training backends')")
 
 
 def _config(args: argparse.Namespace):
@@ -81,11 +90,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"reading {args.dataset}: {detect_layout(args.dataset).describe()}")
     result = train(args.dataset, strands=args.strands, cards=args.cards, out=args.output, config=cfg,
                    resume=args.resume, profile=args.profile, progress=not args.no_progress,
-                   threads=args.threads, device=args.device)
+                   threads=args.threads, device=args.device, backend=args.backend)
     final = result.history[-1] if result.history else None
     if final:
         print(f"iteration {final['iteration']}: loss {final['loss']:.4f}, train PSNR {final['psnr']:.2f} dB "
-              f"({result.seconds:.1f} s, {result.iterations_run} iterations this run)")
+              f"({result.seconds:.1f} s, {result.iterations_run} iterations this run, backend {result.backend})")
     if result.asset is None:
         print(f"variant {cfg.variant!r} has no .cgh encoding (free SH); wrote {result.out_path.with_suffix('.ckpt.pt')}"
               f" and {result.out_path.with_suffix('.train.json')}", file=sys.stderr)

@@ -18,6 +18,7 @@ from pathlib import Path
 from cghair_format.errors import CghError
 
 VARIANTS = ("latents", "unique", "single-sh", "multi-sh", "no-card-clustering")
+BACKENDS = ("reference", "native", "gsplat")  # rasterizers, see training/backends.py
 CONFIG_VERSION = 1
 
 

@@ -234,12 +234,14 @@ def default_thickness(strands: Strands) -> float:
 
 def render_dataset(strands: Strands, out_dir: str | Path, views: int = 32, res: int = 128,
                    engine: str = "splat", preset: str = "brown", seed: int = 0, samples: int = 16,
-                   thickness: float | None = None, progress: bool = False, device: str = "cpu") -> Dataset:
+                   thickness: float | None = None, progress: bool = False, device: str = "cpu",
+                   backend: str | None = None) -> Dataset:
     """Render ``views`` orbit views of ``strands`` at ``res`` x ``res`` and write the dataset.
 
-    ``engine="splat"`` renders the strands' segment Gaussians with the reference splatter on the torch
-    ``device`` (fast, known appearance); ``engine="cycles"`` renders curves with Blender Cycles and the
-    Principled Hair BSDF (needs bpy). Every 8th view goes to the test split.
+    ``engine="splat"`` renders the strands' segment Gaussians (fast, known appearance) on the torch
+    ``device`` with the rasterizer ``backend`` (:mod:`training.backends`; default: the fastest that runs
+    there); ``engine="cycles"`` renders curves with Blender Cycles and the Principled Hair BSDF (needs
+    bpy). Every 8th view goes to the test split.
     """
     if engine not in ENGINES:
         raise DatasetError(f"unknown engine {engine!r}; choose {' or '.join(ENGINES)}")
@@ -254,13 +256,15 @@ def render_dataset(strands: Strands, out_dir: str | Path, views: int = 32, res: 
         thickness = default_thickness(strands)
     cams = orbit_cameras(strands.points.astype(np.float64), views, res, strands.up_axis)
     if engine == "splat":
-        from .splatter import render_gaussians, torch_device
+        from .backends import render_gaussians, resolve_backend
+        from .splatter import torch_device
 
         device = torch_device(device)
+        backend = resolve_backend(backend, device)
         g = reference_gaussians(strands, thickness, preset, seed)
         images = []
         for cam in _progress(cams, progress, "splat"):
-            out = render_gaussians(g, cam, device=device)
+            out = render_gaussians(g, cam, device=device, backend=backend)
             a = out["alpha"][..., None]
             straight = np.where(a > 1e-6, out["rgb"] / np.maximum(a, 1e-6), 0.0)
             images.append(np.concatenate([straight, a], -1).astype(np.float32))
@@ -272,6 +276,7 @@ def render_dataset(strands: Strands, out_dir: str | Path, views: int = 32, res: 
     train_idx, test_idx = split_indices(views)
     meta = {"engine": engine, "views": views, "res": res, "preset": preset, "seed": seed,
             "thickness": thickness, "strands": strands.count, "samples": samples if engine == "cycles" else None,
+            "backend": backend if engine == "splat" else None,
             "up_axis": strands.up_axis}
     ds = Dataset([View(cams[i], images[i], f"r_{i:03d}") for i in train_idx],
                  [View(cams[i], images[i], f"r_{i:03d}") for i in test_idx], meta)

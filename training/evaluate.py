@@ -92,17 +92,19 @@ def evaluate_renders(render_fn: Callable[[View], np.ndarray], views: list[View],
 
 def evaluate(cgh: str | Path | HairAsset, dataset: str | Path | Dataset, out_dir: str | Path | None = None,
              split: str = "test", background=(0.0, 0.0, 0.0), use_lpips: bool = True,
-             device: str = "cpu") -> EvalResult:
+             device: str = "cpu", backend: str | None = None) -> EvalResult:
     """Render a .cgh (decoded exactly as stored) at the dataset's ``split`` views on the torch
-    ``device`` and compare."""
+    ``device`` with ``backend`` (default: the fastest that runs there) and compare."""
     from cghair_format import decode_gaussians, read_with_gaussians
 
-    from .splatter import render_gaussians, torch_device
+    from .backends import render_gaussians, resolve_backend
+    from .splatter import torch_device
 
     device = torch_device(device)
+    backend = resolve_backend(backend, device)
     g = decode_gaussians(cgh) if isinstance(cgh, HairAsset) else read_with_gaussians(cgh)[1]
     ds = dataset if isinstance(dataset, Dataset) else read_dataset(dataset)
-    result = evaluate_renders(lambda v: render_gaussians(g, v.camera, tuple(background), device)["rgb"],
+    result = evaluate_renders(lambda v: render_gaussians(g, v.camera, tuple(background), device, backend)["rgb"],
                               ds.split(split), out_dir, background, use_lpips)
     if out_dir is not None:
         (Path(out_dir) / "metrics.json").write_text(json.dumps(result.to_dict(), indent=2) + "\n")
@@ -110,9 +112,12 @@ def evaluate(cgh: str | Path | HairAsset, dataset: str | Path | Dataset, out_dir
 
 
 def evaluate_model(model, views: list[View], mode: str = "soft", tau: float = 0.1, background=(0.0, 0.0, 0.0),
-                   out_dir: str | Path | None = None, use_lpips: bool = False) -> EvalResult:
+                   out_dir: str | Path | None = None, use_lpips: bool = False,
+                   backend: str = "reference") -> EvalResult:
     """Metrics of a torch :class:`training.model.HairModel` (for variants without a .cgh encoding)."""
-    from .splatter import render
+    from .backends import renderer
+
+    render = renderer(backend)
 
     if model.variant in ("unique", "single-sh"):
         mode = "soft"  # no weights involved

@@ -48,6 +48,8 @@ class CardGeometry(nn.Module):
         self.segments = asset.cards.segments
         self.register_buffer("vertices", torch.as_tensor(mesh.vertices.astype(np.float32)))
         self.register_buffer("normals", torch.as_tensor(mesh.normals.astype(np.float32)))
+        # both side by side [V, 6], so that one gather serves both interpolations (not saved: derived)
+        self.register_buffer("vertex_data", torch.cat([self.vertices, self.normals], 1), persistent=False)
         self.register_buffer("triangles", torch.as_tensor(mesh.triangles.astype(np.int64)))
         self.register_buffer("strand_card", torch.as_tensor(asset.strand_card.astype(np.int64)))
 
@@ -63,9 +65,11 @@ class CardGeometry(nn.Module):
         bary = torch.where(upper[..., None], torch.stack([1 - f, f + v - 1, 1 - v], -1),
                            torch.stack([1 - f - v, v, f], -1))
         tri = self.strand_card[:, None] * 2 * m + 2 * k.long() + upper.long()
-        corners = self.triangles[tri]  # [S, P, 3]
-        pos = (bary[..., None] * self.vertices[corners]).sum(-2)
-        nrm = (bary[..., None] * self.normals[corners]).sum(-2)
+        corners = self.vertex_data[self.triangles[tri]]  # [S, P, 3 corners, 6]
+        # the barycentric sum written out: no [S, P, 3, 6] product materialised, forward or backward
+        both = (bary[..., 0:1] * corners[..., 0, :] + bary[..., 1:2] * corners[..., 1, :]
+                + bary[..., 2:3] * corners[..., 2, :])
+        pos, nrm = both[..., :3], both[..., 3:]
         nrm = nrm / nrm.norm(dim=-1, keepdim=True).clamp_min(1e-30)
         return pos + delta[..., None] * nrm
 
@@ -121,6 +125,8 @@ class HairModel(nn.Module):
         self.n_groups = n_groups
         self.register_buffer("strand_group", torch.as_tensor(groups))
         k, dim = config.codebook_size, config.latent_dim
+        # row of each strand's K codebook entries in the codebooks flattened to [N_T * K, ...]
+        self.register_buffer("book_rows", torch.as_tensor(groups)[:, None] * k + torch.arange(k), persistent=False)
 
         if self.variant in ("latents", "no-card-clustering", "multi-sh"):
             self.logits = nn.Parameter(0.01 * torch.randn(s, k, generator=gen))
@@ -187,13 +193,17 @@ class HairModel(nn.Module):
                 h = torch.relu(h)
         return h
 
+    def mix(self, weights: Tensor) -> Tensor:
+        """``sum_k weights[s, k] codebooks[group(s), k]``, ``[S, ...]``, without gathering ``[S, K, ...]``."""
+        books = self.codebooks.reshape(-1, self.codebooks.shape[-1])
+        return F.embedding_bag(self.book_rows, books, per_sample_weights=weights, mode="sum")
+
     def strand_sh(self, mode: str = "gumbel", tau: float = 1.0) -> Tensor:
         """SH ``[S*(P-1), C, 3]`` of every Gaussian, strand-major."""
         if self.variant in ("latents", "no-card-clustering"):
-            latents = torch.einsum("sk,skd->sd", self.weights(mode, tau), self.codebooks[self.strand_group])
-            out = self.run_mlp(latents)
+            out = self.run_mlp(self.mix(self.weights(mode, tau)))
         elif self.variant == "multi-sh":
-            out = torch.einsum("sk,sko->so", self.weights(mode, tau), self.codebooks[self.strand_group])
+            out = self.mix(self.weights(mode, tau))
         elif self.variant == "single-sh":
             out = self.sh_per_strand.repeat(1, self.n_points - 1)
         else:

@@ -1,7 +1,7 @@
 """The reference 3D Gaussian splatter: pure torch, differentiable, CPU and CUDA.
 
-This is the source of truth for the image model shared with the viewer (see the rendering
-contract): EWA projection with a 0.3 px^2 dilation, alpha = min(0.99, o exp(-q/2)) with
+This is the source of truth for the image model shared with the viewer and the native splatter
+(the rendering contract, spec/rendering.md): EWA projection with a 0.3 px^2 dilation, alpha = min(0.99, o exp(-q/2)) with
 contributions under 1/255 skipped, a 3-sigma square support, colour from SH per Gaussian and
 front-to-back compositing in camera-depth order.
 
@@ -10,8 +10,8 @@ support square is expanded into (pixel, Gaussian) pairs, the pairs are sorted by
 (pixel, depth rank), and the transmittance of each pair is a segmented exclusive cumulative sum
 of ``log(1 - alpha)`` within its pixel's run. Autograd differentiates all of it.
 
-No early termination at T < 1e-4 (optional in the contract): a pixel's remaining contributions
-then add at most 1e-4 x colour, far below the 35 dB agreement the viewer is held to.
+No early termination at T < 1e-4 (allowed by the contract, section 6, with its bound): this
+renderer composites every contribution.
 
 Support rule (both renderers): with ``r = ceil(3 sqrt(lambda_max(Sigma2)))``, Gaussian ``g``
 touches pixel ``(i, j)`` iff ``|i + 0.5 - m_x| <= r`` and ``|j + 0.5 - m_y| <= r``.

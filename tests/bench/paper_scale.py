@@ -18,6 +18,7 @@ from hairdata import hair_path
 
 import cghair_format as cgh
 from cghair_format.asset import Appearance, HairAsset, MlpLayer
+from cghair_format.strands import Strands
 
 STRANDS, POINTS, CARDS, GROUPS, K, D, HIDDEN, SH_DEGREE = 25_000, 100, 800, 64, 10, 64, 64, 3
 
@@ -28,14 +29,20 @@ def paper_scale_asset(name: str, cache_dir: Path) -> tuple[HairAsset, dict]:
     if cached.exists():
         return cgh.read(cached), {}
     from cghair_format.cards import build_cards
-    from cghair_format.exchange import load_strands
-    from cghair_format.strands import densify, resample
 
-    strands = densify(resample(load_strands(hair_path(name)), POINTS, method="bspline"), STRANDS, seed=0)
+    strands = paper_scale_strands(hair_path(name))
     build = build_cards(strands, n_cards=CARDS, n_groups=GROUPS, points=POINTS, seed=0, progress=False)
     asset = with_trained_like_appearance(build.asset)
     cgh.write(asset, cached, "lossless")
     return asset, dict(build.timings)
+
+
+def paper_scale_strands(path: Path) -> Strands:
+    """The strands of a real model resampled (B-spline) to 100 points and densified to 25,000."""
+    from cghair_format.exchange import load_strands
+    from cghair_format.strands import densify, resample
+
+    return densify(resample(load_strands(path), POINTS, method="bspline"), STRANDS, seed=0)
 
 
 def with_trained_like_appearance(asset: HairAsset, seed: int = 0) -> HairAsset:

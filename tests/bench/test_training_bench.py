@@ -1,15 +1,65 @@
 """Training-step timings on this CPU at the issue's small config (a real model of ~2,000 strands x
-32 points = ~64k Gaussians, 128 x 128 views). Reports figures; never asserts times.
+32 points = ~64k Gaussians, 128 x 128 views), and ``python -m training.bench`` end to end on tiny
+configs. Reports figures; never asserts times.
 
 The full 2,000-iteration measurement with a per-stage breakdown is ``python -m training.bench``.
 """
 
 from __future__ import annotations
 
+import json
+import math
+
 import pytest
 from hairdata import hair_path
 
 pytest.importorskip("torch", reason="the training benchmark needs torch (pip install 'cghair[training]')")
+
+STAGES = ["model", "render", "loss", "backward", "step"]
+
+
+def test_bench_small_config_reports_every_figure(tmp_path, capsys):
+    from training import bench
+
+    out = tmp_path / "small.json"
+    assert bench.main(["--strands", str(hair_path("Bangs_100.hair")), "--iters", "4", "--views", "4", "--res", "16",
+                       "--points", "6", "--n-cards", "8", "--threads", "1", "--backend", "reference",
+                       "--work", str(tmp_path / "work"), "--json", str(out)]) == 0
+    report = json.loads(out.read_text())
+    run = report["run"]
+    assert run["backend"] == "reference" and run["iterations"] == 4
+    assert list(run["stage_ms_per_iteration"]) == STAGES
+    assert run["ms_per_iteration"] == pytest.approx(sum(run["stage_ms_per_iteration"].values()), abs=0.5)
+    assert run["peak_rss_gib"] > 0 and report["machine"]["gpu"] is None
+    assert report["scene"]["strands"] == 100 and report["scene"]["res"] == 16
+    assert math.isfinite(report["held_out"]["psnr"]) and report["held_out"]["views"] == 1
+    text = capsys.readouterr().out
+    assert "backend reference: 4 iterations" in text and "held-out: PSNR" in text
+
+
+def test_bench_paper_scale_path_on_a_reduced_recipe(tmp_path, monkeypatch, capsys):
+    """The --paper-scale code path with the recipe's sizes shrunk (the real one needs minutes an iteration)."""
+    from training import bench
+    from training.backends import default_backend
+
+    from . import paper_scale
+
+    for name, value in {"STRANDS": 150, "POINTS": 8, "CARDS": 8, "GROUPS": 2, "K": 3, "D": 8, "HIDDEN": 16,
+                        "SH_DEGREE": 1}.items():
+        monkeypatch.setattr(paper_scale, name, value)
+    out = tmp_path / "paper.json"
+    argv = ["--paper-scale", "--strands", str(hair_path("Bangs_100.hair")), "--iters", "3", "--reference-iters", "1",
+            "--views", "4", "--res", "16", "--threads", "1", "--work", str(tmp_path / "work"), "--json", str(out)]
+    assert bench.main(argv) == 0
+    report = json.loads(out.read_text())
+    assert report["scene"]["strands"] == 150 and report["scene"]["points"] == 8 and report["scene"]["cards"] <= 8
+    assert report["run"]["iterations"] == 3 and report["run"]["backend"] == default_backend("cpu")
+    if report["run"]["backend"] != "reference":
+        assert report["reference"]["iterations"] == 1 and report["speedup_over_reference"] > 0
+    # a second run reuses the cached cards and dataset
+    capsys.readouterr()
+    assert bench.main(argv) == 0
+    assert "dataset:" not in capsys.readouterr().out
 
 
 

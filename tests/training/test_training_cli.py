@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import sys
 
 import pytest
 
@@ -20,9 +21,10 @@ def test_render_train_eval(tmp_path, strands_file, capsys):
     out = tmp_path / "hair.cgh"
     assert main(["train", str(ds), "--strands", str(strands_file), "-o", str(out), "--iters", "10",
                  "--config", str(cfg), "--n-cards", "8", "--groups", "2", "--points", "6", "--no-progress",
-                 "--threads", "1"]) == 0
+                 "--threads", "1", "--backend", "reference"]) == 0
     text = capsys.readouterr().out
-    assert "iteration 10" in text and f"wrote {out}" in text
+    assert "iteration 10" in text and f"wrote {out}" in text and "backend reference" in text
+    assert json.loads(out.with_suffix(".train.json").read_text())["backend"] == "reference"
     assert out.is_file() and out.with_suffix(".ckpt.pt").is_file()
     assert main(["train", str(ds), "--resume", str(out.with_suffix(".ckpt.pt")), "-o", str(out), "--iters", "15",
                  "--no-progress", "--threads", "1"]) == 0
@@ -36,7 +38,8 @@ def test_render_train_eval(tmp_path, strands_file, capsys):
     first, second = read(out), read(out2)
     assert second.cards.count == first.cards.count and second.uvd.shape == first.uvd.shape
     capsys.readouterr()
-    assert main(["eval", str(out), str(ds), "--out", str(tmp_path / "ev"), "--threads", "1"]) == 0
+    assert main(["eval", str(out), str(ds), "--out", str(tmp_path / "ev"), "--threads", "1",
+                 "--backend", "reference"]) == 0
     text = capsys.readouterr().out
     assert "PSNR" in text and "LPIPS" in text
     assert (tmp_path / "ev" / "metrics.json").is_file()
@@ -63,8 +66,15 @@ def test_unique_variant_writes_no_cgh(tmp_path, strands_file, capsys):
      "unknown torch device 'gpu9'"),
     (["render-dataset", "S", "-o", "OUT", "--engine", "splat", "--views", "4", "--preset", "red",
       "--thickness", "0.01", "--res", "8"], None),
+    (["render-dataset", "S", "-o", "OUT", "--views", "4", "--res", "8", "--backend", "reference"], None),
+    (["train", "DS", "--strands", "S", "-o", "x.cgh", "--backend", "gsplat"],
+     "the gsplat backend runs on CUDA, not cpu; use --device cuda"),
+    (["eval", "NOTCGH", "DS", "--backend", "gsplat"], "the gsplat backend runs on CUDA"),
+    (["render-dataset", "S", "-o", "OUT", "--views", "4", "--res", "8", "--backend", "native"],
+     "the native backend is not built"),
 ])
-def test_bad_inputs_give_clear_errors(tmp_path, strands_file, capsys, argv, message):
+def test_bad_inputs_give_clear_errors(tmp_path, strands_file, capsys, monkeypatch, argv, message):
+    monkeypatch.setitem(sys.modules, "training._raster", None)  # as if the native extension were not built
     ds = tmp_path / "ds"
     ds.mkdir()
     (tmp_path / "notcgh").write_text("hello")
@@ -81,6 +91,8 @@ def test_bad_inputs_give_clear_errors(tmp_path, strands_file, capsys, argv, mess
                                   ["render-dataset", "s", "-o", "d", "--engine", "mitsuba"],
                                   ["train", "d", "-o", "x.cgh", "--variant", "bogus"],
                                   ["train", "d", "-o", "x.cgh", "--iters", "0"],
+                                  ["train", "d", "-o", "x.cgh", "--backend", "vulkan"],
+                                  ["eval", "f.cgh", "d", "--backend", "vulkan"],
                                   ["train", "d", "--strands", "a", "--cards", "b", "-o", "x.cgh"]])
 def test_usage_errors(argv):
     with pytest.raises(SystemExit) as exc:

@@ -1,0 +1,690 @@
+# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
+"""Compiled CPU splatting kernels of :mod:`training.native_splat` (spec/rendering.md), forward and
+backward, run on every core through OpenMP with the GIL released.
+
+- :func:`project`: per Gaussian, EWA projection, SH colour and the tiles its footprint touches.
+- :func:`bin_tiles`: the Gaussians in depth order (stable) and per 16 x 16 tile the list of
+  those it touches, front to back.
+- :func:`rasterize`: per tile, front-to-back compositing with early termination; keeps per pixel
+  the final transmittance and the last contribution, all the backward pass needs.
+- :func:`rasterize_backward`: per tile, each pixel's contributions walked back to front;
+  per (Gaussian, tile) gradients, then summed per Gaussian without races.
+- :func:`project_backward`: per Gaussian, gradients through SH and the projection.
+"""
+
+from cython.parallel import prange
+
+from libc.math cimport ceil, expf, floor, log, sqrt
+from libc.stdint cimport int32_t, int64_t, uint32_t
+from libc.stdlib cimport free, malloc
+
+cdef enum:
+    TILE = 16  # tile side in pixels
+    NF = 13  # per-Gaussian features the rasterizer reads, see project()
+    AHEAD = 16  # entries prefetched ahead: the features of a tile's list are scattered in memory
+
+cdef extern from *:
+    """
+    #if defined(__GNUC__)
+    #define PREFETCH(p) __builtin_prefetch(p)
+    #else
+    #define PREFETCH(p) ((void)0)
+    #endif
+    """
+    void PREFETCH(const void* p) noexcept nogil
+
+cdef double NEAR_PLANE = 0.01
+cdef double DILATION = 0.3
+cdef float ALPHA_MAX = 0.99
+cdef float ALPHA_MIN = 1.0 / 255.0
+cdef double T_MIN = 1e-4
+cdef double SIGMA_SUPPORT = 3.0
+
+cdef double C0 = 0.28209479177387814
+cdef double C1 = 0.4886025119029199
+cdef double C2[5]
+C2[:] = [1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792,
+         0.5462742152960396]
+cdef double C3[7]
+C3[:] = [-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154,
+         -0.4570457994644658, 1.445305721320277, -0.5900435899266435]
+
+
+cdef inline double dmin(double a, double b) noexcept nogil:
+    return a if a < b else b
+
+
+cdef inline double dmax(double a, double b) noexcept nogil:
+    return a if a > b else b
+
+
+cdef void sh_basis(int n, double x, double y, double z, double* b, double* bx, double* by,
+                   double* bz) noexcept nogil:
+    """The first ``n`` SH basis values at (x, y, z) and their partial derivatives
+    (the polynomial of cghair_format.gaussians.sh_polynomial)."""
+    cdef int k
+    for k in range(n):
+        bx[k] = 0.0
+        by[k] = 0.0
+        bz[k] = 0.0
+    b[0] = C0
+    if n < 4:
+        return
+    b[1] = -C1 * y
+    by[1] = -C1
+    b[2] = C1 * z
+    bz[2] = C1
+    b[3] = -C1 * x
+    bx[3] = -C1
+    if n < 9:
+        return
+    cdef double xx = x * x, yy = y * y, zz = z * z
+    b[4] = C2[0] * x * y
+    bx[4] = C2[0] * y
+    by[4] = C2[0] * x
+    b[5] = C2[1] * y * z
+    by[5] = C2[1] * z
+    bz[5] = C2[1] * y
+    b[6] = C2[2] * (2 * zz - xx - yy)
+    bx[6] = -2 * C2[2] * x
+    by[6] = -2 * C2[2] * y
+    bz[6] = 4 * C2[2] * z
+    b[7] = C2[3] * x * z
+    bx[7] = C2[3] * z
+    bz[7] = C2[3] * x
+    b[8] = C2[4] * (xx - yy)
+    bx[8] = 2 * C2[4] * x
+    by[8] = -2 * C2[4] * y
+    if n < 16:
+        return
+    b[9] = C3[0] * y * (3 * xx - yy)
+    bx[9] = C3[0] * 6 * x * y
+    by[9] = C3[0] * (3 * xx - 3 * yy)
+    b[10] = C3[1] * x * y * z
+    bx[10] = C3[1] * y * z
+    by[10] = C3[1] * x * z
+    bz[10] = C3[1] * x * y
+    b[11] = C3[2] * y * (4 * zz - xx - yy)
+    bx[11] = -2 * C3[2] * x * y
+    by[11] = C3[2] * (4 * zz - xx - 3 * yy)
+    bz[11] = 8 * C3[2] * y * z
+    b[12] = C3[3] * z * (2 * zz - 3 * xx - 3 * yy)
+    bx[12] = -6 * C3[3] * x * z
+    by[12] = -6 * C3[3] * y * z
+    bz[12] = C3[3] * (6 * zz - 3 * xx - 3 * yy)
+    b[13] = C3[4] * x * (4 * zz - xx - yy)
+    bx[13] = C3[4] * (4 * zz - 3 * xx - yy)
+    by[13] = -2 * C3[4] * x * y
+    bz[13] = 8 * C3[4] * x * z
+    b[14] = C3[5] * z * (xx - yy)
+    bx[14] = 2 * C3[5] * x * z
+    by[14] = -2 * C3[5] * y * z
+    bz[14] = C3[5] * (xx - yy)
+    b[15] = C3[6] * x * (xx - 3 * yy)
+    bx[15] = C3[6] * (3 * xx - 3 * yy)
+    by[15] = -6 * C3[6] * x * y
+
+
+cdef void quat_rotmat(const float* q4, double* q, double* inv_norm, double* r) noexcept nogil:
+    """Unit quaternion ``q`` of ``q4`` (w, x, y, z), 1 / its clamped norm, rotation matrix ``r``."""
+    cdef double n = sqrt(<double>q4[0] * q4[0] + <double>q4[1] * q4[1] + <double>q4[2] * q4[2]
+                         + <double>q4[3] * q4[3])
+    n = dmax(n, 1e-12)
+    inv_norm[0] = 1.0 / n
+    cdef int k
+    for k in range(4):
+        q[k] = q4[k] / n
+    cdef double w = q[0], x = q[1], y = q[2], z = q[3]
+    r[0] = 1 - 2 * (y * y + z * z)
+    r[1] = 2 * (x * y - w * z)
+    r[2] = 2 * (x * z + w * y)
+    r[3] = 2 * (x * y + w * z)
+    r[4] = 1 - 2 * (x * x + z * z)
+    r[5] = 2 * (y * z - w * x)
+    r[6] = 2 * (x * z - w * y)
+    r[7] = 2 * (y * z + w * x)
+    r[8] = 1 - 2 * (x * x + y * y)
+
+
+cdef inline double footprint_q(float opacity) noexcept nogil:
+    """Bound on q = d^T Sigma2^-1 d inside which alpha can reach 1/255 (with the reference's margin)."""
+    cdef double q = 2 * log(dmax(opacity / <double>ALPHA_MIN, 1e-30)) * (1 + 1e-6) + 1e-6
+    return dmax(q, 0.0)
+
+
+cdef void project_one(const float* mean, const float* quat, const float* scale, float opacity,
+                      const float* sh, int nc, const double* cam, int width, int height, float* f,
+                      int32_t* rect, int64_t* ntiles) noexcept nogil:
+    cdef double fx = cam[15], fy = cam[16], cx = cam[17], cy = cam[18]
+    cdef double t[3]
+    cdef double q[4]
+    cdef double r[9]
+    cdef double b[16]
+    cdef double bx[16]
+    cdef double by[16]
+    cdef double bz[16]
+    cdef double d[3]
+    cdef double jw0[3]
+    cdef double jw1[3]
+    cdef double a0[3]
+    cdef double a1[3]
+    cdef double inv_n, x, y, z, m, ca, cb, cc, det, mid, lam, rad, qmax, hx, hy, mx, my, nd, col
+    cdef int k, j, ch, x0, x1, y0, y1
+    for k in range(3):
+        t[k] = cam[3 * k] * mean[0] + cam[3 * k + 1] * mean[1] + cam[3 * k + 2] * mean[2] + cam[9 + k]
+    f[9] = <float>t[2]
+    for k in range(4):
+        rect[k] = 0
+    ntiles[0] = 0
+    if not (<float>t[2] > NEAR_PLANE):
+        return
+    x = t[0]
+    y = t[1]
+    z = t[2]
+    quat_rotmat(quat, q, &inv_n, r)
+    for k in range(3):
+        jw0[k] = fx / z * cam[k] - fx * x / (z * z) * cam[6 + k]
+        jw1[k] = fy / z * cam[3 + k] - fy * y / (z * z) * cam[6 + k]
+    for j in range(3):  # A = J W R_q S, by rows
+        a0[j] = 0.0
+        a1[j] = 0.0
+        for k in range(3):
+            m = r[3 * k + j] * scale[j]
+            a0[j] += jw0[k] * m
+            a1[j] += jw1[k] * m
+    ca = a0[0] * a0[0] + a0[1] * a0[1] + a0[2] * a0[2] + DILATION
+    cb = a0[0] * a1[0] + a0[1] * a1[1] + a0[2] * a1[2]
+    cc = a1[0] * a1[0] + a1[1] * a1[1] + a1[2] * a1[2] + DILATION
+    det = ca * cc - cb * cb
+    f[2] = <float>(cc / det)
+    f[3] = <float>(-cb / det)
+    f[4] = <float>(ca / det)
+    f[5] = opacity
+    mx = fx * x / z + cx
+    my = fy * y / z + cy
+    f[0] = <float>mx
+    f[1] = <float>my
+    mid = 0.5 * (ca + cc)
+    lam = mid + sqrt(dmax(mid * mid - det, 0.0))
+    rad = ceil(SIGMA_SUPPORT * sqrt(lam))
+    for k in range(3):
+        d[k] = mean[k] - cam[12 + k]
+    nd = dmax(sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]), 1e-12)
+    sh_basis(nc, d[0] / nd, d[1] / nd, d[2] / nd, b, bx, by, bz)
+    for ch in range(3):
+        col = 0.0
+        for k in range(nc):
+            col += b[k] * sh[3 * k + ch]
+        f[6 + ch] = <float>dmax(col + 0.5, 0.0)
+    qmax = footprint_q(opacity)
+    hx = dmin(sqrt(qmax * ca), rad)
+    hy = dmin(sqrt(qmax * cc), rad)
+    f[10] = <float>qmax
+    f[11] = <float>rad
+    f[12] = <float>hy
+    # pixels k with |k + 0.5 - m| <= h, clipped to the image, then their tiles
+    x0 = <int>dmax(ceil(mx - hx - 0.5), 0.0)
+    x1 = <int>dmin(floor(mx + hx - 0.5), width - 1.0)
+    y0 = <int>dmax(ceil(my - hy - 0.5), 0.0)
+    y1 = <int>dmin(floor(my + hy - 0.5), height - 1.0)
+    if qmax <= 0 or x0 > x1 or y0 > y1:
+        return
+    rect[0] = x0 // TILE
+    rect[1] = y0 // TILE
+    rect[2] = x1 // TILE + 1
+    rect[3] = y1 // TILE + 1
+    ntiles[0] = (rect[2] - rect[0]) * (rect[3] - rect[1])
+
+
+def project(const float[:, ::1] means, const float[:, ::1] quats, const float[:, ::1] scales,
+            const float[::1] opacities, const float[:, :, ::1] sh, const double[::1] cam,
+            int width, int height, float[:, ::1] feat, int32_t[:, ::1] rect, int64_t[::1] ntiles):
+    """Per Gaussian the features the rasterizer reads, ``feat [G, 13]``: screen centre (2), conic
+    (3), opacity, colour (3), camera depth, footprint bound q, radius, half-height of the footprint's
+    rows; and the tile rectangle [x0, y0, x1, y1) its footprint touches (ntiles 0 when culled).
+    ``cam`` holds world-to-camera rotation (9, row-major), translation (3), camera centre (3),
+    fx, fy, cx, cy."""
+    cdef Py_ssize_t g
+    cdef int nc = sh.shape[1]
+    for g in prange(means.shape[0], nogil=True, schedule="static"):
+        project_one(&means[g, 0], &quats[g, 0], &scales[g, 0], opacities[g], &sh[g, 0, 0], nc, &cam[0],
+                    width, height, &feat[g, 0], &rect[g, 0], &ntiles[g])
+
+
+cdef struct Item:  # a Gaussian and its sort key (the bits of its depth)
+    uint32_t key
+    int32_t g
+
+
+def bin_tiles(const float[:, ::1] feat, const int32_t[:, ::1] rect, const int64_t[::1] ntiles,
+              int tiles_x, int tiles_y, int64_t[::1] pair_start, int32_t[::1] tile_start,
+              int32_t[::1] entries, int32_t[::1] entry_pair):
+    """Sort the Gaussians with tiles by depth (stable radix sort of the float bits, so ties keep
+    input order as the reference's stable argsort does), then list them per tile front to back.
+
+    Fills ``pair_start[:G+1]`` (first (Gaussian, tile) pair of each Gaussian, in input order),
+    ``tile_start[:tiles+1]`` (first entry of each tile), ``entries`` (the Gaussian of each entry,
+    as long as the number of pairs) and ``entry_pair`` (its pair index); returns the number of
+    Gaussians with tiles. Serial: a few passes over the arrays.
+    """
+    cdef Py_ssize_t n = feat.shape[0], g, i, v = 0, k
+    cdef int tiles = tiles_x * tiles_y, pass_, shift, tx, ty
+    cdef int64_t p, c
+    cdef int64_t hist[2048]
+    cdef Item* src = <Item*>malloc(max(n, 1) * sizeof(Item))
+    cdef Item* dst = <Item*>malloc(max(n, 1) * sizeof(Item))
+    cdef int64_t* cursor = <int64_t*>malloc((tiles + 1) * sizeof(int64_t))
+    cdef Item* swap
+    if src == NULL or dst == NULL or cursor == NULL:
+        free(src)
+        free(dst)
+        free(cursor)
+        raise MemoryError()
+    with nogil:
+        pair_start[0] = 0
+        for k in range(tiles + 1):
+            tile_start[k] = 0
+        for g in range(n):
+            pair_start[g + 1] = pair_start[g] + ntiles[g]
+            if ntiles[g] > 0:
+                src[v].key = (<const uint32_t*>&feat[g, 9])[0]
+                src[v].g = <int32_t>g
+                v += 1
+                for ty in range(rect[g, 1], rect[g, 3]):
+                    for tx in range(rect[g, 0], rect[g, 2]):
+                        tile_start[ty * tiles_x + tx + 1] += 1
+        for pass_ in range(3):  # 11 + 11 + 10 bits; positive floats sort as their bit patterns
+            shift = 11 * pass_
+            for k in range(2048):
+                hist[k] = 0
+            for i in range(v):
+                hist[(src[i].key >> shift) & 2047] += 1
+            p = 0
+            for k in range(2048):
+                c = hist[k]
+                hist[k] = p
+                p += c
+            for i in range(v):
+                k = (src[i].key >> shift) & 2047
+                dst[hist[k]] = src[i]
+                hist[k] += 1
+            swap = src
+            src = dst
+            dst = swap
+        for k in range(tiles):
+            tile_start[k + 1] += tile_start[k]
+            cursor[k] = tile_start[k]
+        for i in range(v):
+            if i + AHEAD < v:
+                PREFETCH(&rect[src[i + AHEAD].g, 0])
+                PREFETCH(&pair_start[src[i + AHEAD].g])
+            g = src[i].g
+            p = pair_start[g]
+            for ty in range(rect[g, 1], rect[g, 3]):
+                for tx in range(rect[g, 0], rect[g, 2]):
+                    k = ty * tiles_x + tx
+                    entries[cursor[k]] = <int32_t>g
+                    entry_pair[cursor[k]] = <int32_t>p
+                    cursor[k] += 1
+                    p += 1
+    free(src)
+    free(dst)
+    free(cursor)
+    return v
+
+
+cdef inline int row_span(const float* f, int y, int x_lo, int x_hi, int* x0, int* x1) noexcept nogil:
+    """Pixels x0..x1 of row y (clipped to [x_lo, x_hi]) inside both the footprint ellipse (with the
+    reference's margin) and the 3-sigma square; returns 0 when there are none."""
+    cdef double mx = f[0], a = f[2], b = f[3], c = f[4], qmax = f[10], rad = f[11]
+    cdef double dy = y + 0.5 - <double>f[1]
+    cdef double disc = dmax((b * dy) * (b * dy) - a * (c * dy * dy - qmax), 0.0)
+    cdef double half = sqrt(disc) / a + 1e-4
+    cdef double centre = -b * dy / a
+    cdef double lo = mx + dmax(centre - half, -rad), hi = mx + dmin(centre + half, rad)
+    x0[0] = <int>dmax(ceil(lo - 0.5), x_lo)
+    x1[0] = <int>dmin(floor(hi - 0.5), x_hi)
+    return x0[0] <= x1[0]
+
+
+cdef inline float raw_alpha(const float* f, int x, float dy, float* gauss, float* dx) noexcept nogil:
+    """o exp(-q/2) at pixel column x (before the 0.99 clamp), in float32 as the reference."""
+    cdef float half = 0.5
+    dx[0] = <float>x + half - f[0]
+    cdef float power = -half * (f[2] * dx[0] * dx[0] + f[4] * dy * dy) - f[3] * dx[0] * dy
+    gauss[0] = expf(power)
+    return f[5] * gauss[0]
+
+
+cdef void raster_tile(int tile, int tiles_x, int width, int height, const float* feat,
+                      const int32_t* tile_start, const int32_t* entries, const float* bg, float* rgb,
+                      float* alpha, float* depth, double* t_final, int32_t* last) noexcept nogil:
+    cdef int tx0 = (tile % tiles_x) * TILE, ty0 = (tile // tiles_x) * TILE
+    cdef int tw = min(TILE, width - tx0), th = min(TILE, height - ty0)
+    cdef double trans[TILE * TILE]
+    cdef double acc[TILE * TILE * 4]
+    cdef int32_t lst[TILE * TILE]
+    cdef char done[TILE * TILE]
+    cdef int rowleft[TILE]  # pixels of each row still compositing
+    cdef int start = tile_start[tile], end = tile_start[tile + 1], npix = tw * th, ndone = 0
+    cdef int e, k, y, x, x0, x1, y0, y1, pix, ch
+    cdef const float* f
+    cdef float a, gauss, dx, dy, half = 0.5
+    cdef double tn, w
+    for k in range(TILE * TILE):
+        trans[k] = 1.0
+        lst[k] = -1
+        done[k] = 0
+        acc[4 * k] = 0.0
+        acc[4 * k + 1] = 0.0
+        acc[4 * k + 2] = 0.0
+        acc[4 * k + 3] = 0.0
+    for k in range(TILE):
+        rowleft[k] = tw
+    for e in range(start, end):
+        if ndone == npix:
+            break
+        if e + AHEAD < end:
+            PREFETCH(feat + NF * entries[e + AHEAD])
+        f = feat + NF * entries[e]
+        y0 = <int>dmax(ceil(f[1] - f[12] - 0.5), ty0)
+        y1 = <int>dmin(floor(f[1] + f[12] - 0.5), ty0 + th - 1)
+        for y in range(y0, y1 + 1):
+            if rowleft[y - ty0] == 0 or not row_span(f, y, tx0, tx0 + tw - 1, &x0, &x1):
+                continue
+            dy = <float>y + half - f[1]
+            for x in range(x0, x1 + 1):
+                pix = (y - ty0) * TILE + x - tx0
+                if done[pix]:
+                    continue
+                a = raw_alpha(f, x, dy, &gauss, &dx)
+                if a < ALPHA_MIN:
+                    continue
+                if a > ALPHA_MAX:
+                    a = ALPHA_MAX
+                tn = trans[pix] * (1.0 - <double>a)
+                if tn < T_MIN:  # as 3DGS: stop before the contribution that would take T below 1e-4
+                    done[pix] = 1
+                    ndone += 1
+                    rowleft[y - ty0] -= 1
+                    continue
+                w = a * trans[pix]
+                acc[4 * pix] += w * f[6]
+                acc[4 * pix + 1] += w * f[7]
+                acc[4 * pix + 2] += w * f[8]
+                acc[4 * pix + 3] += w * f[9]
+                trans[pix] = tn
+                lst[pix] = e - start
+    for y in range(th):
+        for x in range(tw):
+            pix = y * TILE + x
+            k = (ty0 + y) * width + tx0 + x
+            for ch in range(3):
+                rgb[3 * k + ch] = <float>(acc[4 * pix + ch] + trans[pix] * bg[ch])
+            alpha[k] = <float>(1.0 - trans[pix])
+            depth[k] = <float>acc[4 * pix + 3]
+            t_final[k] = trans[pix]
+            last[k] = lst[pix]
+
+
+def rasterize(const float[:, ::1] feat, const int32_t[::1] tile_start, const int32_t[::1] entries,
+              int tiles_x, int width, int height, const float[::1] bg, float[:, :, ::1] rgb,
+              float[:, ::1] alpha, float[:, ::1] depth, double[:, ::1] t_final, int32_t[:, ::1] last):
+    """Front-to-back compositing of every tile; also keeps per pixel the final transmittance and the
+    index (within its tile's list) of the last contribution, -1 where none."""
+    cdef int tile, tiles = tile_start.shape[0] - 1
+    cdef const float* fp = &feat[0, 0] if feat.shape[0] > 0 else NULL
+    cdef const int32_t* ep = &entries[0] if entries.shape[0] > 0 else NULL
+    for tile in prange(tiles, nogil=True, schedule="dynamic"):
+        raster_tile(tile, tiles_x, width, height, fp, &tile_start[0], ep, &bg[0], &rgb[0, 0, 0],
+                    &alpha[0, 0], &depth[0, 0], &t_final[0, 0], &last[0, 0])
+
+
+cdef void raster_tile_backward(int tile, int tiles_x, int width, int height, const float* feat,
+                               const int32_t* tile_start, const int32_t* entries,
+                               const int32_t* entry_pair, const float* bg, const float* grad_rgb,
+                               const float* grad_alpha, const double* t_final, const int32_t* last,
+                               float* pair_grad) noexcept nogil:
+    cdef int tx0 = (tile % tiles_x) * TILE, ty0 = (tile // tiles_x) * TILE
+    cdef int tw = min(TILE, width - tx0), th = min(TILE, height - ty0)
+    cdef double trans[TILE * TILE]
+    cdef double rec[TILE * TILE * 3]  # colour behind, per unit transmittance (3DGS's accum_rec)
+    cdef double dc[TILE * TILE * 3]
+    cdef double dfin[TILE * TILE]  # (dL/dalpha - bg . dL/drgb) * T_final
+    cdef int32_t lst[TILE * TILE]
+    cdef int rowlast[TILE]  # the last contribution of each row
+    cdef int start = tile_start[tile], n = tile_start[tile + 1] - start, maxlast = -1
+    cdef int le, k, y, x, x0, x1, y0, y1, pix, ch
+    cdef const float* f
+    cdef float* out
+    cdef float a, raw, gauss, dx, dy, half = 0.5
+    cdef double oma, tb, w, dlda, dpow
+    cdef double gr[9]
+    for k in range(TILE * TILE):
+        lst[k] = -1
+    for k in range(TILE):
+        rowlast[k] = -1
+    for y in range(th):
+        for x in range(tw):
+            pix = y * TILE + x
+            k = (ty0 + y) * width + tx0 + x
+            lst[pix] = last[k]
+            if last[k] > rowlast[y]:
+                rowlast[y] = last[k]
+            if last[k] > maxlast:
+                maxlast = last[k]
+            trans[pix] = t_final[k]
+            dfin[pix] = grad_alpha[k]
+            for ch in range(3):
+                rec[3 * pix + ch] = 0.0
+                dc[3 * pix + ch] = grad_rgb[3 * k + ch]
+                dfin[pix] -= bg[ch] * grad_rgb[3 * k + ch]
+            dfin[pix] *= t_final[k]
+    for le in range(n - 1, -1, -1):
+        for k in range(9):
+            gr[k] = 0.0
+        if le <= maxlast:
+            if le >= AHEAD:
+                PREFETCH(feat + NF * entries[start + le - AHEAD])
+            f = feat + NF * entries[start + le]
+            y0 = <int>dmax(ceil(f[1] - f[12] - 0.5), ty0)
+            y1 = <int>dmin(floor(f[1] + f[12] - 0.5), ty0 + th - 1)
+            for y in range(y0, y1 + 1):
+                if le > rowlast[y - ty0] or not row_span(f, y, tx0, tx0 + tw - 1, &x0, &x1):
+                    continue
+                dy = <float>y + half - f[1]
+                for x in range(x0, x1 + 1):
+                    pix = (y - ty0) * TILE + x - tx0
+                    if le > lst[pix]:
+                        continue
+                    raw = raw_alpha(f, x, dy, &gauss, &dx)
+                    if raw < ALPHA_MIN:
+                        continue
+                    a = raw if raw < ALPHA_MAX else ALPHA_MAX
+                    oma = 1.0 - <double>a
+                    tb = trans[pix] / oma  # transmittance in front of this contribution
+                    w = a * tb
+                    dlda = dfin[pix] / oma
+                    for ch in range(3):
+                        gr[6 + ch] += w * dc[3 * pix + ch]
+                        dlda += tb * (f[6 + ch] - rec[3 * pix + ch]) * dc[3 * pix + ch]
+                        rec[3 * pix + ch] = a * f[6 + ch] + oma * rec[3 * pix + ch]
+                    trans[pix] = tb
+                    if raw <= ALPHA_MAX:  # the clamp passes no gradient
+                        gr[5] += dlda * gauss
+                        dpow = dlda * raw
+                        gr[0] += dpow * (f[2] * dx + f[3] * dy)
+                        gr[1] += dpow * (f[4] * dy + f[3] * dx)
+                        gr[2] -= 0.5 * dpow * dx * dx
+                        gr[3] -= dpow * dx * dy
+                        gr[4] -= 0.5 * dpow * dy * dy
+        out = pair_grad + 9 * <int64_t>entry_pair[start + le]
+        for k in range(9):
+            out[k] = <float>gr[k]
+
+
+def rasterize_backward(const float[:, ::1] feat, const int32_t[::1] tile_start,
+                       const int32_t[::1] entries, const int32_t[::1] entry_pair, int tiles_x, int width,
+                       int height, const float[::1] bg, const float[:, :, ::1] grad_rgb,
+                       const float[:, ::1] grad_alpha, const double[:, ::1] t_final,
+                       const int32_t[:, ::1] last, float[:, ::1] pair_grad):
+    """Gradients per (Gaussian, tile) pair, ``pair_grad [P, 9]``: centre (2), conic (3), opacity,
+    colour (3). Each tile writes only its own pairs, so threads never share an output."""
+    cdef int tile, tiles = tile_start.shape[0] - 1
+    if entries.shape[0] == 0:
+        return
+    for tile in prange(tiles, nogil=True, schedule="dynamic"):
+        raster_tile_backward(tile, tiles_x, width, height, &feat[0, 0], &tile_start[0], &entries[0],
+                             &entry_pair[0], &bg[0], &grad_rgb[0, 0, 0], &grad_alpha[0, 0],
+                             &t_final[0, 0], &last[0, 0], &pair_grad[0, 0])
+
+
+cdef void project_backward_one(const float* mean, const float* quat, const float* scale, const float* sh,
+                               int nc, const double* cam, const float* pair_grad, int64_t npairs,
+                               int geometry, float* g_mean, float* g_quat, float* g_scale,
+                               float* g_opacity, float* g_sh) noexcept nogil:
+    cdef double fx = cam[15], fy = cam[16]
+    cdef double gs[9]
+    cdef double t[3]
+    cdef double q[4]
+    cdef double r[9]
+    cdef double gr[9]
+    cdef double b[16]
+    cdef double bx[16]
+    cdef double by[16]
+    cdef double bz[16]
+    cdef double d[3]
+    cdef double gd[3]
+    cdef double gt[3]
+    cdef double gq[4]
+    cdef double jw0[3]
+    cdef double jw1[3]
+    cdef double a0[3]
+    cdef double a1[3]
+    cdef double ga0[3]
+    cdef double ga1[3]
+    cdef double gj0[3]
+    cdef double gj1[3]
+    cdef double inv_n, x, y, z, ca, cb, cc, det, det2, gca, gcb, gcc, nd, col, gc, dot, m, w
+    cdef int64_t p
+    cdef int k, j, ch
+    for k in range(9):
+        gs[k] = 0.0
+    for p in range(npairs):
+        for k in range(9):
+            gs[k] += pair_grad[9 * p + k]
+    g_opacity[0] = <float>gs[5]
+    # colour: clamp at 0 (gradient where the argument is >= 0), SH basis, direction
+    for k in range(3):
+        d[k] = mean[k] - cam[12 + k]
+    nd = dmax(sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]), 1e-12)
+    for k in range(3):
+        d[k] = d[k] / nd
+        gd[k] = 0.0
+    sh_basis(nc, d[0], d[1], d[2], b, bx, by, bz)
+    for ch in range(3):
+        col = 0.5
+        for k in range(nc):
+            col += b[k] * sh[3 * k + ch]
+        gc = gs[6 + ch] if col >= 0 else 0.0
+        for k in range(nc):
+            g_sh[3 * k + ch] = <float>(b[k] * gc)
+            gd[0] += gc * sh[3 * k + ch] * bx[k]
+            gd[1] += gc * sh[3 * k + ch] * by[k]
+            gd[2] += gc * sh[3 * k + ch] * bz[k]
+    if not geometry:
+        return
+    dot = d[0] * gd[0] + d[1] * gd[1] + d[2] * gd[2]
+    for k in range(3):
+        gd[k] = (gd[k] - d[k] * dot) / nd
+    # the projection, recomputed as in project_one
+    for k in range(3):
+        t[k] = cam[3 * k] * mean[0] + cam[3 * k + 1] * mean[1] + cam[3 * k + 2] * mean[2] + cam[9 + k]
+    x = t[0]
+    y = t[1]
+    z = t[2]
+    quat_rotmat(quat, q, &inv_n, r)
+    for k in range(3):
+        jw0[k] = fx / z * cam[k] - fx * x / (z * z) * cam[6 + k]
+        jw1[k] = fy / z * cam[3 + k] - fy * y / (z * z) * cam[6 + k]
+    for j in range(3):
+        a0[j] = 0.0
+        a1[j] = 0.0
+        for k in range(3):
+            m = r[3 * k + j] * scale[j]
+            a0[j] += jw0[k] * m
+            a1[j] += jw1[k] * m
+    ca = a0[0] * a0[0] + a0[1] * a0[1] + a0[2] * a0[2] + DILATION
+    cb = a0[0] * a1[0] + a0[1] * a1[1] + a0[2] * a1[2]
+    cc = a1[0] * a1[0] + a1[1] * a1[1] + a1[2] * a1[2] + DILATION
+    det = ca * cc - cb * cb
+    det2 = det * det
+    # conic (cc, -cb, ca) / det back to the 2D covariance
+    gca = gs[2] * (-cc * cc / det2) + gs[3] * (cb * cc / det2) + gs[4] * (1 / det - ca * cc / det2)
+    gcc = gs[2] * (1 / det - cc * ca / det2) + gs[3] * (cb * ca / det2) + gs[4] * (-ca * ca / det2)
+    gcb = gs[2] * (2 * cc * cb / det2) + gs[3] * (-1 / det - 2 * cb * cb / det2) + gs[4] * (2 * ca * cb / det2)
+    for j in range(3):
+        ga0[j] = 2 * gca * a0[j] + gcb * a1[j]
+        ga1[j] = 2 * gcc * a1[j] + gcb * a0[j]
+        gj0[j] = 0.0
+        gj1[j] = 0.0
+    for j in range(3):  # A = J W M with M = R_q S: to J W's rows, M, then S and R_q
+        w = 0.0
+        for k in range(3):
+            gj0[k] += ga0[j] * r[3 * k + j] * scale[j]
+            gj1[k] += ga1[j] * r[3 * k + j] * scale[j]
+            m = ga0[j] * jw0[k] + ga1[j] * jw1[k]  # dL/dM[k, j]
+            w += m * r[3 * k + j]
+            gr[3 * k + j] = m * scale[j]
+        g_scale[j] = <float>w
+    # J W's rows and the centre's projection, by camera-space x, y, z
+    gt[0] = gs[0] * fx / z
+    gt[1] = gs[1] * fy / z
+    gt[2] = -gs[0] * fx * x / (z * z) - gs[1] * fy * y / (z * z)
+    for k in range(3):
+        gt[0] -= gj0[k] * fx / (z * z) * cam[6 + k]
+        gt[1] -= gj1[k] * fy / (z * z) * cam[6 + k]
+        gt[2] += gj0[k] * (-fx / (z * z) * cam[k] + 2 * fx * x / (z * z * z) * cam[6 + k])
+        gt[2] += gj1[k] * (-fy / (z * z) * cam[3 + k] + 2 * fy * y / (z * z * z) * cam[6 + k])
+    for k in range(3):
+        g_mean[k] = <float>(cam[k] * gt[0] + cam[3 + k] * gt[1] + cam[6 + k] * gt[2] + gd[k])
+    # rotation matrix back to the unit quaternion (w, x, y, z), then through the normalisation
+    gq[0] = 2 * (-q[3] * gr[1] + q[2] * gr[2] + q[3] * gr[3] - q[1] * gr[5] - q[2] * gr[6] + q[1] * gr[7])
+    gq[1] = 2 * (q[2] * gr[1] + q[3] * gr[2] + q[2] * gr[3] - 2 * q[1] * gr[4] - q[0] * gr[5]
+                 + q[3] * gr[6] + q[0] * gr[7] - 2 * q[1] * gr[8])
+    gq[2] = 2 * (-2 * q[2] * gr[0] + q[1] * gr[1] + q[0] * gr[2] + q[1] * gr[3] + q[3] * gr[5]
+                 - q[0] * gr[6] + q[3] * gr[7] - 2 * q[2] * gr[8])
+    gq[3] = 2 * (-2 * q[3] * gr[0] - q[0] * gr[1] + q[1] * gr[2] + q[0] * gr[3] - 2 * q[3] * gr[4]
+                 + q[2] * gr[5] + q[1] * gr[6] + q[2] * gr[7])
+    dot = q[0] * gq[0] + q[1] * gq[1] + q[2] * gq[2] + q[3] * gq[3]
+    for k in range(4):
+        g_quat[k] = <float>((gq[k] - q[k] * dot) * inv_n)
+
+
+def project_backward(const float[:, ::1] means, const float[:, ::1] quats, const float[:, ::1] scales,
+                     const float[:, :, ::1] sh, const double[::1] cam, const int64_t[::1] pair_start,
+                     const float[:, ::1] pair_grad, bint geometry, float[:, ::1] g_means,
+                     float[:, ::1] g_quats, float[:, ::1] g_scales, float[::1] g_opacities,
+                     float[:, :, ::1] g_sh):
+    """Per Gaussian, its pairs' gradients summed, then taken back through the SH colour and the
+    projection to the inputs; every output row is written (zeros where the Gaussian has no pair).
+    Without ``geometry`` only the opacity and SH gradients are computed (g_means, g_quats and
+    g_scales are left as they are): the geometry is frozen."""
+    cdef Py_ssize_t g
+    cdef int k, nc = sh.shape[1]
+    cdef const float* pg = &pair_grad[0, 0] if pair_grad.shape[0] > 0 else NULL
+    for g in prange(means.shape[0], nogil=True, schedule="static"):
+        if pair_start[g + 1] == pair_start[g]:
+            for k in range(3):
+                g_means[g, k] = 0
+                g_scales[g, k] = 0
+            for k in range(4):
+                g_quats[g, k] = 0
+            g_opacities[g] = 0
+            for k in range(3 * nc):
+                g_sh[g, k // 3, k % 3] = 0
+            continue
+        project_backward_one(&means[g, 0], &quats[g, 0], &scales[g, 0], &sh[g, 0, 0], nc, &cam[0],
+                             pg + 9 * pair_start[g], pair_start[g + 1] - pair_start[g], geometry,
+                             &g_means[g, 0],
+                             &g_quats[g, 0], &g_scales[g, 0], &g_opacities[g], &g_sh[g, 0, 0])

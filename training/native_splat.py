@@ -1,0 +1,190 @@
+"""The compiled CPU splatter: the image contract of spec/rendering.md, as the reference
+:func:`training.splatter.render`, forward and backward in :mod:`training._raster` on every core.
+
+Tile-based as the original 3DGS rasterizer: per Gaussian the EWA projection and SH colour, the
+16 x 16 tiles its tight footprint (3-sigma square AND the ellipse where alpha can reach 1/255)
+touches; per tile the Gaussians front to back (a stable depth sort, the reference's tie order);
+per pixel front-to-back compositing with early termination at T < 1e-4, keeping only the final
+transmittance and the last contribution. The backward pass walks each pixel's contributions back
+to front from there, recomputing alpha, so no (pixel, Gaussian) pair is ever stored.
+
+Differentiable w.r.t. means, quats, scales, opacities and sh through rgb and alpha. The depth
+output is forward-only (its gradient is not propagated), and the background is a constant.
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import TYPE_CHECKING
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from cghair_format.errors import CghError
+from training.splatter import RenderOutput
+
+if TYPE_CHECKING:
+    from cghair_format.camera import Camera
+
+try:
+    from training import _raster
+except ImportError:  # not built: render() says how to build it
+    _raster = None
+
+TILE = 16  # tile side in pixels, as in _raster.pyx
+FEATURES = 13  # per-Gaussian features the kernel keeps, as NF in _raster.pyx
+
+
+class NativeSplatterMissing(CghError, ImportError):
+    """The compiled splatting kernel (training/_raster.pyx) is not built."""
+
+
+def available() -> bool:
+    """Whether the compiled kernel is importable."""
+    return _raster is not None
+
+
+def _require() -> None:
+    if _raster is None:
+        raise NativeSplatterMissing("the native splatter's compiled kernel training/_raster is not built: run "
+                                    "`make venv`, or `python setup.py build_ext --inplace` in the repository")
+
+
+class _Pool:
+    """Reused work and gradient arrays: writing a fresh 480 MB array (the SH gradient at paper scale)
+    costs more in page faults than the whole rasterization. An array is handed out again only once
+    nothing but the pool refers to it (a torch tensor made with ``torch.from_numpy`` holds a
+    reference to its array until the tensor's storage dies), so reuse never aliases live data."""
+
+    KEEP = 32  # arrays kept per dtype
+    SMALL = 1 << 18  # elements; smaller arrays are not worth keeping
+
+    def __init__(self):
+        self.free: dict[np.dtype, list[np.ndarray]] = {}
+
+    def take(self, shape: tuple[int, ...], dtype) -> np.ndarray:
+        size, arrays = int(np.prod(shape)), self.free.setdefault(np.dtype(dtype), [])
+        if size < self.SMALL:
+            return np.empty(shape, dtype)
+        # the smallest idle array that fits; idle: referred to by the list, `a` and the call only
+        fits = [a for a in arrays if a.size >= size and sys.getrefcount(a) == 3]
+        if fits:
+            return min(fits, key=lambda a: a.size)[:size].reshape(shape)
+        base = np.empty(size, dtype)
+        if len(arrays) < self.KEEP:
+            arrays.append(base)
+        return base.reshape(shape)
+
+
+_POOL = _Pool()
+
+
+def _camera_vector(camera: Camera) -> np.ndarray:
+    """World-to-camera rotation (row-major) and translation, camera centre, fx, fy, cx, cy."""
+    w2c = np.asarray(camera.world_to_camera, np.float64)
+    return np.concatenate([w2c[:3, :3].ravel(), w2c[:3, 3], np.asarray(camera.center, np.float64),
+                           [camera.fx, camera.fy, camera.cx, camera.cy]]).astype(np.float64)
+
+
+def _f32(t: Tensor) -> np.ndarray:
+    return np.ascontiguousarray(t.detach().to(torch.float32).numpy())
+
+
+class _Frame:
+    """What one forward pass leaves for its backward pass."""
+
+    def __init__(self, inputs: list[np.ndarray], camera: Camera, background: np.ndarray):
+        _require()
+        means, quats, scales, opac, sh = inputs
+        self.inputs = inputs
+        self.cam = _camera_vector(camera)
+        self.width, self.height = int(camera.width), int(camera.height)
+        self.background = background
+        self.tiles_x = (self.width + TILE - 1) // TILE
+        tiles = self.tiles_x * ((self.height + TILE - 1) // TILE)
+        g = means.shape[0]
+        self.feat = _POOL.take((g, FEATURES), np.float32)
+        rect = _POOL.take((g, 4), np.int32)
+        ntiles = _POOL.take((g,), np.int64)
+        _raster.project(means, quats, scales, opac, sh, self.cam, self.width, self.height, self.feat, rect, ntiles)
+        pairs = int(ntiles.sum())
+        self.pair_start = _POOL.take((g + 1,), np.int64)
+        self.tile_start = np.empty(tiles + 1, np.int32)
+        self.entries = _POOL.take((pairs,), np.int32)
+        self.entry_pair = _POOL.take((pairs,), np.int32)
+        self.visible = _raster.bin_tiles(self.feat, rect, ntiles, self.tiles_x, tiles // self.tiles_x,
+                                         self.pair_start, self.tile_start, self.entries, self.entry_pair)
+
+    def rasterize(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        h, w = self.height, self.width
+        rgb = np.empty((h, w, 3), np.float32)
+        alpha, depth = np.empty((h, w), np.float32), np.empty((h, w), np.float32)
+        self.t_final = np.empty((h, w), np.float64)
+        self.last = np.empty((h, w), np.int32)
+        _raster.rasterize(self.feat, self.tile_start, self.entries, self.tiles_x, w, h, self.background, rgb,
+                          alpha, depth, self.t_final, self.last)
+        return rgb, alpha, depth
+
+    def backward(self, grad_rgb: np.ndarray, grad_alpha: np.ndarray, geometry: bool = True) -> list[np.ndarray]:
+        """Gradients of means, quats, scales, opacities and sh; without ``geometry`` the first three
+        are not computed (and the arrays returned for them hold garbage)."""
+        means, quats, scales, _, sh = self.inputs
+        pair_grad = _POOL.take((len(self.entries), 9), np.float32)
+        _raster.rasterize_backward(self.feat, self.tile_start, self.entries, self.entry_pair, self.tiles_x,
+                                   self.width, self.height, self.background, grad_rgb, grad_alpha,
+                                   self.t_final, self.last, pair_grad)
+        grads = [_POOL.take(a.shape, np.float32) for a in self.inputs]
+        _raster.project_backward(means, quats, scales, sh, self.cam, self.pair_start, pair_grad, geometry, *grads)
+        return grads
+
+
+class _Render(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, means, quats, scales, opacities, sh, camera, background):
+        frame = _Frame([_f32(t) for t in (means, quats, scales, opacities, sh)], camera, background)
+        rgb, alpha, depth = frame.rasterize()
+        ctx.frame = frame
+        ctx.dtypes = [t.dtype for t in (means, quats, scales, opacities, sh)]
+        ctx.mark_non_differentiable(depth_t := torch.from_numpy(depth).to(means.dtype))
+        return torch.from_numpy(rgb).to(means.dtype), torch.from_numpy(alpha).to(means.dtype), depth_t
+
+    @staticmethod
+    def backward(ctx, grad_rgb, grad_alpha, _grad_depth):
+        h, w = ctx.frame.height, ctx.frame.width
+        grad_rgb = _f32(grad_rgb) if grad_rgb is not None else np.zeros((h, w, 3), np.float32)
+        grad_alpha = _f32(grad_alpha) if grad_alpha is not None else np.zeros((h, w), np.float32)
+        # frozen geometry (means, quats and scales not requiring grad): the projection's backward is skipped
+        grads = ctx.frame.backward(grad_rgb, grad_alpha, geometry=any(ctx.needs_input_grad[:3]))
+        ctx.frame = None
+        return (*(torch.from_numpy(g).to(dt) if need else None
+                  for g, dt, need in zip(grads, ctx.dtypes, ctx.needs_input_grad[:5], strict=True)), None, None)
+
+
+def render(
+    means: Tensor,  # [G, 3]
+    quats: Tensor,  # [G, 4] (w, x, y, z), normalised inside
+    scales: Tensor,  # [G, 3] standard deviations
+    opacities: Tensor,  # [G] in [0, 1]
+    sh: Tensor,  # [G, C, 3], C = (deg+1)^2
+    camera: Camera,
+    background: tuple[float, float, float] | Tensor = (0.0, 0.0, 0.0),
+) -> RenderOutput:
+    """Render one camera as :func:`training.splatter.render` does (spec/rendering.md), on the CPU.
+
+    Computes in float32 (other float dtypes are converted, and so are their gradients). Gradients
+    flow from rgb and alpha to every tensor argument; depth and the background get none.
+    """
+    _require()
+    g = means.shape[0]
+    if means.shape != (g, 3) or quats.shape != (g, 4) or scales.shape != (g, 3) or opacities.shape != (g,):
+        raise ValueError(f"shape mismatch: means {tuple(means.shape)}, quats {tuple(quats.shape)}, "
+                         f"scales {tuple(scales.shape)}, opacities {tuple(opacities.shape)}; want [G,3], "
+                         "[G,4], [G,3], [G]")
+    if sh.ndim != 3 or sh.shape[0] != g or sh.shape[2] != 3 or sh.shape[1] not in (1, 4, 9, 16):
+        raise ValueError(f"sh must be [G, (deg+1)^2, 3] with deg 0..3, got {tuple(sh.shape)}")
+    if any(t.device.type != "cpu" for t in (means, quats, scales, opacities, sh)):
+        raise ValueError("the native splatter runs on the CPU: pass CPU tensors (use gsplat on CUDA)")
+    bg = np.ascontiguousarray(torch.as_tensor(background).detach().reshape(3).to(torch.float32).numpy())
+    rgb, alpha, depth = _Render.apply(means, quats, scales, opacities, sh, camera, bg)
+    return RenderOutput(rgb, alpha, depth)
