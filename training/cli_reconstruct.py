@@ -30,6 +30,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="refinement iterations through the splatter (default: 100; 0 skips it)")
     p.add_argument("--meters-per-unit", type=positive_float, default=1.0,
                    help="scale of the dataset's scene units, written into the strands (default: 1)")
+    p.add_argument("--prior", metavar="FILE", help="strand prior for the refinement (from cgh fit-strand-prior); "
+                   "'none' for no prior (default: the built-in basis of the synthetic styles)")
     p.add_argument("--debug-dir", help="folder for each stage's images (orientation maps, hull projections)")
     p.add_argument("--resume", metavar="CKPT", help="continue from a checkpoint (<out>.recon.npz)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
@@ -60,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
         raise FileNotFoundError(2, "No such file or directory", str(out.parent))
     cfg = ReconstructConfig(strands=args.strands, points_per_strand=args.points, hull_resolution=args.hull_resolution,
                             refine_iters=args.refine_iters, meters_per_unit=args.meters_per_unit, seed=args.seed,
-                            backend=args.backend)
+                            backend=args.backend, prior=args.prior)
     ckpt = Path(args.resume) if args.resume else out.with_suffix(".recon.npz")
     ds = read_dataset(args.dataset)
     print(f"read {args.dataset}: {detect_layout(args.dataset).describe()}, {len(ds.train)} training views")

@@ -27,6 +27,7 @@ VERBS: dict[str, tuple[str, str]] = {
     "train": ("training.cli_train", "fit the compact appearance model to a multi-view dataset"),
     "eval": ("training.cli_eval", "PSNR/SSIM of a .cgh on a dataset's held-out views"),
     "reconstruct": ("training.cli_reconstruct", "reconstruct strands from a multi-view dataset with hair masks"),
+    "fit-strand-prior": ("training.cli_fit_prior", "fit a PCA basis of strand shapes for cgh reconstruct --prior"),
     "eval-strands": ("training.cli_eval_strands", "position, curvature, F1 of strands vs ground truth"),
     "view": ("viewer.cli", "open a .cgh in an interactive window"),
     "render": ("viewer.cli_render", "render a .cgh to a PNG, GIF or MP4 without a display"),

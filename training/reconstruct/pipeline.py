@@ -20,6 +20,7 @@ from cghair_format.strands import Strands
 
 from .hull import Grid, Hull, ReconstructError, check_masks, orientation_field, visual_hull
 from .orientation import OrientationMap, orientation_map, save_debug
+from .prior import BUILTIN as BUILTIN_PRIOR
 from .scalp import Roots, check_roots_in_hull, estimate_scalp, load_scalp_mesh, sample_mesh_roots
 
 STAGES = ("orientation", "hull", "scalp", "growth", "refine")
@@ -36,6 +37,7 @@ class ReconstructConfig:
     meters_per_unit: float = 1.0
     seed: int = 0
     backend: str | None = None
+    prior: str | None = None  # a strand prior file; None: the built-in basis, "none": no prior
 
     def validate(self) -> ReconstructConfig:
         if self.strands < 1 or self.points_per_strand < 4 or self.hull_resolution < 8 or self.orientations < 4:
@@ -174,7 +176,10 @@ def reconstruct(dataset, config: ReconstructConfig, checkpoint: str | Path, scal
             from .refine import refine_strands
 
             t0 = time.perf_counter()
-            result, hist = refine_strands(grown, views, maps, cfg, log=log)
+            from .prior import StrandPrior
+
+            strand_prior = None if cfg.prior == "none" else StrandPrior.load(cfg.prior or BUILTIN_PRIOR)
+            result, hist = refine_strands(grown, views, maps, cfg, up, strand_prior, log=log)
             losses["refine"] = hist
             state.update(_strands_state("refined", result))
             finish("refine", t0, f"loss {hist[0]:.4f} -> {hist[-1]:.4f} over {cfg.refine_iters} iterations")

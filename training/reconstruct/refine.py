@@ -3,8 +3,9 @@
 Every strand point but the root moves; each strand also gets a colour. Per iteration, on a few
 training views: photometric L1 (premultiplied RGB), mask L1 (rendered alpha against the hair
 mask), an orientation loss (``conf * sin^2`` of the angle between each projected segment and the
-2D orientation map at its midpoint), and a shape prior that keeps segment lengths and the bending
-(second differences) of the grown strands and pulls weakly towards them.
+2D orientation map at its midpoint), and a shape prior: the strands' distance from the PCA basis
+of :mod:`.prior`, plus terms that keep the grown strands' segment lengths and bending (second
+differences) and pull weakly towards them.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from cghair_format.strands import Strands
 from ..backends import renderer, resolve_backend
 from ..model import segment_gaussians
 from .orientation import OrientationMap
+from .prior import StrandPrior, canonical_frames
 
 VIEWS_PER_ITER = 2
 LR_VOXELS = 0.05  # Adam step for the points, in units of the strands' mean segment length
@@ -27,6 +29,7 @@ W_ORIENT = 0.1
 W_LENGTH = 1.0
 W_BEND = 1.0
 W_ANCHOR = 0.01
+W_PRIOR = 0.1
 OPACITY = 0.9
 THICKNESS_OF_SEGMENT = 0.15  # Gaussian radius as a fraction of the mean segment length
 
@@ -51,7 +54,21 @@ def _orientation_loss(points: torch.Tensor, cam, m: OrientationMap) -> torch.Ten
     return (conf * cross * cross).sum() / conf.sum().clamp_min(1e-9)
 
 
-def refine_strands(grown: Strands, views, maps: list[OrientationMap], cfg, log=print) -> tuple[Strands, list[float]]:
+def _prior_loss(pts: torch.Tensor, prior: StrandPrior, up: np.ndarray, scale: float) -> torch.Tensor:
+    """Mean squared distance (per point, in units of ``scale`` metres) of strands from the basis;
+    the canonical frames are held fixed within a step."""
+    idx = np.linspace(0, pts.shape[1] - 1, prior.points).round().astype(int)
+    sub = pts[:, idx] * scale
+    frames = torch.as_tensor(canonical_frames(sub.detach().double().numpy(), up), dtype=pts.dtype)
+    flat = torch.einsum("sij,spj->spi", frames, sub - sub[:, :1]).reshape(len(sub), -1)
+    d = flat - torch.as_tensor(prior.mean, dtype=pts.dtype)
+    comp = torch.as_tensor(prior.components, dtype=pts.dtype)
+    r = d - (d @ comp.T) @ comp
+    return r.pow(2).mean() * 3
+
+
+def refine_strands(grown: Strands, views, maps: list[OrientationMap], cfg, up: np.ndarray,
+                   strand_prior: StrandPrior | None = None, log=print) -> tuple[Strands, list[float]]:
     """``cfg.refine_iters`` Adam steps (see the module docstring); returns the strands and the loss
     history (mean of each tenth of the run)."""
     render = renderer(resolve_backend(cfg.backend))
@@ -84,10 +101,13 @@ def refine_strands(grown: Strands, views, maps: list[OrientationMap], cfg, log=p
             loss = loss + W_ORIENT * _orientation_loss(pts, views[k].camera, maps[k])
         seg = (pts[:, 1:] - pts[:, :-1]).norm(dim=-1)
         bend = pts[:, 2:] - 2 * pts[:, 1:-1] + pts[:, :-2]
-        prior = (W_LENGTH * ((seg - seg0) / mean_seg).pow(2).mean()
+        shape = (W_LENGTH * ((seg - seg0) / mean_seg).pow(2).mean()
                  + W_BEND * ((bend - bend0) / mean_seg).pow(2).sum(-1).mean()
                  + W_ANCHOR * (delta / mean_seg).pow(2).sum(-1).mean())
-        loss = loss / VIEWS_PER_ITER + prior
+        if strand_prior is not None:
+            metres = mean_seg * grown.meters_per_unit
+            shape = shape + W_PRIOR * _prior_loss(pts, strand_prior, up, grown.meters_per_unit) / metres ** 2
+        loss = loss / VIEWS_PER_ITER + shape
         opt.zero_grad()
         loss.backward()
         opt.step()
