@@ -21,7 +21,18 @@ MIN_POINTS = 4  # shorter strands (in steps) are dropped
 LIFT = 0.3
 SLIDE_MAX = np.radians(60.0)
 NUDGE = 0.2  # a sliding strand also steps this much inward, to stay off the boundary
+LOOKAHEAD = 2  # voxels
+GRACE = 4.0  # voxels a root outside the hull may travel to reach it
 INSIDE_LEVEL = 0.25  # interpolated occupancy above which a point is in the hull (a quarter voxel out)
+
+
+def _ahead_inside(occ: np.ndarray, hull: Hull, points: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """In the hull at ``points`` or within ``LOOKAHEAD`` voxels ahead along ``d``: a strand crosses
+    the small gaps that sparse masks carve into the hull."""
+    inside = np.zeros(len(points), bool)
+    for k in range(LOOKAHEAD + 1):
+        inside |= trilinear(occ, hull.grid.to_index(points + k * hull.grid.voxel * d)) > INSIDE_LEVEL
+    return inside
 
 
 def initial_directions(roots: Roots, up: np.ndarray) -> np.ndarray:
@@ -49,6 +60,7 @@ def grow_strands(hull: Hull, roots: Roots, up: np.ndarray, points_per_strand: in
     prev = initial_directions(roots, up)
     path = [pos.copy()]
     alive = np.ones(len(pos), bool)
+    entered = np.zeros(len(pos), bool)
     lengths = np.ones(len(pos), int)
     for _ in range(n_steps):
         if not alive.any():
@@ -60,7 +72,7 @@ def grow_strands(hull: Hull, roots: Roots, up: np.ndarray, points_per_strand: in
         norm = np.linalg.norm(d, axis=1, keepdims=True)
         d = np.where(norm > 1e-9, d / np.maximum(norm, 1e-12), prev[a])
         new = pos[a] + h * d
-        inside = trilinear(occ, hull.grid.to_index(new)) > INSIDE_LEVEL
+        inside = _ahead_inside(occ, hull, new, d)
         # at the boundary, slide along it unless that turns the strand by more than SLIDE_MAX
         out = np.flatnonzero(~inside)
         if len(out):
@@ -70,11 +82,12 @@ def grow_strands(hull: Hull, roots: Roots, up: np.ndarray, points_per_strand: in
             kept = np.linalg.norm(slid, axis=1)
             slid /= np.maximum(kept, 1e-12)[:, None]
             cand = pos[a[out]] + h * slid
-            ok = (kept > np.cos(SLIDE_MAX)) & (trilinear(occ, hull.grid.to_index(cand)) > INSIDE_LEVEL)
+            ok = (kept > np.cos(SLIDE_MAX)) & _ahead_inside(occ, hull, cand, slid)
             d[out[ok]], new[out[ok]], inside[out[ok]] = slid[ok], cand[ok], True
-        # a root under the surface (an estimated or given scalp) may start outside: let it reach in
-        started = lengths[a] > 2 / STEP
-        stop = ~inside & started
+        # a root off the hull (a given scalp where the masks carved the hairline) gets GRACE voxels
+        # to reach in; a strand stops when it leaves the hull after having been inside
+        entered[a] |= inside
+        stop = (~inside & entered[a]) | (~entered[a] & (lengths[a] > GRACE / STEP))
         go = a[~stop]
         pos[go], prev[go] = new[~stop], d[~stop]
         lengths[go] += 1
@@ -82,7 +95,7 @@ def grow_strands(hull: Hull, roots: Roots, up: np.ndarray, points_per_strand: in
         step_pts = pos.copy()
         path.append(step_pts)
     path = np.stack(path, 1)  # [R, T, 3]; a stopped strand repeats its last point
-    keep = lengths >= MIN_POINTS
+    keep = (lengths >= MIN_POINTS) & entered
     offsets = np.concatenate([[0], np.cumsum(lengths[keep])])
     flat = np.concatenate([path[i, :lengths[i]] for i in np.flatnonzero(keep)]) if keep.any() else np.zeros((0, 3))
     s = Strands(flat.astype(np.float32), offsets.astype(np.int64), meters_per_unit=meters_per_unit, up_axis=up_axis)
