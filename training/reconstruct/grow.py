@@ -22,6 +22,7 @@ LIFT = 0.3
 SLIDE_MAX = np.radians(60.0)
 NUDGE = 0.2  # a sliding strand also steps this much inward, to stay off the boundary
 LOOKAHEAD = 2  # voxels
+BOTTOM_COS = 0.5  # a boundary whose inward normal is within 60 degrees of up is a bottom
 GRACE = 4.0  # voxels a root outside the hull may travel to reach it
 INSIDE_LEVEL = 0.25  # interpolated occupancy above which a point is in the hull (a quarter voxel out)
 
@@ -49,6 +50,7 @@ def grow_strands(hull: Hull, roots: Roots, up: np.ndarray, points_per_strand: in
                  max_length: float | None = None, meters_per_unit: float = 1.0, up_axis: str = "Y") -> Strands:
     """Grow from ``roots``; returns strands resampled to ``points_per_strand`` points."""
     h = STEP * hull.grid.voxel
+    up = np.asarray(up, np.float64) / np.linalg.norm(up)
     if max_length is None:
         max_length = float(np.linalg.norm(np.array(hull.grid.shape) * hull.grid.voxel))
     n_steps = int(max_length / h)
@@ -82,7 +84,8 @@ def grow_strands(hull: Hull, roots: Roots, up: np.ndarray, points_per_strand: in
             kept = np.linalg.norm(slid, axis=1)
             slid /= np.maximum(kept, 1e-12)[:, None]
             cand = pos[a[out]] + h * slid
-            ok = (kept > np.cos(SLIDE_MAX)) & _ahead_inside(occ, hull, cand, slid)
+            # no sliding along a bottom (the inside above): hair ends there, it does not crawl
+            ok = (kept > np.cos(SLIDE_MAX)) & (g @ up < BOTTOM_COS) & _ahead_inside(occ, hull, cand, slid)
             d[out[ok]], new[out[ok]], inside[out[ok]] = slid[ok], cand[ok], True
         # a root off the hull (a given scalp where the masks carved the hairline) gets GRACE voxels
         # to reach in; a strand stops when it leaves the hull after having been inside
