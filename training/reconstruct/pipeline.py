@@ -19,7 +19,7 @@ import numpy as np
 from cghair_format.strands import Strands
 
 from .hull import Grid, Hull, ReconstructError, check_masks, orientation_field, visual_hull
-from .orientation import OrientationMap, orientation_map, save_debug
+from .orientation import orientation_map, save_debug
 from .prior import BUILTIN as BUILTIN_PRIOR
 from .scalp import Roots, check_roots_in_hull, estimate_scalp, load_scalp_mesh, sample_mesh_roots
 
@@ -202,4 +202,4 @@ def _save_hull_debug(hull: Hull, path: Path) -> None:
     Image.fromarray(np.concatenate(tiles, 1)).save(path)
 
 
-__all__ = ["STAGES", "OrientationMap", "ReconstructConfig", "Result", "reconstruct"]
+__all__ = ["STAGES", "ReconstructConfig", "Result", "reconstruct"]
