@@ -1,0 +1,1 @@
+"""From multi-view images to strands: strand metrics, 2D orientation maps, scalp, growth, refinement."""
