@@ -62,6 +62,7 @@ def test_the_writers_order_chains_alike_strands_card_by_card():
             assert dist[0] == dist.min()
 
 
+@pytest.mark.slow  # builds cards of a real model (5-8 s)
 def test_the_writer_stores_strands_in_canonical_order_unless_asked_to_keep_it():
     from cghair_format.cards import build_cards
 
@@ -85,6 +86,7 @@ def test_the_writer_stores_strands_in_canonical_order_unless_asked_to_keep_it():
     assert report.chunk_sizes["STRD"] < kept_report.chunk_sizes["STRD"]  # the ids' own chunk aside
 
 
+@pytest.mark.slow  # builds cards of a real model (5-8 s)
 def test_real_hair_stores_neighbour_differences_and_decodes_the_same_points():
     from cghair_format.cards import build_cards
     from cghair_format.residual_coder import read_residuals, write_residuals
@@ -189,6 +191,7 @@ def wavy_hair():
     return asset, cgh.encode(asset, "compact")
 
 
+@pytest.mark.slow  # harolongo on 120 cards: a 20 s fixture, then 5-8 s a test
 def test_wavy_strands_choose_wide_interpolation_and_code_smaller(wavy_hair, monkeypatch):
     """Strands that wave with a period of a few tens of points are under-sampled at the middle levels
     for 4-point interpolation: the writer takes wider ones there, and the file is smaller for it."""
@@ -200,6 +203,7 @@ def test_wavy_strands_choose_wide_interpolation_and_code_smaller(wavy_hair, monk
     assert len(data) < len(fours)
 
 
+@pytest.mark.slow  # harolongo on 120 cards: a 20 s fixture, then 5-8 s a test
 def test_searched_newton_steps_code_wavy_hair_smaller_within_the_bound(wavy_hair, monkeypatch):
     """A full Newton step can land where the card bends away (spec 4.3); halving it instead of giving
     up keeps the world-guided prediction. Measured: 504,200 bytes against 680,304 without halving."""
@@ -208,6 +212,7 @@ def test_searched_newton_steps_code_wavy_hair_smaller_within_the_bound(wavy_hair
     smaller_than_the_writer_now_and_within_bound(asset, coded, "newton_halvings", 4, 0, 0.9)
 
 
+@pytest.mark.slow  # harolongo on 120 cards: a 20 s fixture, then 5-8 s a test
 def test_stretched_residual_steps_code_wavy_hair_smaller_within_the_bound(wavy_hair, monkeypatch):
     """A card's u and v scales are its longest segment and widest point; where it is shorter or
     narrower, refinement steps stretched to the local scale (spec 4.3) cost fewer bits for the same
@@ -217,6 +222,7 @@ def test_stretched_residual_steps_code_wavy_hair_smaller_within_the_bound(wavy_h
     smaller_than_the_writer_now_and_within_bound(asset, coded, "stretch_max", 1.5, 1.0, 0.98)
 
 
+@pytest.mark.slow  # harolongo on 120 cards: a 20 s fixture, then 5-8 s a test
 def test_base_samples_guided_by_the_neighbours_steps_code_wavy_hair_smaller_within_the_bound(wavy_hair,
                                                                                               monkeypatch):
     """On a bending card the steps of strands side by side differ in card coordinates more than in world
@@ -227,6 +233,7 @@ def test_base_samples_guided_by_the_neighbours_steps_code_wavy_hair_smaller_with
     smaller_than_the_writer_now_and_within_bound(asset, coded, "base_guide", 3, 0, 0.97)
 
 
+@pytest.mark.slow  # harolongo on 120 cards: a 20 s fixture, then 5-8 s a test
 def test_base_samples_following_the_most_alike_earlier_strand_code_wavy_hair_smaller(wavy_hair, monkeypatch):
     """Along a wavy card the strand whose last steps were most like a strand's is often not its chain
     neighbour: taking the step from the most alike of the strands before it on the card (``base_guide``
@@ -239,6 +246,7 @@ def test_base_samples_following_the_most_alike_earlier_strand_code_wavy_hair_sma
     smaller_than_the_writer_now_and_within_bound(asset, coded, "base_guide", 3, 1, 0.985)
 
 
+@pytest.mark.slow  # harolongo on 120 cards: a 20 s fixture, then 5-8 s a test
 def test_level_references_code_wavy_hair_smaller_within_the_bound(wavy_hair, monkeypatch):
     """Each base segment's refinement residuals as differences from those of the strand before it on
     the card whose steps around that segment were most alike (``level_guide``, spec 4.3), rather than
@@ -495,6 +503,7 @@ def test_the_dead_zone_moves_a_sample_that_rounding_leaves_beyond_the_tolerance(
     assert beyond(real(*args, **kw)[2]) < plain / 10
 
 
+@pytest.mark.slow  # builds cards of a real model (5-8 s)
 def test_the_writer_tries_the_neighbours_residual_where_a_cards_strands_are_alike():
     """Densified strands (each between two real ones) are much alike: the neighbour's residual pays.
     Ratboy's strands, evenly re-spaced, are not alike enough, and the writer keeps the plain dead zone."""
