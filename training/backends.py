@@ -171,14 +171,4 @@ def render(backend: str, means: Tensor, quats: Tensor, scales: Tensor, opacities
 def render_gaussians(g: Gaussians, camera: Camera, background=(0.0, 0.0, 0.0), device: str | torch.device = "cpu",
                      backend: str = "reference") -> dict[str, np.ndarray]:
     """:func:`training.splatter.render_gaussians` with a choice of backend: numpy ``rgb``, ``alpha``, ``depth``."""
-    if backend == "reference":
-        return splatter.render_gaussians(g, camera, background, device)
-    if not isinstance(device, torch.device):
-        device = torch_device(device)
-
-    def t(a: np.ndarray) -> Tensor:
-        return torch.as_tensor(np.ascontiguousarray(a, np.float32), device=device)
-
-    with torch.no_grad():
-        out = render(backend, t(g.means), t(g.rotations), t(g.scales), t(g.opacities), t(g.sh), camera, background)
-    return {"rgb": out.rgb.cpu().numpy(), "alpha": out.alpha.cpu().numpy(), "depth": out.depth.cpu().numpy()}
+    return splatter.render_gaussians(g, camera, background, device, renderer(backend))

@@ -27,7 +27,7 @@ import torch
 from torch import Tensor
 
 from cghair_format.errors import CghError
-from training.splatter import RenderOutput
+from training.splatter import RenderOutput, check_shapes
 
 if TYPE_CHECKING:
     from cghair_format.camera import Camera
@@ -198,13 +198,7 @@ def render(
     flow from rgb and alpha to every tensor argument; depth and the background get none.
     """
     _require()
-    g = means.shape[0]
-    if means.shape != (g, 3) or quats.shape != (g, 4) or scales.shape != (g, 3) or opacities.shape != (g,):
-        raise ValueError(f"shape mismatch: means {tuple(means.shape)}, quats {tuple(quats.shape)}, "
-                         f"scales {tuple(scales.shape)}, opacities {tuple(opacities.shape)}; want [G,3], "
-                         "[G,4], [G,3], [G]")
-    if sh.ndim != 3 or sh.shape[0] != g or sh.shape[2] != 3 or sh.shape[1] not in (1, 4, 9, 16):
-        raise ValueError(f"sh must be [G, (deg+1)^2, 3] with deg 0..3, got {tuple(sh.shape)}")
+    check_shapes(means, quats, scales, opacities, sh)
     if any(t.device.type != "cpu" for t in (means, quats, scales, opacities, sh)):
         raise ValueError("the native splatter runs on the CPU: pass CPU tensors (use gsplat on CUDA)")
     bg = np.ascontiguousarray(torch.as_tensor(background).detach().reshape(3).to(torch.float32).numpy())

@@ -170,6 +170,17 @@ def _pairs(proj: Projection, opacity: Tensor, width: int, height: int) -> tuple[
         return px, row_y[row_of_pair], row_g[row_of_pair]
 
 
+def check_shapes(means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, sh: Tensor) -> None:
+    """A ValueError unless the arguments of a render are [G, 3], [G, 4], [G, 3], [G] and [G, C, 3]."""
+    g = means.shape[0]
+    if means.shape != (g, 3) or quats.shape != (g, 4) or scales.shape != (g, 3) or opacities.shape != (g,):
+        raise ValueError(f"shape mismatch: means {tuple(means.shape)}, quats {tuple(quats.shape)}, "
+                         f"scales {tuple(scales.shape)}, opacities {tuple(opacities.shape)}; want [G,3], "
+                         "[G,4], [G,3], [G]")
+    if sh.ndim != 3 or sh.shape[0] != g or sh.shape[2] != 3 or sh.shape[1] not in (1, 4, 9, 16):
+        raise ValueError(f"sh must be [G, (deg+1)^2, 3] with deg 0..3, got {tuple(sh.shape)}")
+
+
 def render(
     means: Tensor,  # [G, 3]
     quats: Tensor,  # [G, 4] (w, x, y, z), normalised inside
@@ -180,13 +191,7 @@ def render(
     background: tuple[float, float, float] | Tensor = (0.0, 0.0, 0.0),
 ) -> RenderOutput:
     """Render one camera; differentiable w.r.t. every tensor argument. Device follows ``means``."""
-    g = means.shape[0]
-    if means.shape != (g, 3) or quats.shape != (g, 4) or scales.shape != (g, 3) or opacities.shape != (g,):
-        raise ValueError(f"shape mismatch: means {tuple(means.shape)}, quats {tuple(quats.shape)}, "
-                         f"scales {tuple(scales.shape)}, opacities {tuple(opacities.shape)}; want [G,3], "
-                         "[G,4], [G,3], [G]")
-    if sh.ndim != 3 or sh.shape[0] != g or sh.shape[2] != 3 or sh.shape[1] not in (1, 4, 9, 16):
-        raise ValueError(f"sh must be [G, (deg+1)^2, 3] with deg 0..3, got {tuple(sh.shape)}")
+    check_shapes(means, quats, scales, opacities, sh)
     width, height = int(camera.width), int(camera.height)
     dtype, dev = means.dtype, means.device
     bg = torch.as_tensor(background, dtype=dtype, device=dev).reshape(3)
@@ -241,9 +246,11 @@ def render_batch(means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor
 
 
 def render_gaussians(g: Gaussians, camera: Camera, background=(0.0, 0.0, 0.0),
-                     device: str | torch.device = "cpu") -> dict[str, np.ndarray]:
-    """Render a :class:`cghair_format.Gaussians` set on the torch ``device``; returns numpy ``rgb``,
-    ``alpha``, ``depth``. Entry points pass a checked torch.device; a name is checked here."""
+                     device: str | torch.device = "cpu", render_fn=None) -> dict[str, np.ndarray]:
+    """Render a :class:`cghair_format.Gaussians` set on the torch ``device`` with ``render_fn`` (a
+    function of :func:`render`'s arguments; default :func:`render`); returns numpy ``rgb``, ``alpha``,
+    ``depth``. Entry points pass a checked torch.device; a name is checked here."""
+    render_fn = render if render_fn is None else render_fn
     if not isinstance(device, torch.device):
         device = torch_device(device)
 
@@ -251,5 +258,5 @@ def render_gaussians(g: Gaussians, camera: Camera, background=(0.0, 0.0, 0.0),
         return torch.as_tensor(np.ascontiguousarray(a, np.float32), device=device)
 
     with torch.no_grad():
-        out = render(t(g.means), t(g.rotations), t(g.scales), t(g.opacities), t(g.sh), camera, background)
+        out = render_fn(t(g.means), t(g.rotations), t(g.scales), t(g.opacities), t(g.sh), camera, background)
     return {"rgb": out.rgb.cpu().numpy(), "alpha": out.alpha.cpu().numpy(), "depth": out.depth.cpu().numpy()}
