@@ -1,5 +1,6 @@
-"""Builds the compiled kernels: the codec's (cghair_format/_native.pyx) and the training splatter's
-(training/_raster.pyx); everything else is in pyproject.toml."""
+"""Builds the compiled kernels: the codec's (cghair_format/_native.pyx) and training's (the splatter,
+training/_raster.pyx, and the card-bound Gaussians, training/_geometry.pyx); everything else is in
+pyproject.toml."""
 
 import sys
 
@@ -8,7 +9,7 @@ from setuptools import Extension, setup
 
 # No FMA contraction and no fast-math: encoder and decoder must round alike (spec 4.3).
 FLAGS = [] if sys.platform == "win32" else ["-O3", "-ffp-contract=off", "-fno-fast-math"]
-# The splatter runs its loops on every core (OpenMP); it makes no bit-exactness promise. Apple's
+# Training's kernels run their loops on every core (OpenMP); they make no bit-exactness promise. Apple's
 # clang has no -fopenmp: there its loops run on one core.
 if sys.platform == "win32":
     RASTER_FLAGS, RASTER_LINK = ["/O2", "/openmp"], []
@@ -20,5 +21,7 @@ else:
 setup(ext_modules=cythonize([
     Extension("cghair_format._native", ["cghair_format/_native.pyx"], extra_compile_args=FLAGS),
     Extension("training._raster", ["training/_raster.pyx"], extra_compile_args=RASTER_FLAGS,
+              extra_link_args=RASTER_LINK),
+    Extension("training._geometry", ["training/_geometry.pyx"], extra_compile_args=RASTER_FLAGS,
               extra_link_args=RASTER_LINK),
 ]))

@@ -27,6 +27,7 @@ from cghair_format.errors import CghError
 from cghair_format.gaussians import rgb_to_sh0
 from cghair_format.geometry import card_mesh
 
+from . import native_geometry
 from .config import TrainConfig
 
 WEIGHT_MODES = ("gumbel", "soft", "hard")
@@ -214,7 +215,9 @@ class HairModel(nn.Module):
         return self.geometry.points(self.uv, self.delta)
 
     def gaussian_geometry(self) -> tuple[Tensor, Tensor, Tensor]:
-        """Means, quaternions and scales of all Gaussians."""
+        """Means, quaternions and scales of all Gaussians (by the compiled kernel where it can run)."""
+        if native_geometry.usable(self.uv, self.delta, self.geometry.vertex_data):
+            return native_geometry.segment_gaussians(self.geometry, self.uv, self.delta, self.thickness)
         return segment_gaussians(self.points(), self.thickness)
 
     def forward(self, mode: str = "gumbel", tau: float = 1.0,
