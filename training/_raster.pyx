@@ -8,6 +8,8 @@ backward, run on every core through OpenMP with the GIL released.
 - :func:`rasterize`: per tile, front-to-back compositing with early termination (SH colours
   computed only for the Gaussians that contribute); keeps per pixel the final transmittance and
   the last contribution, all the backward pass needs.
+- :func:`contributors`: the same compositing on opacities alone, marking the Gaussians that
+  contribute, so that SH need be computed for those only.
 - :func:`rasterize_backward`: per tile, each pixel's contributions walked back to front;
   per (Gaussian, tile) gradients, then summed per Gaussian without races.
 - :func:`project_backward`: per Gaussian, gradients through SH and the projection.
@@ -16,7 +18,7 @@ backward, run on every core through OpenMP with the GIL released.
 from cython.parallel import prange
 
 from libc.math cimport ceil, expf, floor, isfinite, log, sqrt
-from libc.stdint cimport int32_t, int64_t, uint32_t
+from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t
 from libc.stdlib cimport free, malloc
 
 cdef enum:
@@ -384,8 +386,11 @@ cdef inline float raw_alpha(const float* f, int x, float dy, float* gauss, float
 
 cdef void raster_tile(int tile, int tiles_x, int width, int height, const float* feat,
                       const int32_t* tile_start, const int32_t* entries, const float* means, const float* sh,
-                      int nc, const double* cam, const float* bg, float* rgb, float* alpha, float* depth,
-                      double* t_final, int32_t* last, float* entry_colour) noexcept nogil:
+                      const int32_t* sh_row, int nc, const double* cam, const float* bg, float* rgb, float* alpha,
+                      float* depth, double* t_final, int32_t* last, float* entry_colour,
+                      uint8_t* contributes) noexcept nogil:
+    """Composites one tile. With ``contributes`` (and no SH) it only marks the Gaussians that
+    contribute, taking exactly the decisions of the full pass, whose colours are then black."""
     cdef int tx0 = (tile % tiles_x) * TILE, ty0 = (tile // tiles_x) * TILE
     cdef int tw = min(TILE, width - tx0), th = min(TILE, height - ty0)
     cdef double trans[TILE * TILE]
@@ -439,8 +444,14 @@ cdef void raster_tile(int tile, int tiles_x, int width, int height, const float*
                     ndone += 1
                     rowleft[y - ty0] -= 1
                     continue
-                if not have:  # kept per entry for the backward pass (each entry is this tile's alone)
-                    colour_of(means + 3 * g, sh + 3 * nc * g, nc, cam, col)
+                if not have and contributes != NULL:
+                    contributes[g] = 1
+                    col[0] = 0.0
+                    col[1] = 0.0
+                    col[2] = 0.0
+                    have = 1
+                elif not have:  # kept per entry for the backward pass (each entry is this tile's alone)
+                    colour_of(means + 3 * g, sh + 3 * nc * (sh_row[g] if sh_row != NULL else g), nc, cam, col)
                     for ch in range(3):
                         entry_colour[3 * e + ch] = <float>col[ch]
                     have = 1
@@ -464,22 +475,57 @@ cdef void raster_tile(int tile, int tiles_x, int width, int height, const float*
 
 
 def rasterize(const float[:, ::1] feat, const int32_t[::1] tile_start, const int32_t[::1] entries,
-              const float[:, ::1] means, const float[:, :, ::1] sh, const double[::1] cam, int tiles_x,
-              int width, int height, const float[::1] bg, float[:, :, ::1] rgb, float[:, ::1] alpha,
-              float[:, ::1] depth, double[:, ::1] t_final, int32_t[:, ::1] last, float[:, ::1] entry_colour):
+              const float[:, ::1] means, const float[:, :, ::1] sh, const int32_t[::1] sh_row,
+              const double[::1] cam, int tiles_x, int width, int height, const float[::1] bg,
+              float[:, :, ::1] rgb, float[:, ::1] alpha, float[:, ::1] depth, double[:, ::1] t_final,
+              int32_t[:, ::1] last, float[:, ::1] entry_colour):
     """Front-to-back compositing of every tile; also keeps per pixel the final transmittance and the
     index (within its tile's list) of the last contribution, -1 where none, and per entry the colour
-    of the Gaussian (written only for entries that contribute: those the backward pass reads)."""
+    of the Gaussian (written only for entries that contribute: those the backward pass reads).
+    Gaussian g's SH are row ``sh_row[g]`` of ``sh`` (row g where ``sh_row`` is empty)."""
     cdef int tile, tiles = tile_start.shape[0] - 1
     cdef const float* fp = &feat[0, 0] if feat.shape[0] > 0 else NULL
     cdef const int32_t* ep = &entries[0] if entries.shape[0] > 0 else NULL
     cdef const float* mp = &means[0, 0] if means.shape[0] > 0 else NULL
     cdef const float* shp = &sh[0, 0, 0] if sh.shape[0] > 0 else NULL
+    cdef const int32_t* rp = &sh_row[0] if sh_row.shape[0] > 0 else NULL
     cdef float* cp = &entry_colour[0, 0] if entry_colour.shape[0] > 0 else NULL
     cdef int nc = sh.shape[1]
     for tile in prange(tiles, nogil=True, schedule="dynamic"):
-        raster_tile(tile, tiles_x, width, height, fp, &tile_start[0], ep, mp, shp, nc, &cam[0], &bg[0],
-                    &rgb[0, 0, 0], &alpha[0, 0], &depth[0, 0], &t_final[0, 0], &last[0, 0], cp)
+        raster_tile(tile, tiles_x, width, height, fp, &tile_start[0], ep, mp, shp, rp, nc, &cam[0], &bg[0],
+                    &rgb[0, 0, 0], &alpha[0, 0], &depth[0, 0], &t_final[0, 0], &last[0, 0], cp, NULL)
+
+
+def contributors(const float[:, ::1] feat, const int32_t[::1] tile_start, const int32_t[::1] entries,
+                 int tiles_x, int width, int height, uint8_t[::1] contributes):
+    """Marks (sets to 1) the Gaussians that :func:`rasterize` would take a colour from: the same
+    compositing, on opacities alone. ``contributes`` must start zeroed."""
+    cdef int tile, tiles = tile_start.shape[0] - 1
+    cdef float bg[3]
+    cdef double cam[19]
+    cdef float* rgb
+    cdef float* alpha
+    cdef float* depth
+    cdef double* t_final
+    cdef int32_t* last
+    if entries.shape[0] == 0:
+        return
+    bg[0] = 0
+    bg[1] = 0
+    bg[2] = 0
+    rgb = <float*>malloc(3 * width * height * sizeof(float))
+    alpha = <float*>malloc(width * height * sizeof(float))
+    depth = <float*>malloc(width * height * sizeof(float))
+    t_final = <double*>malloc(width * height * sizeof(double))
+    last = <int32_t*>malloc(width * height * sizeof(int32_t))
+    for tile in prange(tiles, nogil=True, schedule="dynamic"):
+        raster_tile(tile, tiles_x, width, height, &feat[0, 0], &tile_start[0], &entries[0], NULL, NULL, NULL, 0,
+                    cam, bg, rgb, alpha, depth, t_final, last, NULL, &contributes[0])
+    free(rgb)
+    free(alpha)
+    free(depth)
+    free(t_final)
+    free(last)
 
 
 cdef void raster_tile_backward(int tile, int tiles_x, int width, int height, const float* feat,
@@ -724,18 +770,21 @@ cdef void project_backward_one(const float* mean, const float* quat, const float
 
 
 def project_backward(const float[:, ::1] means, const float[:, ::1] quats, const float[:, ::1] scales,
-                     const float[:, :, ::1] sh, const double[::1] cam, const int64_t[::1] pair_start,
-                     const float[:, ::1] pair_grad, bint geometry, float[:, ::1] g_means,
-                     float[:, ::1] g_quats, float[:, ::1] g_scales, float[::1] g_opacities,
-                     float[:, :, ::1] g_sh):
+                     const float[:, :, ::1] sh, const int32_t[::1] sh_row, const double[::1] cam,
+                     const int64_t[::1] pair_start, const float[:, ::1] pair_grad, bint geometry,
+                     float[:, ::1] g_means, float[:, ::1] g_quats, float[:, ::1] g_scales,
+                     float[::1] g_opacities, float[:, :, ::1] g_sh):
     """Per Gaussian, its pairs' gradients summed, then taken back through the SH colour and the
     projection to the inputs; every output row is written (zeros where the Gaussian has no pair).
     Without ``geometry`` only the opacity and SH gradients are computed (g_means, g_quats and
-    g_scales are left as they are): the geometry is frozen."""
-    cdef Py_ssize_t g
+    g_scales are left as they are): the geometry is frozen. SH rows as in :func:`rasterize`: with
+    ``sh_row``, only the Gaussians that contributed have one (and only they get a gradient)."""
+    cdef Py_ssize_t g, row
     cdef int k, nc = sh.shape[1]
     cdef const float* pg = &pair_grad[0, 0] if pair_grad.shape[0] > 0 else NULL
+    cdef bint rows = sh_row.shape[0] > 0
     for g in prange(means.shape[0], nogil=True, schedule="static"):
+        row = sh_row[g] if rows else g
         if pair_start[g + 1] == pair_start[g]:
             for k in range(3):
                 g_means[g, k] = 0
@@ -743,10 +792,19 @@ def project_backward(const float[:, ::1] means, const float[:, ::1] quats, const
             for k in range(4):
                 g_quats[g, k] = 0
             g_opacities[g] = 0
-            for k in range(3 * nc):
-                g_sh[g, k // 3, k % 3] = 0
+            if row >= 0:
+                for k in range(3 * nc):
+                    g_sh[row, k // 3, k % 3] = 0
             continue
-        project_backward_one(&means[g, 0], &quats[g, 0], &scales[g, 0], &sh[g, 0, 0], nc, &cam[0],
+        if row < 0:  # no contribution (rasterize took no colour): only the opacity's gradient, zero
+            for k in range(3):
+                g_means[g, k] = 0
+                g_scales[g, k] = 0
+            for k in range(4):
+                g_quats[g, k] = 0
+            g_opacities[g] = 0
+            continue
+        project_backward_one(&means[g, 0], &quats[g, 0], &scales[g, 0], &sh[row, 0, 0], nc, &cam[0],
                              pg + 9 * pair_start[g], pair_start[g + 1] - pair_start[g], geometry,
                              &g_means[g, 0],
-                             &g_quats[g, 0], &g_scales[g, 0], &g_opacities[g], &g_sh[g, 0, 0])
+                             &g_quats[g, 0], &g_scales[g, 0], &g_opacities[g], &g_sh[row, 0, 0])

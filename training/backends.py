@@ -151,14 +151,25 @@ def render_gsplat(means, quats, scales, opacities, sh, camera, background=(0.0, 
 # --- one entry point ---------------------------------------------------------------------------------------
 
 
+def _all_sh(render_fn):
+    """``render_fn`` taking, as the native splatter does, SH or a function of Gaussian indices giving
+    them (:meth:`training.model.HairModel.sh_source`): here asked for all of them."""
+    def render_any(means, quats, scales, opacities, sh, camera, background=(0.0, 0.0, 0.0)) -> RenderOutput:
+        return render_fn(means, quats, scales, opacities, sh if isinstance(sh, Tensor) else sh(None), camera,
+                         background)
+    return render_any
+
+
 def renderer(backend: str):
-    """The ``render(means, quats, scales, opacities, sh, camera, background)`` function of a backend."""
+    """The ``render(means, quats, scales, opacities, sh, camera, background)`` function of a backend;
+    ``sh`` is ``[G, C, 3]`` or a function from Gaussian indices (None: all) to their SH, which the
+    native backend asks only for the Gaussians that contribute."""
     if backend == "reference":
-        return splatter.render
+        return _all_sh(splatter.render)
     if backend == "native":
         return _native_module().render
     if backend == "gsplat":
-        return render_gsplat
+        return _all_sh(render_gsplat)
     raise BackendError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
 
 

@@ -16,6 +16,7 @@ Gaussians follow :func:`cghair_format.gaussians.segment_frames`. Appearance by v
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 import torch
@@ -186,14 +187,6 @@ class HairModel(nn.Module):
             return F.one_hot(self.logits.argmax(-1), self.logits.shape[1]).to(self.logits.dtype)
         raise ValueError(f"weight mode must be one of {WEIGHT_MODES}, got {mode!r}")
 
-    def run_mlp(self, latents: Tensor) -> Tensor:
-        h = latents
-        for i, layer in enumerate(self.mlp):
-            h = layer(h)
-            if i < len(self.mlp) - 1:
-                h = torch.relu(h)
-        return h
-
     def mix(self, weights: Tensor) -> Tensor:
         """``sum_k weights[s, k] codebooks[group(s), k]``, ``[S, ...]``, without gathering ``[S, K, ...]``."""
         books = self.codebooks.reshape(-1, self.codebooks.shape[-1])
@@ -201,15 +194,39 @@ class HairModel(nn.Module):
 
     def strand_sh(self, mode: str = "gumbel", tau: float = 1.0) -> Tensor:
         """SH ``[S*(P-1), C, 3]`` of every Gaussian, strand-major."""
+        return self.sh_source(mode, tau)(None)
+
+    def sh_source(self, mode: str = "gumbel", tau: float = 1.0) -> Callable[[Tensor | None], Tensor]:
+        """A function from Gaussian indices ``[n]`` (strand-major; None: all) to their SH ``[n, C, 3]``,
+        with the codebook weights drawn once, now. For the MLP variants it runs the last layer only
+        for the Gaussians asked for: a renderer that asks only for those it shows (the native
+        splatter) skips most of the model's work and memory in dense hair."""
+        per_gaussian = self.sh_coeffs * 3
         if self.variant in ("latents", "no-card-clustering"):
-            out = self.run_mlp(self.mix(self.weights(mode, tau)))
+            hidden = self.mix(self.weights(mode, tau))
+            for layer in self.mlp[:-1]:
+                hidden = torch.relu(layer(hidden))
+            last = self.mlp[-1]
+
+            def rows(index: Tensor | None) -> Tensor:
+                if index is None:
+                    return last(hidden)
+                return segment_rows(hidden, last.weight, last.bias, index, self.n_points - 1)
         elif self.variant == "multi-sh":
-            out = self.mix(self.weights(mode, tau))
+            mixed = self.mix(self.weights(mode, tau)).reshape(-1, per_gaussian)
+
+            def rows(index: Tensor | None) -> Tensor:
+                return mixed if index is None else mixed[index]
         elif self.variant == "single-sh":
-            out = self.sh_per_strand.repeat(1, self.n_points - 1)
+            def rows(index: Tensor | None) -> Tensor:
+                if index is None:
+                    return self.sh_per_strand.repeat(1, self.n_points - 1)
+                return self.sh_per_strand[torch.div(index, self.n_points - 1, rounding_mode="floor")]
         else:
-            out = self.sh_per_gaussian
-        return out.reshape(-1, self.sh_coeffs, 3)
+            def rows(index: Tensor | None) -> Tensor:
+                every = self.sh_per_gaussian.reshape(-1, per_gaussian)
+                return every if index is None else every[index]
+        return lambda index: rows(index).reshape(-1, self.sh_coeffs, 3)
 
     def points(self) -> Tensor:
         return self.geometry.points(self.uv, self.delta)
@@ -276,6 +293,58 @@ class HairModel(nn.Module):
                          up_axis=base.up_axis, generator="cghair train", attribution=base.attribution,
                          strand_ids=base.strand_ids, root_uv=base.root_uv, source_color=base.source_color,
                          metadata=dict(base.metadata)).validate()
+
+
+class _SegmentRows(torch.autograd.Function):
+    """Forward and backward of :func:`segment_rows` by hand: autograd through a hundred slices of
+    the gathered inputs would allocate and fill a full-size gradient for each."""
+
+    @staticmethod
+    def forward(ctx, hidden, weight, bias, index, segments):
+        width = weight.shape[0] // segments
+        strand = torch.div(index, segments, rounding_mode="floor")
+        block = index - strand * segments
+        order = torch.argsort(block, stable=True)
+        counts = torch.bincount(block, minlength=segments).tolist()
+        strand = strand[order]
+        picked = hidden[strand]
+        w, b = weight.reshape(segments, width, -1), bias.reshape(segments, width)
+        out = hidden.new_empty((len(index), width))
+        start = 0
+        for k, n in enumerate(counts):
+            torch.addmm(b[k], picked[start:start + n], w[k].t(), out=out[start:start + n])
+            start += n
+        ctx.save_for_backward(picked, weight, strand, order)
+        ctx.counts, ctx.n_hidden = counts, hidden.shape[0]
+        unsorted = torch.empty_like(out)
+        unsorted[order] = out
+        return unsorted
+
+    @staticmethod
+    def backward(ctx, grad):
+        picked, weight, strand, order = ctx.saved_tensors
+        segments = len(ctx.counts)
+        width = weight.shape[0] // segments
+        grad = grad[order]
+        w = weight.reshape(segments, width, -1)
+        g_weight, g_bias = torch.zeros_like(w), grad.new_zeros((segments, width))
+        g_picked = torch.empty_like(picked)
+        start = 0
+        for k, n in enumerate(ctx.counts):
+            rows = slice(start, start + n)
+            torch.mm(grad[rows].t(), picked[rows], out=g_weight[k])
+            torch.sum(grad[rows], 0, out=g_bias[k])
+            torch.mm(grad[rows], w[k], out=g_picked[rows])
+            start += n
+        g_hidden = picked.new_zeros((ctx.n_hidden, picked.shape[1])).index_add_(0, strand, g_picked)
+        return g_hidden, g_weight.reshape(weight.shape), g_bias.reshape(-1), None, None
+
+
+def segment_rows(hidden: Tensor, weight: Tensor, bias: Tensor, index: Tensor, segments: int) -> Tensor:
+    """Rows ``index`` of ``hidden @ weight.T + bias`` viewed as ``[S * segments, out / segments]``
+    (Gaussian ``i`` is strand ``i // segments``'s block ``i % segments``), computing only those:
+    one small product per block."""
+    return _SegmentRows.apply(hidden, weight, bias, index, segments)
 
 
 def tau_at(config: TrainConfig, iteration: int) -> float:

@@ -20,6 +20,7 @@ and reused between calls (:func:`release_memory` drops them).
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -39,6 +40,9 @@ except ImportError:  # not built: render() says how to build it
 
 TILE = 16  # tile side in pixels, as in _raster.pyx
 FEATURES = 10  # per-Gaussian features the kernel keeps, as NF in _raster.pyx
+
+
+ShSource = Callable[[Tensor | None], Tensor]  # Gaussian indices -> their SH [n, C, 3]; None: all
 
 
 class NativeSplatterMissing(CghError, ImportError):
@@ -114,10 +118,10 @@ def _f32(t: Tensor) -> np.ndarray:
 class _Frame:
     """What one forward pass leaves for its backward pass."""
 
-    def __init__(self, inputs: list[np.ndarray], camera: Camera, background: np.ndarray):
+    def __init__(self, geometry: list[np.ndarray], camera: Camera, background: np.ndarray):
         _require()
-        means, quats, scales, opac, sh = inputs
-        self.inputs = inputs
+        means, quats, scales, opac = geometry
+        self.geometry = geometry
         self.cam = _camera_vector(camera)
         self.width, self.height = int(camera.width), int(camera.height)
         self.background = background
@@ -135,37 +139,48 @@ class _Frame:
         self.entry_pair = _POOL.take((pairs,), np.int32)
         self.visible = _raster.bin_tiles(self.feat, rect, ntiles, self.tiles_x, tiles // self.tiles_x,
                                          self.pair_start, self.tile_start, self.entries, self.entry_pair)
+        self.sh, self.sh_row = None, np.empty(0, np.int32)
 
-    def rasterize(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def contributors(self) -> np.ndarray:
+        """Indices of the Gaussians that :meth:`rasterize` takes a colour from, ascending."""
+        flags = np.zeros(len(self.geometry[0]), np.uint8)
+        _raster.contributors(self.feat, self.tile_start, self.entries, self.tiles_x, self.width, self.height, flags)
+        return np.flatnonzero(flags)
+
+    def rasterize(self, sh: np.ndarray, rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The image; Gaussian g's SH are ``sh[rows[g]]`` (``sh[g]`` without ``rows``)."""
         h, w = self.height, self.width
+        self.sh = sh
+        if rows is not None:
+            self.sh_row = rows
         rgb = np.empty((h, w, 3), np.float32)
         alpha, depth = np.empty((h, w), np.float32), np.empty((h, w), np.float32)
         self.t_final = np.empty((h, w), np.float64)
         self.last = np.empty((h, w), np.int32)
-        means, sh = self.inputs[0], self.inputs[4]
         self.entry_colour = _POOL.take((len(self.entries), 3), np.float32)
-        _raster.rasterize(self.feat, self.tile_start, self.entries, means, sh, self.cam, self.tiles_x, w, h,
-                          self.background, rgb, alpha, depth, self.t_final, self.last, self.entry_colour)
+        _raster.rasterize(self.feat, self.tile_start, self.entries, self.geometry[0], sh, self.sh_row, self.cam,
+                          self.tiles_x, w, h, self.background, rgb, alpha, depth, self.t_final, self.last,
+                          self.entry_colour)
         return rgb, alpha, depth
 
     def backward(self, grad_rgb: np.ndarray, grad_alpha: np.ndarray, geometry: bool = True) -> list[np.ndarray]:
         """Gradients of means, quats, scales, opacities and sh; without ``geometry`` the first three
         are not computed (and the arrays returned for them hold garbage)."""
-        means, quats, scales, _, sh = self.inputs
+        means, quats, scales, _ = self.geometry
         pair_grad = _POOL.take((len(self.entries), 9), np.float32)
         _raster.rasterize_backward(self.feat, self.tile_start, self.entries, self.entry_pair, self.entry_colour,
                                    self.tiles_x, self.width, self.height, self.background, grad_rgb, grad_alpha,
                                    self.t_final, self.last, pair_grad)
-        grads = [_POOL.take(a.shape, np.float32) for a in self.inputs]
-        _raster.project_backward(means, quats, scales, sh, self.cam, self.pair_start, pair_grad, geometry, *grads)
+        grads = [_POOL.take(a.shape, np.float32) for a in (*self.geometry, self.sh)]
+        _raster.project_backward(means, quats, scales, self.sh, self.sh_row, self.cam, self.pair_start, pair_grad,
+                                 geometry, *grads)
         return grads
 
 
 class _Render(torch.autograd.Function):
     @staticmethod
-    def forward(ctx, means, quats, scales, opacities, sh, camera, background):
-        frame = _Frame([_f32(t) for t in (means, quats, scales, opacities, sh)], camera, background)
-        rgb, alpha, depth = frame.rasterize()
+    def forward(ctx, means, quats, scales, opacities, sh, frame, rows):
+        rgb, alpha, depth = frame.rasterize(_f32(sh), rows)
         ctx.frame = frame
         ctx.dtypes = [t.dtype for t in (means, quats, scales, opacities, sh)]
         ctx.mark_non_differentiable(depth_t := torch.from_numpy(depth).to(means.dtype))
@@ -188,19 +203,32 @@ def render(
     quats: Tensor,  # [G, 4] (w, x, y, z), normalised inside
     scales: Tensor,  # [G, 3] standard deviations
     opacities: Tensor,  # [G] in [0, 1]
-    sh: Tensor,  # [G, C, 3], C = (deg+1)^2
+    sh: Tensor | ShSource,  # [G, C, 3], C = (deg+1)^2, or a function of Gaussian indices
     camera: Camera,
     background: tuple[float, float, float] | Tensor = (0.0, 0.0, 0.0),
 ) -> RenderOutput:
     """Render one camera as :func:`training.splatter.render` does (spec/rendering.md), on the CPU.
 
+    ``sh`` may also be a function that returns the SH ``[n, C, 3]`` of the Gaussians at indices
+    ``[n]`` (all of them for None): it is then asked only for those that contribute to the image,
+    which in dense hair are a small part (the image is the same).
+
     Computes in float32 (other float dtypes are converted, and so are their gradients). Gradients
     flow from rgb and alpha to every tensor argument; depth and the background get none.
     """
     _require()
-    check_shapes(means, quats, scales, opacities, sh)
-    if any(t.device.type != "cpu" for t in (means, quats, scales, opacities, sh)):
+    check_shapes(means, quats, scales, opacities, sh if isinstance(sh, Tensor) else None)
+    if any(t.device.type != "cpu" for t in (means, quats, scales, opacities)):
         raise ValueError("the native splatter runs on the CPU: pass CPU tensors (use gsplat on CUDA)")
     bg = np.ascontiguousarray(torch.as_tensor(background).detach().reshape(3).to(torch.float32).numpy())
-    rgb, alpha, depth = _Render.apply(means, quats, scales, opacities, sh, camera, bg)
+    frame = _Frame([_f32(t) for t in (means, quats, scales, opacities)], camera, bg)
+    rows = None
+    if not isinstance(sh, Tensor):
+        index = frame.contributors()
+        rows = np.full(len(means), -1, np.int32)
+        rows[index] = np.arange(len(index), dtype=np.int32)
+        sh = sh(torch.from_numpy(index))
+        if sh.ndim != 3 or sh.shape[0] != len(index) or sh.shape[1:] not in ((1, 3), (4, 3), (9, 3), (16, 3)):
+            raise ValueError(f"the SH function gave {tuple(sh.shape)} for {len(index)} Gaussians; want [n, C, 3]")
+    rgb, alpha, depth = _Render.apply(means, quats, scales, opacities, sh, frame, rows)
     return RenderOutput(rgb, alpha, depth)

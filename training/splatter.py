@@ -170,14 +170,15 @@ def _pairs(proj: Projection, opacity: Tensor, width: int, height: int) -> tuple[
         return px, row_y[row_of_pair], row_g[row_of_pair]
 
 
-def check_shapes(means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, sh: Tensor) -> None:
-    """A ValueError unless the arguments of a render are [G, 3], [G, 4], [G, 3], [G] and [G, C, 3]."""
+def check_shapes(means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, sh: Tensor | None) -> None:
+    """A ValueError unless the arguments of a render are [G, 3], [G, 4], [G, 3], [G] and [G, C, 3]
+    (``sh`` None: not checked)."""
     g = means.shape[0]
     if means.shape != (g, 3) or quats.shape != (g, 4) or scales.shape != (g, 3) or opacities.shape != (g,):
         raise ValueError(f"shape mismatch: means {tuple(means.shape)}, quats {tuple(quats.shape)}, "
                          f"scales {tuple(scales.shape)}, opacities {tuple(opacities.shape)}; want [G,3], "
                          "[G,4], [G,3], [G]")
-    if sh.ndim != 3 or sh.shape[0] != g or sh.shape[2] != 3 or sh.shape[1] not in (1, 4, 9, 16):
+    if sh is not None and (sh.ndim != 3 or sh.shape[0] != g or sh.shape[2] != 3 or sh.shape[1] not in (1, 4, 9, 16)):
         raise ValueError(f"sh must be [G, (deg+1)^2, 3] with deg 0..3, got {tuple(sh.shape)}")
 
 

@@ -290,9 +290,11 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
             elif frozen is None:  # frozen geometry: the Gaussians' positions are computed once
                 with torch.no_grad():
                     frozen = model.gaussian_geometry()
-            gauss = model("gumbel", tau, frozen)
+            means, quats, scales = frozen if frozen is not None else model.gaussian_geometry()
+            sh = model.sh_source("gumbel", tau)  # the native backend runs it for the Gaussians it shows only
             t1 = clock()
-            out_img = render(*gauss, ds.train[v].camera, tuple(config.background))
+            out_img = render(means, quats, scales, model.opacities().reshape(-1), sh, ds.train[v].camera,
+                             tuple(config.background))
             t2 = clock()
             loss = (losses.image_loss(out_img.rgb, targets[v], config.lambda_dssim)
                     + config.lambda_alpha * losses.l1(out_img.alpha, masks[v])

@@ -127,3 +127,21 @@ def test_config_round_trip_and_errors(tmp_path):
         TrainConfig(codebook_size=300).validate()
     cfg = TrainConfig(iterations=100, tau_start=1.0, tau_end=0.1)
     assert tau_at(cfg, 0) == 1.0 and abs(tau_at(cfg, 100) - 0.1) < 1e-12
+
+
+@pytest.mark.parametrize("variant", ["latents", "no-card-clustering", "multi-sh", "single-sh", "unique"])
+def test_sh_source_of_some_gaussians_is_those_rows_of_all(variant):
+    """What the native splatter asks for (a few Gaussians, any order) is what the full SH hold there,
+    and gradients reach the same parameters."""
+    model = HairModel(example_asset(seed=1, sh_degree=1), _config(variant))
+    _perturbed(model)
+    torch.manual_seed(0)
+    source = model.sh_source("soft", 0.5)
+    every = source(None)
+    index = torch.randperm(len(every))[: len(every) // 3]
+    some = source(index)
+    assert some.shape == (len(index), *every.shape[1:])
+    assert torch.allclose(some, every[index], rtol=1e-5, atol=1e-6)
+    some.sum().backward()
+    appearance = [p for name, p in model.named_parameters() if name not in ("uv", "delta", "opacity_logit")]
+    assert appearance and all(p.grad is not None for p in appearance)

@@ -157,8 +157,8 @@ def dense_pile():
 def test_early_termination_is_within_its_bound():
     scene, cam = dense_pile(), camera(32, 24)
     ref = splatter.render(*[t.double() for t in scene], cam, BACKGROUND)
-    frame = native_splat._Frame([native_splat._f32(t) for t in scene], cam, np.asarray(BACKGROUND, np.float32))
-    rgb, alpha, _ = (torch.from_numpy(a).double() for a in frame.rasterize())
+    frame = native_splat._Frame([native_splat._f32(t) for t in scene[:4]], cam, np.asarray(BACKGROUND, np.float32))
+    rgb, alpha, _ = (torch.from_numpy(a).double() for a in frame.rasterize(native_splat._f32(scene[4])))
     t_final = torch.from_numpy(frame.t_final)
     stopped = (t_final >= 1e-4) & (1 - ref.alpha < 1e-4)
     assert int(stopped.sum()) > 20  # early termination did trigger
@@ -221,3 +221,38 @@ def test_bad_shapes_are_rejected():
     scene[2] = scene[2][:, :2]
     with pytest.raises(ValueError, match="shape mismatch"):
         native_splat.render(*scene, camera())
+
+
+def test_sh_asked_only_for_contributing_gaussians_gives_the_same_render_and_gradients():
+    """render() with a function of Gaussian indices for the SH: asked once, for the contributing
+    Gaussians only (fewer than all in a dense pile), and the image and every gradient are those of
+    the full SH tensor, bit for bit (the same arithmetic per Gaussian)."""
+    scene, cam = dense_pile(), camera(32, 24)
+    gen = torch.Generator().manual_seed(6)  # and 100 small Gaussians behind the pile's opaque middle
+    behind = -0.3 * torch.as_tensor(cam.center, dtype=torch.float32) / float(np.linalg.norm(cam.center))
+    hidden = [behind + 0.01 * torch.randn(100, 3, generator=gen), torch.randn(100, 4, generator=gen),
+              torch.full((100, 3), 0.02), torch.full((100,), 0.9), torch.randn(100, 4, 3, generator=gen)]
+    scene = [torch.cat([a, b]) for a, b in zip(scene, hidden, strict=True)]
+    full = [t.clone().requires_grad_(True) for t in scene]
+    out = native_splat.render(*full, cam, BACKGROUND)
+    (out.rgb.sum() + out.alpha.sum()).backward()
+    lazy, asked = [t.clone().requires_grad_(True) for t in scene], []
+
+    def sh_of(index):
+        asked.append(index)
+        return lazy[4][index]
+
+    out_lazy = native_splat.render(*lazy[:4], sh_of, cam, BACKGROUND)
+    (out_lazy.rgb.sum() + out_lazy.alpha.sum()).backward()
+    assert len(asked) == 1 and 0 < len(asked[0]) < len(scene[0])
+    shown = full[4].grad.abs().sum((1, 2)) > 0  # the full render's SH gradient marks what it showed
+    assert set(torch.nonzero(shown).ravel().tolist()) <= set(asked[0].tolist())
+    assert torch.equal(out.rgb, out_lazy.rgb) and torch.equal(out.alpha, out_lazy.alpha)
+    for a, b in zip(full, lazy, strict=True):
+        assert torch.equal(a.grad, b.grad)
+
+
+def test_a_bad_sh_function_is_refused():
+    scene, cam = dense_pile(), camera(32, 24)
+    with pytest.raises(ValueError, match="SH function"):
+        native_splat.render(*scene[:4], lambda index: scene[4][:3], cam, BACKGROUND)
