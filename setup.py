@@ -1,5 +1,6 @@
 """Builds the compiled kernels: the codec's (cghair_format/_native.pyx) and training's (the splatter,
-training/_raster.pyx, and the card-bound Gaussians, training/_geometry.pyx); everything else is in
+training/_raster.pyx, the card-bound Gaussians, training/_geometry.pyx, and the SH rows of the
+Gaussians shown, training/_rows.pyx); everything else is in
 pyproject.toml."""
 
 import sys
@@ -23,5 +24,7 @@ setup(ext_modules=cythonize([
     Extension("training._raster", ["training/_raster.pyx"], extra_compile_args=RASTER_FLAGS,
               extra_link_args=RASTER_LINK),
     Extension("training._geometry", ["training/_geometry.pyx"], extra_compile_args=RASTER_FLAGS,
+              extra_link_args=RASTER_LINK),
+    Extension("training._rows", ["training/_rows.pyx"], extra_compile_args=RASTER_FLAGS,
               extra_link_args=RASTER_LINK),
 ]))

@@ -29,6 +29,11 @@ from cghair_format.gaussians import rgb_to_sh0
 from cghair_format.geometry import card_mesh
 
 from . import native_geometry
+
+try:
+    from training import _rows
+except ImportError:  # not built: segment_rows computes every row
+    _rows = None
 from .config import TrainConfig
 
 WEIGHT_MODES = ("gumbel", "soft", "hard")
@@ -296,54 +301,44 @@ class HairModel(nn.Module):
 
 
 class _SegmentRows(torch.autograd.Function):
-    """Forward and backward of :func:`segment_rows` by hand: autograd through a hundred slices of
-    the gathered inputs would allocate and fill a full-size gradient for each."""
+    """:func:`segment_rows` through the compiled kernel (training/_rows.pyx)."""
 
     @staticmethod
     def forward(ctx, hidden, weight, bias, index, segments):
         width = weight.shape[0] // segments
         strand = torch.div(index, segments, rounding_mode="floor")
         block = index - strand * segments
-        order = torch.argsort(block, stable=True)
-        counts = torch.bincount(block, minlength=segments).tolist()
-        strand = strand[order]
-        picked = hidden[strand]
-        w, b = weight.reshape(segments, width, -1), bias.reshape(segments, width)
+        h = hidden.detach().contiguous()
+        w = weight.detach().reshape(segments, width, -1)
         out = hidden.new_empty((len(index), width))
-        start = 0
-        for k, n in enumerate(counts):
-            torch.addmm(b[k], picked[start:start + n], w[k].t(), out=out[start:start + n])
-            start += n
-        ctx.save_for_backward(picked, weight, strand, order)
-        ctx.counts, ctx.n_hidden = counts, hidden.shape[0]
-        unsorted = torch.empty_like(out)
-        unsorted[order] = out
-        return unsorted
+        _rows.forward(h.numpy(), w.transpose(1, 2).contiguous().numpy(),
+                      bias.detach().reshape(segments, width).contiguous().numpy(), strand.numpy(), block.numpy(),
+                      out.numpy())
+        ctx.save_for_backward(h, w, strand, block)
+        return out
 
     @staticmethod
     def backward(ctx, grad):
-        picked, weight, strand, order = ctx.saved_tensors
-        segments = len(ctx.counts)
-        width = weight.shape[0] // segments
-        grad = grad[order]
-        w = weight.reshape(segments, width, -1)
-        g_weight, g_bias = torch.zeros_like(w), grad.new_zeros((segments, width))
-        g_picked = torch.empty_like(picked)
-        start = 0
-        for k, n in enumerate(ctx.counts):
-            rows = slice(start, start + n)
-            torch.mm(grad[rows].t(), picked[rows], out=g_weight[k])
-            torch.sum(grad[rows], 0, out=g_bias[k])
-            torch.mm(grad[rows], w[k], out=g_picked[rows])
-            start += n
-        g_hidden = picked.new_zeros((ctx.n_hidden, picked.shape[1])).index_add_(0, strand, g_picked)
-        return g_hidden, g_weight.reshape(weight.shape), g_bias.reshape(-1), None, None
+        h, w, strand, block = ctx.saved_tensors
+        segments, width, _ = w.shape
+        by_block = torch.argsort(block, stable=True)
+        block_start = torch.zeros(segments + 1, dtype=torch.int64)
+        block_start[1:] = torch.cumsum(torch.bincount(block, minlength=segments), 0)
+        grad_rows = h.new_empty((len(strand), h.shape[1]))
+        g_weight, g_bias = torch.zeros_like(w), h.new_zeros((segments, width))
+        _rows.backward(h.numpy(), w.contiguous().numpy(), strand.numpy(), block.numpy(), by_block.numpy(),
+                       block_start.numpy(), grad.contiguous().float().numpy(), grad_rows.numpy(), g_weight.numpy(),
+                       g_bias.numpy())
+        g_hidden = torch.zeros_like(h).index_add_(0, strand, grad_rows)
+        return g_hidden, g_weight.reshape(-1, h.shape[1]), g_bias.reshape(-1), None, None
 
 
 def segment_rows(hidden: Tensor, weight: Tensor, bias: Tensor, index: Tensor, segments: int) -> Tensor:
     """Rows ``index`` of ``hidden @ weight.T + bias`` viewed as ``[S * segments, out / segments]``
-    (Gaussian ``i`` is strand ``i // segments``'s block ``i % segments``), computing only those:
-    one small product per block."""
+    (Gaussian ``i`` is strand ``i // segments``'s block ``i % segments``), computing only those
+    where the compiled kernel runs (float32 on the CPU), else all of them."""
+    if _rows is None or any(t.device.type != "cpu" or t.dtype != torch.float32 for t in (hidden, weight, bias)):
+        return F.linear(hidden, weight, bias).reshape(-1, weight.shape[0] // segments)[index]
     return _SegmentRows.apply(hidden, weight, bias, index, segments)
 
 

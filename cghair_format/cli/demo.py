@@ -19,6 +19,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--iters", type=int, default=300, help="training iterations (default 300)")
     p.add_argument("--views", type=int, default=24, help="dataset views (default 24)")
     p.add_argument("--res", type=int, default=128, help="dataset resolution (default 128)")
+    from training.cli_train import add_backend_argument
+
+    add_backend_argument(p)
 
 
 def _step(title: str) -> float:
@@ -54,8 +57,8 @@ def run(args: argparse.Namespace) -> int:
     config = TrainConfig(iterations=args.iters, n_cards=64, n_groups=8, points_per_strand=32, card_segments=16,
                          geometry_frozen_iters=args.iters // 2, checkpoint_every=max(args.iters, 1),
                          log_every=max(args.iters // 6, 1))
-    train(out / "dataset", strands=strands, out=out / "hair.cgh", config=config)
-    print(f"   wrote {out / 'hair.cgh'} ({time.perf_counter() - t:.1f} s)")
+    result = train(out / "dataset", strands=strands, out=out / "hair.cgh", config=config, backend=args.backend)
+    print(f"   wrote {out / 'hair.cgh'} ({time.perf_counter() - t:.1f} s, {result.backend} rasterizer)")
 
     t = _step("4. the file (cgh info) and the same Gaussians as a 3DGS PLY")
     info = read_info(out / "hair.cgh")
@@ -67,8 +70,8 @@ def run(args: argparse.Namespace) -> int:
           f".cgh: {info['file_bytes']:,} bytes ({ply / info['file_bytes']:.0f} x smaller)")
 
     t = _step("5. evaluate on the held-out views")
-    result = evaluate(out / "hair.cgh", out / "dataset", out_dir=out / "eval")
-    print(f"   {result.summary()}")
+    scores = evaluate(out / "hair.cgh", out / "dataset", out_dir=out / "eval", backend=args.backend)
+    print(f"   {scores.summary()}")
     print(f"   side-by-side images in {out / 'eval'} ({time.perf_counter() - t:.1f} s)")
 
     t = _step("6. export USD (curves with groom primvars, and the cards)")

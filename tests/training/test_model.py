@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+import torch.nn.functional as F
 
 from cghair_format import decode, decode_gaussians, encode
 from cghair_format.examples import example_asset
@@ -145,3 +146,27 @@ def test_sh_source_of_some_gaussians_is_those_rows_of_all(variant):
     some.sum().backward()
     appearance = [p for name, p in model.named_parameters() if name not in ("uv", "delta", "opacity_logit")]
     assert appearance and all(p.grad is not None for p in appearance)
+
+
+def test_segment_rows_kernel_matches_the_full_layer_with_gradients():
+    """The compiled rows (training/_rows.pyx) against the full layer's rows: values and gradients
+    of hidden, weight and bias, to float32 rounding of sums of 16-64 terms."""
+    from training import model as model_module
+
+    if model_module._rows is None:
+        pytest.fail("training/_rows is not built: run `make venv`")
+    gen = torch.Generator().manual_seed(3)
+    segments, width, n_hidden, strands = 7, 12, 16, 50
+    hidden = torch.randn(strands, n_hidden, generator=gen)
+    weight = torch.randn(segments * width, n_hidden, generator=gen)
+    bias = torch.randn(segments * width, generator=gen)
+    index = torch.randperm(strands * segments, generator=gen)[:120]
+    index = torch.cat([index, index[:5]])  # a row asked twice
+    results = []
+    for rows in (model_module.segment_rows, lambda h, w, b, i, s: F.linear(h, w, b).reshape(-1, width)[i]):
+        params = [t.clone().requires_grad_(True) for t in (hidden, weight, bias)]
+        out = rows(*params, index, segments)
+        (out * torch.linspace(-1, 1, out.numel()).reshape(out.shape)).sum().backward()
+        results.append([out.detach(), *(p.grad for p in params)])
+    for mine, truth in zip(*results, strict=True):
+        assert torch.allclose(mine, truth, rtol=1e-5, atol=1e-5)
