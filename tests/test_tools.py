@@ -65,7 +65,9 @@ Prose before, kept as written | with a pipe.
 <!-- /bench -->
 
 Prose between: compact is <!-- bench: test_sizes field=bytes where="profile=compact" -->1<!-- /bench --> B,
-ratios <!-- bench: test_sizes field=ratio -->9<!-- /bench -->.
+ratios <!-- bench: test_sizes field=ratio -->9<!-- /bench -->, run <!-- bench: @run field=date --><!-- /bench -->.
+
+Scalar <!-- bench: test_step field=gaussians --><!-- /bench -->.
 
 <!-- bench: test_step timing -->
 <!-- /bench -->
@@ -90,7 +92,7 @@ def _fill(tmp_path, page_text: str, data: dict = BENCH) -> tuple[subprocess.Comp
 def test_bench_tables_fills_marked_regions_and_keeps_the_prose(tmp_path):
     run, text = _fill(tmp_path, PAGE)
     assert run.returncode == 0, run.stderr
-    assert "filled 5 regions in 1 pages" in run.stdout
+    assert "filled 7 regions in 1 pages" in run.stdout
     table = ("| model | profile | bytes |\n|---|---|---|\n| a.hair | compact | 1,000 |\n"
              "| b.hair | compact | 3,000 |\n<!-- /bench -->")
     assert table in text and "stale" not in text and "high" not in text
@@ -98,10 +100,12 @@ def test_bench_tables_fills_marked_regions_and_keeps_the_prose(tmp_path):
     assert "4.0, 3.0, 2.0 at the start" in text and "6.5, 5.0, 4.0 at the end" in text
     assert 'compact is <!-- bench: test_sizes field=bytes where="profile=compact" -->1,000-3,000<!-- /bench --> B' \
         in text
-    assert "ratios <!-- bench: test_sizes field=ratio -->0.5-0.93<!-- /bench -->." in text
+    assert "ratios <!-- bench: test_sizes field=ratio -->0.5-0.93<!-- /bench -->, run " \
+        "<!-- bench: @run field=date -->2026-11-25 10:00 UTC<!-- /bench -->." in text
     assert ("| gaussians | median s | min s | max s | rounds |\n|---|---|---|---|---|\n"
             "| 69,068 | 0.25 | 0.2 | 0.3 | 10 |") in text
     assert "| model | STRD |\n|---|---|\n| a.hair | 700 |\n<!-- /bench -->" in text and "old" not in text
+    assert "Scalar <!-- bench: test_step field=gaussians -->69,068<!-- /bench -->." in text
     # everything outside the regions is byte for byte what it was
     outside = lambda t: re.sub(r"<!-- bench: .*? -->.*?<!-- /bench -->", "R", t, flags=re.DOTALL)  # noqa: E731
     assert outside(text) == outside(PAGE)
@@ -110,7 +114,7 @@ def test_bench_tables_fills_marked_regions_and_keeps_the_prose(tmp_path):
 def test_bench_tables_says_not_measured_for_a_missing_benchmark(tmp_path):
     run, text = _fill(tmp_path, PAGE, {**BENCH, "benchmarks": BENCH["benchmarks"][2:]})
     assert run.returncode == 0, run.stderr
-    assert "_Not measured: run `make bench` (no benchmark matches `test_sizes`" in text
+    assert "_Not measured: run `make bench` (no rows of `test_sizes`" in text
     assert ('compact is <!-- bench: test_sizes field=bytes where="profile=compact" -->'
             "not measured: run `make bench`<!-- /bench -->") in text
     assert "1,000" not in text
@@ -137,6 +141,28 @@ def test_bench_tables_page_has_timing_further_tables_and_load(tmp_path):
     assert "Load average (1, 5, 15 min): 4.0, 3.0, 2.0 at the start" in text
     assert "`chunks`:\n\n| model | STRD |\n|---|---|\n| a.hair | 700 |" in text
     assert "Timed call: median 0.5 s, min 0.4 s, max 0.75 s over 5 rounds." in text
+
+
+def test_bench_tables_check_fails_on_a_page_that_differs_and_writes_nothing(tmp_path):
+    src, page = tmp_path / "bench.json", tmp_path / "page.md"
+    src.write_text(json.dumps(BENCH))
+    page.write_text(PAGE)
+    tool = [sys.executable, str(ROOT / "tools" / "bench_tables.py"), str(src), "--fill", str(page), "--check"]
+    run = subprocess.run(tool, capture_output=True, text=True)
+    assert run.returncode == 1 and "page.md differ from" in run.stderr and page.read_text() == PAGE
+    subprocess.run(tool[:-1], check=True, capture_output=True)
+    assert subprocess.run(tool, capture_output=True, text=True).returncode == 0
+
+
+def test_committed_pages_agree_with_the_committed_benchmark_json():
+    """docs/benchmarks.md and the marked regions of the Makefile's BENCH_PAGES are what
+    docs/benchmarks.json gives: no figure in them was typed by hand, and the README's agree with the rest."""
+    line = next(x for x in (ROOT / "Makefile").read_text().splitlines() if x.startswith("BENCH_PAGES :="))
+    pages = line.split(":=")[1].split()
+    assert all("<!-- bench: " in (ROOT / page).read_text() for page in pages)
+    run = subprocess.run([sys.executable, "tools/bench_tables.py", "docs/benchmarks.json", "-o", "docs/benchmarks.md",
+                          "--fill", *pages, "--check"], cwd=ROOT, capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
 
 
 def test_baseline_coder_keeps_the_bound_on_strands_of_unequal_lengths():

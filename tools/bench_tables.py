@@ -1,6 +1,6 @@
 """Figures in the docs from a pytest-benchmark JSON file (``make bench`` writes one).
 
-    python tools/bench_tables.py .benchmarks/bench.json [-o docs/benchmarks.md] [--fill PAGE.md ...]
+    python tools/bench_tables.py docs/benchmarks.json [-o docs/benchmarks.md] [--fill PAGE.md ...] [--check]
 
 ``-o``: a page with a section per benchmark: its ``extra_info["rows"]`` (a list of dicts) as a
 table, else its ``extra_info["table"]`` (printed lines) as a block, else its scalar ``extra_info``
@@ -17,9 +17,14 @@ becomes a caption (machine, date, load) and a table of the rows of every benchma
 name without its parameters, matches the pattern (fnmatch); a region on one line with ``field=``
 becomes that field's value, or the range of its values over the rows. Options: ``table=`` reads
 ``extra_info[table]`` instead of ``rows``; ``columns=`` picks and orders columns; ``where=`` keeps
-the rows whose column has one of the listed values (several ``where=`` all apply); ``timing`` adds
-each benchmark's median, min and max seconds and rounds to its rows. A pattern that matches nothing
+the rows whose column has one of the listed values (several ``where=`` all apply); ``field=`` falls
+back on the benchmarks' scalar ``extra_info`` values when no row has the field; ``timing`` adds
+each benchmark's median, min and max seconds and rounds to its rows. The pattern ``@run`` with
+``field=date``, ``machine`` or ``load`` gives the run's. A pattern that matches nothing
 gives "not measured: run `make bench`", so a page never shows a stale figure as a fresh one.
+
+``--check`` writes nothing and fails (exit 1) when a page differs from what the JSON gives: the
+committed pages agree with the committed JSON (tests/test_tools.py runs it).
 """
 
 from __future__ import annotations
@@ -47,7 +52,7 @@ class RegionError(ValueError):
 
 def _cell(value) -> str:
     if isinstance(value, float):
-        return f"{value:.2e}" if 0 < abs(value) < 1e-3 else f"{value:.4g}"
+        return f"{value:.2e}" if 0 < abs(value) < 1e-3 else f"{value:.3g}"
     if isinstance(value, int) and not isinstance(value, bool):
         return f"{value:,}"
     if value is None:
@@ -176,13 +181,18 @@ def fill(text: str, data: dict, source: str) -> str:
                f"{data.get('datetime', '?')[:16].replace('T', ' ')} UTC, load average {load_line(data)}; "
                f"do not edit by hand._")
 
+    run = {"date": f"{data.get('datetime', '?')[:16].replace('T', ' ')} UTC", "machine": machine_line(data),
+           "load": load_line(data)}
+
     def replace(m: re.Match) -> str:
         pattern, opts = _options(m["spec"])
-        rows = _rows(matching(data, pattern), opts)
+        rows = [run] if pattern == "@run" else _rows(matching(data, pattern), opts)
+        if "field" in opts and not any(opts["field"] in r for r in rows):  # a scalar of extra_info
+            rows = _rows(matching(data, pattern), {**opts, "table": None})
         if "field" in opts:
             body = _value(rows, opts["field"])
         elif not rows:
-            body = f"\n_Not measured: run `make bench` (no benchmark matches `{pattern}` in `{source}`)._\n"
+            body = f"\n_Not measured: run `make bench` (no rows of `{pattern}` in `{source}`)._\n"
         else:
             body = "\n" + "\n".join([caption, "", *_table(rows, opts.get("columns"))]) + "\n"
         return f"<!-- bench: {m['spec']} -->{body}<!-- /bench -->"
@@ -196,6 +206,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("-o", "--out", type=Path, help="write the page of every benchmark here")
     p.add_argument("--fill", type=Path, nargs="+", default=[], metavar="PAGE",
                    help="replace the marked regions of these pages in place")
+    p.add_argument("--check", action="store_true", help="write nothing; exit 1 if a page would change")
     args = p.parse_args(argv)
     try:
         data = json.loads(args.json.read_text())
@@ -205,7 +216,15 @@ def main(argv: list[str] | None = None) -> int:
     try:
         pages = {page: fill(page.read_text(), data, args.json.as_posix()) for page in args.fill}
         if args.out:
-            args.out.write_text(render(data, args.json.as_posix()))
+            pages[args.out] = render(data, args.json.as_posix())
+        if args.check:
+            stale = [str(page) for page, text in pages.items() if not page.exists() or page.read_text() != text]
+            if stale:
+                print(f"bench_tables: {', '.join(stale)} differ from {args.json}: run "
+                      "`python tools/bench_tables.py` with the same arguments without --check", file=sys.stderr)
+                return 1
+            print(f"bench_tables: {len(pages)} pages agree with {args.json}")
+            return 0
         for page, text in pages.items():
             page.write_text(text)
     except (OSError, RegionError) as exc:
@@ -213,9 +232,9 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     if args.out:
         print(f"bench_tables: wrote {args.out} ({len(data.get('benchmarks', []))} benchmarks)")
-    if pages:
-        print(f"bench_tables: filled {sum(len(REGION.findall(t)) for t in pages.values())} regions in "
-              f"{len(pages)} pages")
+    if args.fill:
+        print(f"bench_tables: filled {sum(len(REGION.findall(pages[p])) for p in args.fill)} regions in "
+              f"{len(args.fill)} pages")
     return 0
 
 
