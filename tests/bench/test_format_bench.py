@@ -75,4 +75,11 @@ def test_format_table(model, request, tmp_path, benchmark):
     if build_timings:
         lines.append("card build (s): " + ", ".join(f"{k} {v:.1f}" for k, v in build_timings.items()))
     print("\n".join(lines))
-    benchmark.extra_info["table"] = lines
+    benchmark.extra_info.update({
+        "table": lines, "model": model, "strands": asset.n_strands, "gaussians": asset.n_gaussians,
+        "ply_bytes": ply_bytes,
+        "rows": [{"model": model, "profile": r[0], "bytes": r[1], "bits/Gaussian": round(r[2], 2), "encode s": r[3],
+                  "decode s": r[4], "to Gaussians s": r[5], "max point err / diag": r[6], "max opacity err": r[7],
+                  "max weight err": r[10], "PLY / .cgh": round(r[8])} for r in rows],
+        "chunks": [{"model": model, "profile": r[0], **r[9]} for r in rows],
+        "card_build": [{"model": model, **{f"{k} s": v for k, v in build_timings.items()}}] if build_timings else []})

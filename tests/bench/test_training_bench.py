@@ -110,5 +110,6 @@ def test_training_step(benchmark, setup, geometry):
         opt.step()
 
     benchmark.pedantic(step, rounds=10, iterations=1, warmup_rounds=2)
-    benchmark.extra_info.update({"gaussians": model.n_strands * (model.n_points - 1),
-                                 "torch_threads": torch.get_num_threads()})
+    benchmark.extra_info["rows"] = [{"scene": "Ratboy_mohawk.tfx, 32 points, 128 x 128", "geometry": geometry,
+                                     "gaussians": model.n_strands * (model.n_points - 1),
+                                     "torch threads": torch.get_num_threads()}]
