@@ -6,7 +6,8 @@ import sys
 from Cython.Build import cythonize
 from setuptools import Extension, setup
 
-# No FMA contraction and no fast-math: encoder and decoder must round alike (spec 4.3).
+# No FMA contraction and no fast-math: every decoder must round alike (spec 4, "Arithmetic"); _native.pyx
+# also pins contraction off in its source, so other flags cannot (tests/format/test_fma_build.py).
 FLAGS = [] if sys.platform == "win32" else ["-O3", "-ffp-contract=off", "-fno-fast-math"]
 # The splatter runs its loops on every core (OpenMP); it makes no bit-exactness promise. Apple's
 # clang has no -fopenmp: there its loops run on one core.

@@ -22,4 +22,4 @@ __all__ = [
     "HairAsset", "MissingDependencyError", "MlpLayer", "Profile", "Strands", "decode", "decode_gaussians",
     "decode_points", "encode", "read", "read_info", "read_with_gaussians", "write",
 ]
-__version__ = "0.1.0"
+__version__ = "0.2.0"

@@ -15,6 +15,19 @@ and is called on independent blocks of strands from several threads (:mod:`.para
   :func:`fit_blends`, :func:`blend_misses`.
 """
 
+# The spec's decoding arithmetic (spec 4, "Arithmetic"): each float64 operation rounded on its own, in
+# the order written. No fused multiply-add, whatever flags the build passes (GCC and Clang honour these
+# pragmas for every function below; setup.py also passes -ffp-contract=off; tests/format/test_fma_build.py
+# builds with -ffp-contract=fast -mfma and checks that every vector decodes the same).
+cdef extern from *:
+    """
+    #if defined(__clang__)
+    #pragma clang fp contract(off)
+    #elif defined(__GNUC__)
+    #pragma GCC optimize ("fp-contract=off")
+    #endif
+    """
+
 from libc.float cimport FLT_MAX
 from libc.math cimport INFINITY, fabs, floor, isfinite, rint, sqrt
 from libc.stdint cimport int32_t, uint8_t, uint16_t, uint32_t, uint64_t
@@ -63,9 +76,8 @@ cdef inline void card_map(const double* frames, int m, i64 card, const double* u
     cdef double length = sqrt(dot3(n, n))
     if length < 1e-30:
         length = 1e-30
-    cdef double inv = 1.0 / length
     for i in range(3):
-        nh[i] = n[i] * inv
+        nh[i] = n[i] / length
     cdef double delta = uvd[2]
     for i in range(3):
         x[i] = fr.a[i] + f * fr.ef[i] + g * fr.ev[i] + delta * nh[i]
@@ -74,8 +86,8 @@ cdef inline void card_map(const double* frames, int m, i64 card, const double* u
     cdef double pf = dot3(nh, fr.nef)
     cdef double pv = dot3(nh, fr.nev)
     for i in range(3):
-        ju[i] = m * (fr.ef[i] + delta * ((fr.nef[i] - nh[i] * pf) * inv))
-        jv[i] = fr.ev[i] + delta * ((fr.nev[i] - nh[i] * pv) * inv)
+        ju[i] = m * (fr.ef[i] + delta * ((fr.nef[i] - nh[i] * pf) / length))
+        jv[i] = fr.ev[i] + delta * ((fr.nev[i] - nh[i] * pv) / length)
         jd[i] = nh[i]
 
 
@@ -89,18 +101,23 @@ cdef inline void solve3(const double* a, const double* b, const double* c, const
     cross3(c, a, ca)
     cross3(a, b, ab)
     cdef double det = dot3(a, bc)
-    cdef double inv = 1.0 / det if fabs(det) > 1e-30 else 0.0
-    out[0] = dot3(r, bc) * inv
-    out[1] = dot3(r, ca) * inv
-    out[2] = dot3(r, ab) * inv
+    if not (fabs(det) > 1e-30):
+        out[0] = 0.0
+        out[1] = 0.0
+        out[2] = 0.0
+        return
+    out[0] = dot3(r, bc) / det
+    out[1] = dot3(r, ca) / det
+    out[2] = dot3(r, ab) / det
 
 
-cdef inline void to_world(const double* frames, int m, i64 card, const double* scaled, const double* inv_sc,
+cdef inline void to_world(const double* frames, int m, i64 card, const double* scaled, const double* sc,
                           double* x) noexcept nogil:
+    """World point ``x`` of scaled card coordinates (``scaled / sc``, spec 4.3: ``y / g``)."""
     cdef double uvd[3]
-    uvd[0] = scaled[0] * inv_sc[0]
-    uvd[1] = scaled[1] * inv_sc[1]
-    uvd[2] = scaled[2] * inv_sc[2]
+    uvd[0] = scaled[0] / sc[0]
+    uvd[1] = scaled[1] / sc[1]
+    uvd[2] = scaled[2] / sc[2]
     card_map(frames, m, card, uvd, x, NULL, NULL, NULL)
 
 
@@ -156,26 +173,26 @@ cdef inline double newton_solve(const double* frames, int m, i64 card, const dou
     return m2
 
 
-cdef inline void newton(const double* frames, int m, i64 card, const double* sc, const double* inv_sc,
-                        const double* goal, int steps, int halvings, double* p, double* j) noexcept nogil:
-    """:func:`newton_solve` on scaled card coordinates ``p`` (stopping within a hundredth of a step of
-    ``goal``: ``sc[2]`` is 1 / q), which keep their value where the result is not finite; ``j [9]``
-    gets the Jacobian columns at the card coordinates ``p / sc`` (spec 4.3: at ``z``)."""
+cdef inline void newton(const double* frames, int m, i64 card, const double* sc, const double* goal, int steps,
+                        int halvings, double* p, double* j) noexcept nogil:
+    """Spec 4.3's ``place`` without the stretch: :func:`newton_solve` from the scaled card coordinates
+    ``p / sc`` (stopping within a hundredth of a step of ``goal``: ``sc[2]`` is 1 / q), ``p`` then the
+    result times ``sc`` where that is finite, else kept; ``j [9]`` gets the Jacobian columns at the card
+    coordinates ``p / sc``."""
     cdef double c[3]
     cdef double x[3]
     cdef int i
     for i in range(3):
-        c[i] = p[i] * inv_sc[i]
-    if steps > 0:
-        newton_solve(frames, m, card, goal, steps, halvings, c, sc[2] * sc[2], j)
+        c[i] = p[i] / sc[i]
+    newton_solve(frames, m, card, goal, steps, halvings, c, sc[2] * sc[2], j)
+    for i in range(3):
+        x[i] = c[i] * sc[i]
+    if isfinite(x[0]) and isfinite(x[1]) and isfinite(x[2]):
         for i in range(3):
-            x[i] = c[i] * sc[i]
-        if isfinite(x[0]) and isfinite(x[1]) and isfinite(x[2]):
-            for i in range(3):
-                p[i] = x[i]
-            return
-        for i in range(3):
-            c[i] = p[i] * inv_sc[i]
+            p[i] = x[i]
+        return
+    for i in range(3):
+        c[i] = p[i] / sc[i]
     card_map(frames, m, card, c, x, j, j + 3, j + 6)
 
 
@@ -289,7 +306,7 @@ cdef check_cards(const i64[::1] card, Py_ssize_t triangles, int segments):
 
 
 cdef inline double miss2(const double* frames, int m, i64 card, const double* pred, const i64* r,
-                         const double* f, const double* inv_sc, const double* target) noexcept nogil:
+                         const double* f, const double* sc, const double* target) noexcept nogil:
     """The squared world distance from ``pred + r * f`` (scaled card coordinates; ``f`` the residual's
     step per channel) to ``target``."""
     cdef double p[3]
@@ -297,25 +314,25 @@ cdef inline double miss2(const double* frames, int m, i64 card, const double* pr
     cdef int ch
     for ch in range(3):
         p[ch] = pred[ch] + r[ch] * f[ch]
-    to_world(frames, m, card, p, inv_sc, x)
+    to_world(frames, m, card, p, sc, x)
     for ch in range(3):
         x[ch] = x[ch] - target[ch]
     return dot3(x, x)
 
 
 cdef inline bint fits(const double* frames, int m, i64 card, const double* pred, const i64* r, const double* f,
-                      const double* inv_sc, const double* target, double dist2) noexcept nogil:
+                      const double* sc, const double* target, double dist2) noexcept nogil:
     """Whether ``pred + r * f`` (scaled card coordinates) maps within ``sqrt(dist2)`` of ``target``."""
-    return miss2(frames, m, card, pred, r, f, inv_sc, target) <= dist2
+    return miss2(frames, m, card, pred, r, f, sc, target) <= dist2
 
 
 cdef inline void nearest(const double* frames, int m, i64 card, const double* pred, const double* f,
-                         const double* inv_sc, const double* point, double dist2, i64* r) noexcept nogil:
+                         const double* sc, const double* point, double dist2, i64* r) noexcept nogil:
     """Where the rounded residual ``r`` (steps ``f``) maps farther than ``sqrt(dist2)`` from ``point``: the
     one of its 26 neighbours that maps nearest instead, if nearer (the writer's dead zone, spec 4.3)."""
     cdef i64 c[3]
     cdef i64 best[3]
-    cdef double d, best_d = miss2(frames, m, card, pred, r, f, inv_sc, point)
+    cdef double d, best_d = miss2(frames, m, card, pred, r, f, sc, point)
     cdef int ch, du, dv, dd
     if best_d <= dist2:
         return
@@ -327,7 +344,7 @@ cdef inline void nearest(const double* frames, int m, i64 card, const double* pr
                 c[0] = r[0] + du
                 c[1] = r[1] + dv
                 c[2] = r[2] + dd
-                d = miss2(frames, m, card, pred, c, f, inv_sc, point)
+                d = miss2(frames, m, card, pred, c, f, sc, point)
                 if d < best_d:
                     best_d = d
                     for ch in range(3):
@@ -400,14 +417,15 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                 double stretch_max, int base_guide, double[:, :, ::1] rec, double[:, :, ::1] world,
                 i64[:, :, ::1] res,
                 const double[:, :, ::1] y=None, const double[:, :, ::1] dz_points=None, double dz_dist=-1.0,
-                bint neighbour_zone=False, float[:, :, ::1] uvd=None, const i64[::1] row_seg=None,
+                bint neighbour_zone=False, double[:, :, ::1] uvd=None, const i64[::1] row_seg=None,
                 i64[:, ::1] level_ref=None, Py_ssize_t first=0):
     """The recurrence of spec 4.3 for the strands ``strands_to_code`` (indices into ``[S]``; best
     grouped by card, whose triangles then stay in cache) of ``n`` points, into ``rec`` (scaled card
-    coordinates ``[S, n, 3]``) and ``world`` (their world points). Decoding into ``uvd`` (float32
+    coordinates ``[S, n, 3]``) and ``world`` (their world points). Decoding into ``uvd`` (float64
     ``[S, n, 3]``, given): ``rec`` and ``world`` are the scratch of the last ``SCRATCH_STRANDS`` strands
-    (``[SCRATCH_STRANDS, n, 3]``: a strand's and those before it that its base samples may follow), and each strand's card coordinates ``rec / scale`` go to ``uvd``; returns how
-    many of them float32 cannot hold (inf or NaN there: a corrupt file). Otherwise returns 0.
+    (``[SCRATCH_STRANDS, n, 3]``: a strand's and those before it that its base samples may follow), and
+    each strand's card coordinates ``rec / scale`` go to ``uvd``; returns how many of them float32
+    cannot hold (beyond its range, or NaN: a corrupt file). Otherwise returns 0.
 
     With ``base_guide`` (1 to 3) a strand whose card neighbour came before it in ``strands_to_code``
     predicts its base samples from the neighbour's: its root from the neighbour's root, each later one
@@ -446,7 +464,6 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
     cdef double v
     cdef double pred[3]
     cdef double goal[3]
-    cdef double inv_sc[3]
     cdef double f[3]
     cdef double jac[9]
     cdef double bf[3]
@@ -510,8 +527,6 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
             s = strands_to_code[t]
             card = strand_card[s]
             sc = &scale[s, 0]
-            for ch in range(3):
-                inv_sc[ch] = 1.0 / sc[ch]
             R = &rec[scratch_row(t, strands_to_code, scratch), 0, 0]
             W = &world[scratch_row(t, strands_to_code, scratch), 0, 0]
             RN = NULL  # with base_guide, the neighbour's reconstruction (spec 4.3)
@@ -551,7 +566,7 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                     for ch in range(3):
                         pred[ch] = R[3 * b + ch] + rho * (RM[3 * c + ch] - RM[3 * b + ch])
                         goal[ch] = W[3 * b + ch] + rho * (WM[3 * c + ch] - WM[3 * b + ch])
-                    newton(fr, segments, card, sc, inv_sc, goal, newton_steps, newton_halvings, pred, jac)
+                    newton(fr, segments, card, sc, goal, newton_steps, newton_halvings, pred, jac)
                     residual_steps(jac, sc, stretch_max, bf)
                 else:  # the strand's own base samples, per channel (spec 4.1)
                     for ch in range(3):
@@ -568,13 +583,13 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                     for ch in range(3):
                         BR[3 * j + ch] = <i64> rint((Y[3 * c + ch] - pred[ch]) / bf[ch])
                 if dead_zone:
-                    nearest(fr, segments, card, pred, bf, inv_sc, Z + 3 * c, dist2, BR + 3 * j)
-                if NB != NULL and fits(fr, segments, card, pred, NB + 3 * j, bf, inv_sc, Z + 3 * c, dist2):
+                    nearest(fr, segments, card, pred, bf, sc, Z + 3 * c, dist2, BR + 3 * j)
+                if NB != NULL and fits(fr, segments, card, pred, NB + 3 * j, bf, sc, Z + 3 * c, dist2):
                     for ch in range(3):  # the neighbour's residual will do: its difference is zero
                         BR[3 * j + ch] = NB[3 * j + ch]
                 for ch in range(3):
                     R[3 * c + ch] = pred[ch] + BR[3 * j + ch] * bf[ch]
-                to_world(fr, segments, card, R + 3 * c, inv_sc, W + 3 * c)
+                to_world(fr, segments, card, R + 3 * c, sc, W + 3 * c)
             if level_guide:  # per base segment, the most alike strand before it on the card
                 for kk in range(nbase - 1):
                     segref[kk] = -1
@@ -596,7 +611,7 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                         for ch in range(3):
                             pred[ch] = pred[ch] + R[j + ch] * w
                             goal[ch] = goal[ch] + W[j + ch] * w
-                    newton(fr, segments, card, sc, inv_sc, goal, newton_steps, newton_halvings, pred, jac)
+                    newton(fr, segments, card, sc, goal, newton_steps, newton_halvings, pred, jac)
                     residual_steps(jac, sc, stretch_max, f)
                     m = segref[row_seg[row]] if level_guide else -1
                     if level_guide and not encode and m >= 0:  # stored as the difference from m's
@@ -609,27 +624,25 @@ def run_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int
                         for ch in range(3):
                             LR[3 * row + ch] = <i64> rint((Y[3 * i + ch] - pred[ch]) / f[ch])
                         if dead_zone:
-                            nearest(fr, segments, card, pred, f, inv_sc, Z + 3 * i, dist2, LR + 3 * row)
-                        if NB != NULL and fits(fr, segments, card, pred, NB + 3 * (nbase + row), f, inv_sc,
+                            nearest(fr, segments, card, pred, f, sc, Z + 3 * i, dist2, LR + 3 * row)
+                        if NB != NULL and fits(fr, segments, card, pred, NB + 3 * (nbase + row), f, sc,
                                                Z + 3 * i, dist2):
                             for ch in range(3):  # the neighbour's residual will do: its difference is zero
                                 LR[3 * row + ch] = NB[3 * (nbase + row) + ch]
-                        elif dead_zone and fits(fr, segments, card, pred, zero, f, inv_sc, Z + 3 * i, dist2):
+                        elif dead_zone and fits(fr, segments, card, pred, zero, f, sc, Z + 3 * i, dist2):
                             LR[3 * row] = 0
                             LR[3 * row + 1] = 0
                             LR[3 * row + 2] = 0
                     for ch in range(3):
                         R[3 * i + ch] = pred[ch] + LR[3 * row + ch] * f[ch]
                     if encode or li + 1 < levels:  # a decoder predicts nothing from the last level
-                        to_world(fr, segments, card, R + 3 * i, inv_sc, W + 3 * i)
+                        to_world(fr, segments, card, R + 3 * i, sc, W + 3 * i)
             if scratch:
                 for i in range(npts):
                     for ch in range(3):
                         v = R[3 * i + ch] / sc[ch]
-                        if fabs(v) <= FLT_MAX:
-                            uvd[s, i, ch] = <float> v
-                        else:
-                            uvd[s, i, ch] = <float> (v if v != v else (INFINITY if v > 0 else -INFINITY))
+                        uvd[s, i, ch] = v
+                        if not (fabs(v) <= FLT_MAX):
                             unrepresentable += 1
     free(segref)
     return unrepresentable

@@ -208,8 +208,9 @@ def place_children(cmap: CardMap, step: float, guides: np.ndarray, parents: np.n
     goal = blend(guides, parents, weights, respaced)
     uvd = np.empty(goal.shape, np.float32)
     card = np.ascontiguousarray(card, np.int64)
+    per_unit2 = (1.0 / step) * (1.0 / step)  # g_d^2, g_d = 1 / q (spec 4.3)
     bad = sum(map_blocks(lambda b: _native.place_points(cmap.frames, cmap.segments, goal[b], card[b], NEWTON_STEPS,
-                                                        NEWTON_HALVINGS, 1.0 / step**2, uvd[b]), len(goal)))
+                                                        NEWTON_HALVINGS, per_unit2, uvd[b]), len(goal)))
     if bad:
         raise ValueError(f"{bad} interpolated strand coordinates beyond float32's range")
     return uvd

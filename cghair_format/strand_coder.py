@@ -211,17 +211,24 @@ def level_widths(n: int, base_stride: int) -> list[int]:
     return [len(base)] + [len(idx) for idx, _, _ in levels]
 
 
-def decode_uvd(cmap: CardMap, strand_card: np.ndarray, residuals: np.ndarray, n: int, scale: np.ndarray,
-               plan: Prediction) -> np.ndarray:
-    """Card coordinates ``[S, n, 3]`` (float32) from the residuals of :func:`encode_uvd`, side by side in
-    one array ``[S, N, 3]`` (base samples, then each level). Raises InvalidContentError where float32
-    cannot hold them (a corrupt step or residuals)."""
-    uvd = np.empty((len(strand_card), n, 3), np.float32)
-    bad = _run_strands(cmap, strand_card, scale, np.ascontiguousarray(residuals, np.int64), n, plan, uvd=uvd)
+def decode_coordinates(cmap: CardMap, strand_card: np.ndarray, residuals: np.ndarray, n: int, scale: np.ndarray,
+                       plan: Prediction) -> np.ndarray:
+    """Card coordinates ``[S, n, 3]`` in float64 (spec 4.3's ``y / g``, before the rounding to float32)
+    from the residuals of :func:`encode_uvd`, side by side in one array ``[S, N, 3]`` (base samples,
+    then each level). Raises InvalidContentError where float32 cannot hold them (a corrupt step or
+    residuals)."""
+    coords = np.empty((len(strand_card), n, 3))
+    bad = _run_strands(cmap, strand_card, scale, np.ascontiguousarray(residuals, np.int64), n, plan, uvd=coords)
     if bad:
         raise InvalidContentError(f"{bad} strand point coordinates decode beyond float32's range (a corrupt "
                                   f"step, scale or residuals)", chunk="STRD")
-    return uvd
+    return coords
+
+
+def decode_uvd(cmap: CardMap, strand_card: np.ndarray, residuals: np.ndarray, n: int, scale: np.ndarray,
+               plan: Prediction) -> np.ndarray:
+    """:func:`decode_coordinates` rounded to float32: the decoded strands' ``uvd``."""
+    return decode_coordinates(cmap, strand_card, residuals, n, scale, plan).astype(np.float32)
 
 
 # --- neighbour prediction across the strands of a card (spec 4.3) ----------------------------------
