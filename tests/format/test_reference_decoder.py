@@ -101,3 +101,34 @@ def test_format_1_quantized_files_are_refused_saying_how_to_rewrite_them_lossles
         cgh.decode(quantized)
     lossless = (VECTORS / "minimal_lossless.cgh").read_bytes()
     assert same(cgh.decode(container.rewrite_header(lossless, major=1)).uvd, cgh.decode(lossless).uvd)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("model", ["straight.hair", "harolongo.data"])
+def test_paper_scale_files_decode_alike_on_a_subset_of_cards(model, request, monkeypatch, tmp_path):
+    """The benchmark's files (tests/bench/paper_scale.py: 25,000 strands of 100 points on 800 cards, real
+    hair densified), compact: the strands of 48 evenly spaced cards and of the cards holding the parents
+    of 8 children on those (a whole file would take the reference decoder about 8 minutes)."""
+    from bench.paper_scale import paper_scale_asset
+
+    from cghair_format import container
+
+    asset = paper_scale_asset(model, request.config.cache.mkdir("cghair_paper_scale"))[0]
+    path = tmp_path / "compact.cgh"
+    cgh.write(asset, path, "compact")
+    data = path.read_bytes()
+    coordinates, uvd, points = compiled(path, monkeypatch)
+    guides = len(coordinates)
+    card = cgh.read(path).strand_card
+    cards = reference_decoder.evenly_spaced_cards(asset.cards.count, 48)
+    _, table = container.verify(data, set(codec.KNOWN_CHUNKS))
+    chld = next(i for i in table if i.type == codec.FAMILY_CHUNK)
+    family = codec._read_family(container.payload(data, chld), guides, len(card) - guides)
+    on_cards = [k for k in range(len(family.parents)) if card[guides + k] in cards][:8]
+    cards |= {int(card[p]) for k in on_cards for p in family.parents[k]}
+    ref = reference_decoder.decode_points(data, cards)
+    is_guide = ref.index < guides
+    print(f"{model}: {len(cards)} cards, {is_guide.sum()} guides, {(~is_guide).sum()} children compared")
+    assert is_guide.sum() >= 200 and (~is_guide).sum() >= 8
+    assert same(ref.coordinates[is_guide], coordinates[ref.index[is_guide]])
+    assert same(ref.uvd, uvd[ref.index]) and same(ref.points, points[ref.index])
