@@ -1,4 +1,4 @@
-"""Builds the compiled kernels: the codec's (cghair_format/_native.pyx) and the training splatter's
+"""Builds the compiled kernels: the codec's (cghair_format/_decoder.pyx, _writer.pyx) and the training splatter's
 (training/_raster.pyx); everything else is in pyproject.toml."""
 
 import sys
@@ -6,8 +6,8 @@ import sys
 from Cython.Build import cythonize
 from setuptools import Extension, setup
 
-# No FMA contraction and no fast-math: every decoder must round alike (spec 4, "Arithmetic"); _native.pyx
-# also pins contraction off in its source, so other flags cannot (tests/format/test_fma_build.py).
+# No FMA contraction and no fast-math: every decoder must round alike (spec 4, "Arithmetic");
+# _arithmetic.pxi also pins contraction off in the source, so other flags cannot (tests/format/test_fma_build.py).
 FLAGS = [] if sys.platform == "win32" else ["-O3", "-ffp-contract=off", "-fno-fast-math"]
 # The splatter runs its loops on every core (OpenMP); it makes no bit-exactness promise. Apple's
 # clang has no -fopenmp: there its loops run on one core.
@@ -19,7 +19,8 @@ else:
     RASTER_FLAGS, RASTER_LINK = ["-O3", "-fopenmp"], ["-fopenmp"]
 
 setup(ext_modules=cythonize([
-    Extension("cghair_format._native", ["cghair_format/_native.pyx"], extra_compile_args=FLAGS),
+    Extension("cghair_format._decoder", ["cghair_format/_decoder.pyx"], extra_compile_args=FLAGS),
+    Extension("cghair_format._writer", ["cghair_format/_writer.pyx"], extra_compile_args=FLAGS),
     Extension("training._raster", ["training/_raster.pyx"], extra_compile_args=RASTER_FLAGS,
               extra_link_args=RASTER_LINK),
 ]))

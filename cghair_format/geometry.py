@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _native
+from . import _decoder, _writer
 from .asset import Cards
 from .parallel import map_blocks
 
@@ -198,7 +198,7 @@ class CardMap:
     Each triangle is kept as the affine frame of spec 6.1: ``x = A + f * Ef + (v - upper) * Ev`` and
     likewise for the normal, where ``f`` is the fraction of the way along the quad and ``upper`` is 1
     on a quad's upper triangle; one gather per point fetches it. Float64 rails (:func:`card_rails`),
-    the cards' float32 normals. The mapping itself, and its Jacobian, are compiled (:mod:`._native`).
+    the cards' float32 normals. The mapping itself, and its Jacobian, are compiled (:mod:`._decoder`).
     """
 
     def __init__(self, cards: Cards) -> None:
@@ -217,7 +217,7 @@ class CardMap:
     def __call__(self, card: np.ndarray, uvd: np.ndarray) -> np.ndarray:
         """World points ``[N, 3]`` (float64) of card coordinates ``uvd [N, 3]`` on cards ``card [N]``."""
         out = np.empty((len(card), 3))
-        _native.map_points(self.frames, self.segments, np.ascontiguousarray(card, np.int64),
+        _decoder.map_points(self.frames, self.segments, np.ascontiguousarray(card, np.int64),
                            np.ascontiguousarray(uvd, np.float64), out)
         return out
 
@@ -241,7 +241,7 @@ class CardMap:
         out = np.empty(uvd.shape, np.float32)
 
         def block(b: slice) -> None:
-            _native.map_strands(self.frames, self.segments, card[b], uvd[b], out[b])
+            _decoder.map_strands(self.frames, self.segments, card[b], uvd[b], out[b])
 
         map_blocks(block, len(card))
         return out
@@ -253,7 +253,7 @@ class CardMap:
         such as the coordinates on slightly other cards)."""
         out = np.array(uvd, np.float64, order="C")
         miss = np.empty(len(out))
-        _native.invert_points(self.frames, self.segments, np.ascontiguousarray(card, np.int64), out,
+        _writer.invert_points(self.frames, self.segments, np.ascontiguousarray(card, np.int64), out,
                               np.ascontiguousarray(points, np.float64), steps, miss)
         return out, miss
 

@@ -1,7 +1,7 @@
 """A second decoder of quantized files' geometry, written from the spec (sections 4.1-4.5, 5, 6.1 and
 "Arithmetic") alone: slow, readable, one point at a time in Python floats.
 
-It shares no floating-point code with the compiled decoder (:mod:`._native`, :mod:`.geometry`,
+It shares no floating-point code with the compiled decoder (:mod:`._decoder`, :mod:`.geometry`,
 :mod:`.quantize`): the predictor plans and weights, the cards and their angles' cosines, the strips,
 the card map and its Jacobian, the Newton searches, the most alike strand and the children are its
 own. Python's float operations are the spec's (binary64, each rounded once, no fused multiply-add),

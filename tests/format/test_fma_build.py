@@ -1,6 +1,6 @@
 """The compiled kernels built with FMA contraction forced on (``-O3 -ffp-contract=fast -mfma``) decode
-every vector to the same bits: the source pins contraction off (``_native.pyx``'s pragma), not only
-setup.py's flags (spec 4, "Arithmetic").
+every vector to the same bits: the source pins contraction off (``_arithmetic.pxi``'s pragma, included
+by ``_decoder.pyx`` and ``_writer.pyx``), not only setup.py's flags (spec 4, "Arithmetic").
 
 Each build goes to a temporary copy of the package and decodes in a subprocess. A control build of the
 same source without the pragma shows that the flags do contract there and change the decoded float64
@@ -29,14 +29,14 @@ import sys
 from pathlib import Path
 import numpy as np
 import cghair_format as cgh
-from cghair_format import _native, codec, strand_coder
+from cghair_format import _decoder, codec, strand_coder
 
 seen = {}
 def keep_float64(*args):  # the guides' card coordinates before their rounding to float32
     seen["c"] = strand_coder.decode_coordinates(*args)
     return seen["c"].astype(np.float32)
 codec.decode_uvd = keep_float64
-out = {"native_file": np.array(_native.__file__)}
+out = {"native_file": np.array(_decoder.__file__)}
 for path in sys.argv[2:]:
     seen.clear()
     asset = cgh.read(path)
@@ -50,8 +50,9 @@ np.savez(sys.argv[1], **out)
 BUILD = """
 from Cython.Build import cythonize
 from setuptools import Extension, setup
-setup(ext_modules=cythonize([Extension("cghair_format._native", ["cghair_format/_native.pyx"],
-                                       extra_compile_args={flags!r})], quiet=True),
+setup(ext_modules=cythonize([Extension(f"cghair_format.{{name}}", [f"cghair_format/{{name}}.pyx"],
+                                       extra_compile_args={flags!r}) for name in ("_decoder", "_writer")],
+                            quiet=True),
       script_args=["build_ext", "--inplace"])
 """
 
@@ -67,10 +68,10 @@ def _copy(dest: Path, pragma: bool) -> Path:
     shutil.copytree(ROOT / "cghair_format", dest / "cghair_format",
                     ignore=shutil.ignore_patterns("*.so", "*.pyd", "*.c", "__pycache__"))
     if not pragma:
-        pyx = dest / "cghair_format" / "_native.pyx"
-        text, n = re.subn(r'cdef extern from \*:\n    """\n.*?    """\n', "", pyx.read_text(), count=1, flags=re.S)
-        assert n == 1, "the pragma block of _native.pyx moved: update this test"
-        pyx.write_text(text)
+        pxi = dest / "cghair_format" / "_arithmetic.pxi"
+        text, n = re.subn(r'cdef extern from \*:\n    """\n.*?    """\n', "", pxi.read_text(), count=1, flags=re.S)
+        assert n == 1, "the pragma block of _arithmetic.pxi moved: update this test"
+        pxi.write_text(text)
     (dest / "build_fma.py").write_text(textwrap.dedent(BUILD.format(flags=FLAGS)))
     return dest
 
