@@ -252,7 +252,7 @@ def card_map(st: Strip, z, jacobian: bool = False):
         k = float(m - 1)
     f = s - k
     up = f + v > 1
-    g = v - (1.0 if up else 0.0)
+    e = v - (1.0 if up else 0.0)
     k = int(k)
     n0, n1 = st.normal[k], st.normal[k + 1]
     if up:  # triangle 2k+1: (R_k, R_k+1, L_k+1)
@@ -261,10 +261,10 @@ def card_map(st: Strip, z, jacobian: bool = False):
     else:  # triangle 2k: (L_k, R_k, L_k+1)
         a, ef, ev = st.left[k], sub(st.left[k + 1], st.left[k]), sub(st.right[k], st.left[k])
         na, nf, nv = n0, sub(n1, n0), sub(n0, n0)
-    n = add(add(na, scale(f, nf)), scale(g, nv))
+    n = add(add(na, scale(f, nf)), scale(e, nv))
     length = at_least(norm(n), 1e-30)
     nh = [n[0] / length, n[1] / length, n[2] / length]
-    x = add(add(add(a, scale(f, ef)), scale(g, ev)), scale(delta, nh))
+    x = add(add(add(a, scale(f, ef)), scale(e, ev)), scale(delta, nh))
     if not jacobian:
         return x
     pf, pv = dot(nh, nf), dot(nh, nv)
