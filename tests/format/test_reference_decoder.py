@@ -93,6 +93,15 @@ def test_validate_reference_says_the_decoders_agree(capsys):
     assert "nothing for the reference decoder" in capsys.readouterr().out
 
 
+def test_validate_reference_fails_saying_how_many_strands_differ(capsys, monkeypatch):
+    path = VECTORS / "synth_curly_compact.cgh"
+    place = reference_decoder.place
+    monkeypatch.setattr(reference_decoder, "place", lambda st, p0, goal, g, q: place(st, p0, goal, g, q | {
+        "newton_steps": 0}))
+    assert main(["validate", "--reference", str(path)]) == 1
+    assert "the reference decoder gives other points on" in capsys.readouterr().out
+
+
 def test_format_1_quantized_files_are_refused_saying_how_to_rewrite_them_lossless_ones_read():
     from cghair_format import container
 
