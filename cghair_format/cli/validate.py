@@ -13,7 +13,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("file", help="a .cgh file")
     p.add_argument("--reference", action="store_true",
                    help="also decode a quantized file's strands with the reference decoder (spec alone, pure "
-                        "Python, about 20 ms a strand) and check both give the same points, bit for bit")
+                        "Python: 2 CPU minutes, 2.3 GB for 25,000 strands) and check both give the same points, "
+                        "bit for bit")
     p.add_argument("--cards", type=int_at_least(1), default=None, metavar="N",
                    help="with --reference, only the strands of N evenly spaced cards (default: all)")
 
