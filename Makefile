@@ -9,7 +9,7 @@ TORCH  ?= torch==2.13.0
 
 venv: $(VENV)/.installed
 
-$(VENV)/.installed: pyproject.toml setup.py cghair_format/_native.pyx training/_raster.pyx training/_geometry.pyx training/_rows.pyx
+$(VENV)/.installed: pyproject.toml setup.py cghair_format/_decoder.pyx cghair_format/_writer.pyx cghair_format/_arithmetic.pxi training/_raster.pyx training/_geometry.pyx training/_rows.pyx
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q "$(TORCH)"

@@ -1,11 +1,11 @@
 """CGHair's .cgh codec: the data model, reading and writing, and decoding to strands and Gaussians.
 
-Importing this package needs only numpy and zstandard, and its compiled kernels (``_native``, built
+Importing this package needs only numpy and zstandard, and its compiled kernels (``_decoder``, ``_writer``, built
 from Cython by ``pip install``, which needs a C compiler).
 """
 
 try:
-    from . import _native  # noqa: F401  (checked first, so that a missing build says what to do)
+    from . import _decoder, _writer  # noqa: F401  (checked first, so that a missing build says what to do)
 except ImportError as exc:  # pragma: no cover - only a source tree that was never built gets here
     raise ImportError("cghair_format's compiled kernels are not built: run `pip install -e .` in the repository "
                       "(it needs a C compiler: gcc, clang or MSVC), or `make venv`") from exc
@@ -22,4 +22,4 @@ __all__ = [
     "HairAsset", "MissingDependencyError", "MlpLayer", "Profile", "Strands", "decode", "decode_gaussians",
     "decode_points", "encode", "read", "read_info", "read_with_gaussians", "write",
 ]
-__version__ = "0.1.0"
+__version__ = "0.2.0"

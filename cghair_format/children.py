@@ -17,7 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from . import _native
+from . import _decoder, _writer
 from .geometry import CardMap
 from .parallel import map_blocks
 
@@ -68,17 +68,17 @@ def root_candidates(roots: np.ndarray, k: int) -> np.ndarray:
     cell_hi = np.where(found, ends[at], 0).astype(np.int64)
     out = np.empty((s, k), np.int64)
     order = order.astype(np.int64)
-    map_blocks(lambda b: _native.nearest_roots(roots, order, cell_lo[b], cell_hi[b], out[b], b.start), s)
+    map_blocks(lambda b: _writer.nearest_roots(roots, order, cell_lo[b], cell_hi[b], out[b], b.start), s)
     return out
 
 
 def fit_weights(targets: np.ndarray, sources: np.ndarray, parents: np.ndarray) -> np.ndarray:
     """Least-squares weights ``[n, 3]`` (summing to 1) of the blends of ``sources[parents]`` nearest
-    ``targets [n, P, 3]`` (:func:`._native.fit_blends`)."""
+    ``targets [n, P, 3]`` (:func:`._writer.fit_blends`)."""
     targets, sources = np.ascontiguousarray(targets, np.float64), np.ascontiguousarray(sources, np.float64)
     parents = np.ascontiguousarray(parents, np.int64)
     out = np.empty((len(targets), 3))
-    map_blocks(lambda b: _native.fit_blends(targets[b], sources, parents[b], out[b]), len(targets))
+    map_blocks(lambda b: _writer.fit_blends(targets[b], sources, parents[b], out[b]), len(targets))
     return out
 
 
@@ -96,7 +96,7 @@ def blend(guides: np.ndarray, parents: np.ndarray, weights: np.ndarray, respaced
     parents, weights = np.ascontiguousarray(parents, np.int64), np.ascontiguousarray(weights, np.int64)
     respaced = np.ascontiguousarray(respaced, np.uint8)
     out = np.empty((len(parents),) + guides.shape[1:])
-    map_blocks(lambda b: _native.blend_strands(guides, parents[b], weights[b], WEIGHT_ONE, respaced[b], out[b]),
+    map_blocks(lambda b: _decoder.blend_strands(guides, parents[b], weights[b], WEIGHT_ONE, respaced[b], out[b]),
                len(parents))
     return out
 
@@ -107,7 +107,7 @@ def _misses(guides: np.ndarray, parents: np.ndarray, weights: np.ndarray, respac
     guides, targets = np.ascontiguousarray(guides, np.float64), np.ascontiguousarray(targets, np.float64)
     parents, weights = np.ascontiguousarray(parents, np.int64), np.ascontiguousarray(weights, np.int64)
     respaced, out = np.ascontiguousarray(respaced, np.uint8), np.empty(len(parents))
-    map_blocks(lambda b: _native.blend_misses(guides, parents[b], weights[b], WEIGHT_ONE, respaced[b], targets[b],
+    map_blocks(lambda b: _writer.blend_misses(guides, parents[b], weights[b], WEIGHT_ONE, respaced[b], targets[b],
                                               out[b]), len(parents))
     return out
 
@@ -115,7 +115,7 @@ def _misses(guides: np.ndarray, parents: np.ndarray, weights: np.ndarray, respac
 def find_children(points: np.ndarray, tol: float) -> Children:
     """The strands of ``points [S, P, 3]`` that a blend of two or three other strands predicts within
     ACCEPT x ``tol``, with their parents and weights, none of them a parent itself: each search finds
-    every strand's best blend among its CANDIDATES (:func:`._native.best_blends`), and strands are
+    every strand's best blend among its CANDIDATES (:func:`._writer.best_blends`), and strands are
     taken as children best first, their parents then kept as guides."""
     points = np.ascontiguousarray(points, np.float64)
     s, p = points.shape[:2]
@@ -139,7 +139,7 @@ def find_children(points: np.ndarray, tol: float) -> Children:
         rows = np.ascontiguousarray(rows, np.int64)
         sub, use = np.ascontiguousarray(cand[rows]), usable.astype(np.uint8)
         f, ww, m = np.full((len(rows), 3), -1, np.int64), np.zeros((len(rows), 3)), np.empty(len(rows))
-        map_blocks(lambda b: _native.best_blends(roots, desc, tangent, rows[b], sub[b], use, ROOT_TOLERANCE * tol,
+        map_blocks(lambda b: _writer.best_blends(roots, desc, tangent, rows[b], sub[b], use, ROOT_TOLERANCE * tol,
                                                  WEIGHT_SLACK, GOOD_ENOUGH * tol, f[b], ww[b], m[b]), len(rows))
         ok = np.flatnonzero(m <= tol)
         if len(ok) == 0:
@@ -208,8 +208,9 @@ def place_children(cmap: CardMap, step: float, guides: np.ndarray, parents: np.n
     goal = blend(guides, parents, weights, respaced)
     uvd = np.empty(goal.shape, np.float32)
     card = np.ascontiguousarray(card, np.int64)
-    bad = sum(map_blocks(lambda b: _native.place_points(cmap.frames, cmap.segments, goal[b], card[b], NEWTON_STEPS,
-                                                        NEWTON_HALVINGS, 1.0 / step**2, uvd[b]), len(goal)))
+    per_unit2 = (1.0 / step) * (1.0 / step)  # g_d^2, g_d = 1 / q (spec 4.3)
+    bad = sum(map_blocks(lambda b: _decoder.place_points(cmap.frames, cmap.segments, goal[b], card[b], NEWTON_STEPS,
+                                                        NEWTON_HALVINGS, per_unit2, uvd[b]), len(goal)))
     if bad:
         raise ValueError(f"{bad} interpolated strand coordinates beyond float32's range")
     return uvd

@@ -26,7 +26,7 @@ from .children import (
     fit_weights,
     place_children,
 )
-from .errors import AssetError, CghFormatError, InvalidContentError, LimitError
+from .errors import AssetError, CghFormatError, InvalidContentError, LimitError, UnsupportedVersionError
 from .gaussians import Gaussians, decode_gaussians
 from .geometry import (
     CardMap,
@@ -239,13 +239,18 @@ def _decode(data: bytes, sh_ahead: bool, limits: ReadLimits | None) -> tuple[Hai
     (where the decoder found no finer place, the chunk's start in the file)."""
     infos = {}
     try:
-        _, table = container.verify(data, set(KNOWN_CHUNKS))
+        version, table = container.verify(data, set(KNOWN_CHUNKS))
         infos = {i.type: i for i in table if i.type in KNOWN_CHUNKS}
         for name in REQUIRED_CHUNKS:
             if name not in infos:
                 raise InvalidContentError(f"required chunk {name!r} is missing from the chunk table", chunk=name,
                                           offset=container.HEADER_SIZE)
         meta = _parse_meta(_meta_payload(data, infos["META"]))
+        if version[0] == 1 and not meta["quant"]["lossless"]:
+            raise UnsupportedVersionError(
+                f"format {version[0]}.{version[1]} quantized files decode with other arithmetic: rewrite it with "
+                f"cghair 0.1 (cgh encode FILE -o LOSSLESS.cgh --profile lossless), then with this version "
+                f"(cgh encode LOSSLESS.cgh -o NEW.cgh)", offset=8)
         check_limits(meta, list(infos.values()), limits or default_limits(), sh_ahead)
         payloads = {name: container.payload(data, info) for name, info in infos.items()}
         return _decode_payloads(meta, payloads, sh_ahead)

@@ -25,8 +25,11 @@ from .errors import (
 from .parallel import map_threads
 
 MAGIC = b"\x89CGH\r\n\x1a\n"
-VERSION_MAJOR = 1
+VERSION_MAJOR = 2
 VERSION_MINOR = 0
+# 1.x files hold the same chunks; only the arithmetic of quantized files' decoding changed (spec 4,
+# "Arithmetic"), so a 1.x lossless file is read as before and a 1.x quantized one refused by the codec
+READ_MAJORS = (1, 2)
 HEADER = struct.Struct("<8sHHIQII")  # magic, major, minor, flags, file length, chunk count, crc
 ENTRY = struct.Struct("<4sHBBQQQII")  # type, flags, codec, reserved, offset, stored, raw, crc, reserved
 HEADER_SIZE = HEADER.size  # 32
@@ -134,7 +137,7 @@ def read_table(data: bytes | memoryview) -> tuple[tuple[int, int], list[ChunkInf
     magic, major, minor, _flags, length, count, head_crc = HEADER.unpack_from(data, 0)
     if magic != MAGIC:
         raise BadMagicError("not a .cgh file: wrong magic bytes", offset=0)
-    if major != VERSION_MAJOR:
+    if major not in READ_MAJORS:
         raise UnsupportedVersionError(f"format version {major}.{minor} is not supported by this reader "
                                       f"(major {VERSION_MAJOR}); upgrade cghair", offset=8)
     if count > MAX_CHUNKS:

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _native, memory
+from . import _decoder, memory
 from .asset import Appearance, HairAsset
 from .geometry import strand_points
 from .parallel import map_blocks
@@ -47,7 +47,7 @@ def segment_frames(points: np.ndarray, thickness: float) -> tuple[np.ndarray, np
     """Means, rotations (w, x, y, z) and scales of the segment Gaussians of strands ``[S, P, 3]``.
 
     The rotation is the shortest arc taking +z to the segment direction; a zero-length segment
-    gets the identity, a segment along -z a half turn about x (compiled: :func:`._native.segment_frames`).
+    gets the identity, a segment along -z a half turn about x (compiled: :func:`._decoder.segment_frames`).
     """
     s, p = points.shape[:2]
     points = np.ascontiguousarray(points, np.float32)
@@ -56,7 +56,7 @@ def segment_frames(points: np.ndarray, thickness: float) -> tuple[np.ndarray, np
     scales = np.empty((s, p - 1, 3), np.float32)
 
     def block(b: slice) -> None:
-        _native.segment_frames(points[b], float(thickness), means[b], rotations[b], scales[b])
+        _decoder.segment_frames(points[b], float(thickness), means[b], rotations[b], scales[b])
 
     map_blocks(block, s)
     return means.reshape(-1, 3), rotations.reshape(-1, 4), scales.reshape(-1, 3)

@@ -13,14 +13,25 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _native
+from . import _decoder, _writer
 from .asset import Cards
 from .parallel import map_blocks
 
 
+def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a0 b0 + a1 b1 + a2 b2`` of vectors ``[..., 3]``, in that order (spec 4, "Arithmetic")."""
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
+
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a x b`` of vectors ``[..., 3]`` as the spec writes it (numpy's ``cross`` does not promise an order)."""
+    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1], a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
+
+
 def _normalize(v: np.ndarray) -> np.ndarray:
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
-    return v / np.maximum(n, 1e-30)
+    """``v / max(|v|, 1e-30)`` (spec 4, "Arithmetic")."""
+    return v / np.maximum(lengths(v), 1e-30)[..., None]
 
 
 def lengths(v: np.ndarray) -> np.ndarray:
@@ -50,7 +61,7 @@ def _reference_axis(t: np.ndarray) -> np.ndarray:
     """``normalize(e x t)`` for the unit axis ``e`` (x, y or z, the first on ties) least aligned
     with each ``t [..., 3]``."""
     e = np.eye(3)[np.argmin(np.abs(t), axis=-1)]
-    return _normalize(np.cross(e, t))
+    return _normalize(cross(e, t))
 
 
 def spine_frames(spine: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -61,8 +72,8 @@ def spine_frames(spine: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     r = np.empty_like(t)
     r[:, 0] = _reference_axis(t[:, 0])
     for k in range(1, t.shape[1]):
-        v = r[:, k - 1] - np.sum(r[:, k - 1] * t[:, k], axis=-1, keepdims=True) * t[:, k]
-        short = np.linalg.norm(v, axis=-1) < 1e-6
+        v = r[:, k - 1] - dot(r[:, k - 1], t[:, k])[:, None] * t[:, k]
+        short = lengths(v) < 1e-6
         r[:, k] = np.where(short[:, None], _reference_axis(t[:, k]), _normalize(v))
     return t, r
 
@@ -73,21 +84,52 @@ def normal_angles(normal: np.ndarray, spine: np.ndarray, bits: int) -> np.ndarra
     a turn (the normals' component along the spine is dropped: the card builder's have none)."""
     t, r = spine_frames(spine)
     n = np.asarray(normal, np.float64)
-    theta = np.arctan2(np.sum(n * np.cross(t, r), axis=-1), np.sum(n * r, axis=-1))
+    theta = np.arctan2(dot(n, cross(t, r)), dot(n, r))
     return np.unwrap(theta, axis=1) * (2**bits / (2 * np.pi))
 
 
 def angle_normals(angle: np.ndarray, spine: np.ndarray, bits: int) -> np.ndarray:
-    """Inverse of :func:`normal_angles`: ``normalize(cos a r_k + sin a (t_k x r_k))``, ``a = 2 pi angle /
-    2^bits``, float64."""
+    """Inverse of :func:`normal_angles`: ``normalize(cos a r_k + sin a (t_k x r_k))``, ``a`` the angle
+    ``angle / 2^bits`` of a turn (:func:`turn_cos_sin`), float64."""
     t, r = spine_frames(spine)
-    a = np.asarray(angle, np.float64)[..., None] * (2 * np.pi / 2**bits)
-    return _normalize(np.cos(a) * r + np.sin(a) * np.cross(t, r))
+    c, s = turn_cos_sin(np.asarray(angle, np.float64) / 2.0**bits)
+    return _normalize(c[..., None] * r + s[..., None] * cross(t, r))
+
+
+TWO_PI = 6.283185307179586  # the float64 nearest 2 pi
+
+
+def turn_cos_sin(turns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Cosine and sine of ``turns`` whole turns, as spec 4.2 defines them: on the nearest quarter turn's
+    remainder (at most an eighth of a turn), Taylor polynomials to x^16 and x^17 (within 3e-18 of the
+    true values there), in float64 operations only, so that every machine gets the same bits."""
+    k = np.floor(4 * turns + 0.5)
+    x = (turns - k / 4) * TWO_PI
+    t = x * x
+    c = np.ones_like(t)
+    for n in range(16, 0, -2):
+        c = 1 - (t / (n * (n - 1))) * c
+    s = np.ones_like(t)
+    for n in range(17, 1, -2):
+        s = 1 - (t / (n * (n - 1))) * s
+    s = x * s
+    quarter = k - 4 * np.floor(k / 4)  # k mod 4
+    cos = np.select([quarter == 0, quarter == 1, quarter == 2], [c, -s, -c], s)
+    sin = np.select([quarter == 0, quarter == 1, quarter == 2], [s, c, -s], -c)
+    return cos, sin
 
 
 def card_bitangents(cards: Cards) -> np.ndarray:
-    """Unit bitangents ``b_k = normalize(n_k x t_k)``, ``[C, M+1, 3]``."""
-    return _normalize(np.cross(cards.normal, spine_tangents(cards.spine)))
+    """Unit bitangents ``b_k = normalize(n_k x t_k)``, ``[C, M+1, 3]``, float64 from the float32 cards."""
+    return _normalize(cross(cards.normal.astype(np.float64), spine_tangents(cards.spine.astype(np.float64))))
+
+
+def card_rails(cards: Cards) -> np.ndarray:
+    """The strips' rails ``[C, M+1, 2, 3]`` (``L_k``, ``R_k``; spec 5), float64."""
+    b = card_bitangents(cards)
+    p = cards.spine.astype(np.float64)
+    w = cards.half_width.astype(np.float64)[..., None]
+    return np.stack([p - w * b, p + w * b], axis=2)
 
 
 @dataclass
@@ -105,9 +147,7 @@ def card_mesh(cards: Cards) -> CardMesh:
     """Derive the strip mesh (vertices, normals, UVs, triangles) of every card."""
     c, m1 = cards.spine.shape[:2]
     m = m1 - 1
-    b = card_bitangents(cards)
-    w = cards.half_width[..., None]
-    rails = np.stack([cards.spine - w * b, cards.spine + w * b], axis=2)  # [C, M+1, 2, 3]
+    rails = card_rails(cards)
     normals = np.repeat(cards.normal[:, :, None, :], 2, axis=2)
     u = np.broadcast_to((np.arange(m1) / m)[None, :, None], (c, m1, 2))
     v = np.broadcast_to(np.array([0.0, 1.0])[None, None, :], (c, m1, 2))
@@ -144,10 +184,9 @@ def triangle_and_barycentrics(uv: np.ndarray, segments: int) -> tuple[np.ndarray
 
 def card_scales(cards: Cards, step: float) -> tuple[np.ndarray, np.ndarray]:
     """Per card, the world length of one unit of u and of v (upper bounds), at least ``step``."""
-    mesh = card_mesh(cards)
     m1 = cards.spine.shape[1]
-    rails = mesh.vertices.astype(np.float64).reshape(cards.count, m1, 2, 3)
-    seg = np.linalg.norm(np.diff(rails, axis=1), axis=-1).max(axis=(1, 2))
+    rails = card_rails(cards)
+    seg = lengths(rails[:, 1:] - rails[:, :-1]).max(axis=(1, 2))
     su = np.maximum((m1 - 1) * seg, step)
     sv = np.maximum(2 * cards.half_width.astype(np.float64).max(axis=1), step)
     return su, sv
@@ -156,18 +195,18 @@ def card_scales(cards: Cards, step: float) -> tuple[np.ndarray, np.ndarray]:
 class CardMap:
     """The card-to-world mapping of section "Strand points", for many points.
 
-    Each triangle is kept as an affine frame: ``x = A + f * Ef + (v - upper) * Ev`` and likewise for
-    the normal, where ``f`` is the fraction of the way along the quad and ``upper`` is 1 on a quad's
-    upper triangle. This equals the barycentric form of the spec; one gather per point fetches it.
-    The mapping itself, and its Jacobian, are compiled (:mod:`._native`).
+    Each triangle is kept as the affine frame of spec 6.1: ``x = A + f * Ef + (v - upper) * Ev`` and
+    likewise for the normal, where ``f`` is the fraction of the way along the quad and ``upper`` is 1
+    on a quad's upper triangle; one gather per point fetches it. Float64 rails (:func:`card_rails`),
+    the cards' float32 normals. The mapping itself, and its Jacobian, are compiled (:mod:`._decoder`).
     """
 
     def __init__(self, cards: Cards) -> None:
-        mesh = card_mesh(cards)
+        triangles = card_mesh(cards).triangles
         self.segments = cards.segments
-        v = mesh.vertices.astype(np.float64)[mesh.triangles]  # [T, 3 corners, 3]
-        n = mesh.normals.astype(np.float64)[mesh.triangles]
-        upper = (np.arange(len(mesh.triangles)) % 2 == 1)[:, None]
+        v = card_rails(cards).reshape(-1, 3)[triangles]  # [T, 3 corners, 3]
+        n = np.repeat(cards.normal.astype(np.float64), 2, axis=1).reshape(-1, 3)[triangles]
+        upper = (np.arange(len(triangles)) % 2 == 1)[:, None]
 
         def frame(c):  # lower: d/df = c2 - c0, d/dv = c1 - c0; upper: d/df = c1 - c0, d/dv = c1 - c2
             return [c[:, 0], np.where(upper, c[:, 1], c[:, 2]) - c[:, 0],
@@ -178,7 +217,7 @@ class CardMap:
     def __call__(self, card: np.ndarray, uvd: np.ndarray) -> np.ndarray:
         """World points ``[N, 3]`` (float64) of card coordinates ``uvd [N, 3]`` on cards ``card [N]``."""
         out = np.empty((len(card), 3))
-        _native.map_points(self.frames, self.segments, np.ascontiguousarray(card, np.int64),
+        _decoder.map_points(self.frames, self.segments, np.ascontiguousarray(card, np.int64),
                            np.ascontiguousarray(uvd, np.float64), out)
         return out
 
@@ -202,7 +241,7 @@ class CardMap:
         out = np.empty(uvd.shape, np.float32)
 
         def block(b: slice) -> None:
-            _native.map_strands(self.frames, self.segments, card[b], uvd[b], out[b])
+            _decoder.map_strands(self.frames, self.segments, card[b], uvd[b], out[b])
 
         map_blocks(block, len(card))
         return out
@@ -214,7 +253,7 @@ class CardMap:
         such as the coordinates on slightly other cards)."""
         out = np.array(uvd, np.float64, order="C")
         miss = np.empty(len(out))
-        _native.invert_points(self.frames, self.segments, np.ascontiguousarray(card, np.int64), out,
+        _writer.invert_points(self.frames, self.segments, np.ascontiguousarray(card, np.int64), out,
                               np.ascontiguousarray(points, np.float64), steps, miss)
         return out, miss
 

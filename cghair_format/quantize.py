@@ -177,9 +177,12 @@ def to_colour_basis(rows: np.ndarray) -> np.ndarray:
 
 
 def from_colour_basis(rows: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`to_colour_basis` (the basis is orthonormal: its transpose), float64."""
-    r = np.asarray(rows, np.float64)
-    return np.einsum("kc,tk...->tc...", COLOUR_BASIS, r.reshape(-1, 3, *r.shape[1:])).reshape(r.shape)
+    """Inverse of :func:`to_colour_basis` (the basis is orthonormal: its transpose), float64, summed over
+    the basis rows in order as spec 4.4 writes it (einsum does not promise an order)."""
+    r = np.asarray(rows, np.float64).reshape(-1, 3, *np.shape(rows)[1:])
+    c = COLOUR_BASIS
+    out = np.stack([c[0, ch] * r[:, 0] + c[1, ch] * r[:, 1] + c[2, ch] * r[:, 2] for ch in range(3)], axis=1)
+    return out.reshape(np.shape(rows))
 
 
 def steps_encode(w: np.ndarray, step: float) -> np.ndarray:

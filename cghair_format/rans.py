@@ -1,5 +1,5 @@
 """A multi-lane rANS entropy coder with static context tables (spec 4.3.2): tokens and tables in
-numpy; the coding itself is compiled (:func:`._native.encode_rans`, :func:`._native.decode_residuals`).
+numpy; the coding itself is compiled (:func:`._writer.encode_rans`, :func:`._decoder.decode_residuals`).
 
 Unsigned integers are split into a token (coded with rANS under a frequency table that the caller
 picks per symbol: its context) and raw extra bits. ``L`` lanes each hold a rANS state and code their
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import _native
+from . import _writer
 from .errors import InvalidContentError
 from .quantize import zigzag
 
@@ -65,7 +65,7 @@ def pack_bits(width: np.ndarray, value: np.ndarray) -> np.ndarray:
     width = np.ascontiguousarray(width, np.uint8).ravel()
     value = np.ascontiguousarray(value, np.uint64).ravel()
     out = np.zeros((int(width.sum(dtype=np.int64)) + 7) // 8, np.uint8)
-    _native.pack_bits(width, value, out)
+    _writer.pack_bits(width, value, out)
     return out
 
 
@@ -169,10 +169,10 @@ class Tables:
 def encode(sym: np.ndarray, table: np.ndarray, active: np.ndarray, tables: Tables) -> tuple[np.ndarray, np.ndarray]:
     """Code steps of symbols ``sym [N, L]`` under ``table [N, L]``; lanes ``>= active[n]`` are idle at
     step ``n``. Returns the lanes' initial states for the decoder (uint32 ``[L]``) and the words
-    (compiled: :func:`._native.encode_rans`)."""
+    (compiled: :func:`._writer.encode_rans`)."""
     states = np.empty(sym.shape[1], np.uint32)
     words = np.empty(sym.size, np.uint16)
-    start = _native.encode_rans(np.ascontiguousarray(sym, np.uint8), np.ascontiguousarray(table, np.int32),
+    start = _writer.encode_rans(np.ascontiguousarray(sym, np.uint8), np.ascontiguousarray(table, np.int32),
                                 np.ascontiguousarray(active, np.int64), tables.flat_freq, tables.flat_start,
                                 states, words)
     return states, words[start:].copy()

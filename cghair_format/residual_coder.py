@@ -17,7 +17,7 @@ from typing import NamedTuple
 import numpy as np
 import zstandard
 
-from . import _native, rans
+from . import _decoder, rans
 from .errors import InvalidContentError, TruncatedError
 from .quantize import zigzag
 from .streams import StreamReader, StreamWriter
@@ -169,7 +169,7 @@ def _put_tables(w: StreamWriter, codes: np.ndarray) -> None:
 
 def read_residuals(r: StreamReader, strand_card: np.ndarray, widths: list[int], classes: int) -> np.ndarray:
     """Inverse of :func:`write_residuals`: the residual arrays side by side, ``[S, sum(widths), 3]``
-    (int64), decoded by the compiled :func:`._native.decode_residuals` (one strand per lane, as the
+    (int64), decoded by the compiled :func:`._decoder.decode_residuals` (one strand per lane, as the
     spec's step order has it)."""
     strands = len(strand_card)
     column_array, first, lanes, _ = _plan(widths, strands)
@@ -184,11 +184,11 @@ def read_residuals(r: StreamReader, strand_card: np.ndarray, widths: list[int], 
     n = len(column_array)
     rans.check_budget(strands * n * 3, len(words), lanes, tables, "STRD")
     values = np.empty((strands, n, 3), np.int64)
-    fault = _native.decode_residuals(tables.flat_freq, tables.flat_start, states, words,
+    fault = _decoder.decode_residuals(tables.flat_freq, tables.flat_start, states, words,
                                      extra_bits, column_array.astype(np.int64), first.astype(np.uint8), lanes,
                                      after_neighbour(strand_card, lanes).astype(np.uint8), classes,
                                      np.empty((strands, n, 3), np.uint8), values)
     if fault:
-        error = TruncatedError if fault == _native.TRUNCATED else InvalidContentError
-        raise error(f"STRD: {_native.FAULTS[fault]}", chunk="STRD")
+        error = TruncatedError if fault == _decoder.TRUNCATED else InvalidContentError
+        raise error(f"STRD: {_decoder.FAULTS[fault]}", chunk="STRD")
     return values

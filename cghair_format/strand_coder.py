@@ -20,7 +20,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from . import _native
+from . import _decoder, _writer
 from .asset import Cards
 from .errors import InvalidContentError
 from .geometry import CardMap, card_scales
@@ -93,7 +93,8 @@ def base_residuals(y: np.ndarray, base: np.ndarray, orders: tuple[int, int, int]
 
 def _run_strands(cmap: CardMap, strand_card: np.ndarray, scale: np.ndarray, residuals: np.ndarray, n: int,
                  plan: Prediction, after: int = 0, **arrays) -> int:
-    """The compiled recurrence :func:`._native.run_strands` over blocks of whole cards in parallel, card
+    """The compiled recurrence (:func:`._decoder.decode_strands`, :func:`._writer.encode_strands`) over
+    blocks of whole cards in parallel, card
     by card, each strand after its neighbour (which the base samples' guide reads and the dead zone may
     copy; a card's triangles stay in cache while its strands are coded). ``arrays``: encoding, ``rec``,
     ``world``, ``y`` and the dead zone's arguments; decoding, ``uvd`` (each block then gets its own
@@ -116,12 +117,13 @@ def _run_strands(cmap: CardMap, strand_card: np.ndarray, scale: np.ndarray, resi
 
     def block(b: slice, first: int = 0) -> int:
         given = dict(arrays)
+        args = (by_card[b], cmap.frames, cmap.segments, card, scale, base, orders, level_start, taps, idx, nb, wt,
+                plan.newton_steps, plan.newton_halvings, plan.stretch_max, plan.base_guide)
         if "uvd" in given:  # decoding: per block, the scratch of a strand and those its base samples may follow
-            given["rec"], given["world"] = (np.empty((_native.SCRATCH_STRANDS, n, 3)) for _ in range(2))
+            scratch = [np.empty((_decoder.SCRATCH_STRANDS, n, 3)) for _ in range(2)]
+            return _decoder.decode_strands(*args, *scratch, residuals, **given)
         rec, world = given.pop("rec"), given.pop("world")
-        return _native.run_strands(by_card[b], cmap.frames, cmap.segments, card, scale, base, orders, level_start,
-                                   taps, idx, nb, wt, plan.newton_steps, plan.newton_halvings, plan.stretch_max,
-                                   plan.base_guide, rec, world, residuals, first=first, **given)
+        return _writer.encode_strands(*args, rec, world, residuals, first=first, **given)
 
     if after == 0:
         return sum(map_threads(block, card_blocks(starts)))
@@ -187,7 +189,7 @@ def encode_uvd(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.
     # (the levels' differences go to a copy where the raw residuals may be gone on from)
     residuals = raw[:s].copy() if plan.level_guide and (len(raw) > s or before is not None) else raw[:s]
     if plan.level_guide:  # the levels as differences from each base segment's reference's (spec 4.3)
-        _native.level_differences(residuals, ref[:s], _row_segments(n, plan.base_stride), widths[0])
+        _writer.level_differences(residuals, ref[:s], _row_segments(n, plan.base_stride), widths[0])
     base, *levels = np.split(residuals, np.cumsum(widths)[:-1], axis=1)
     return base, levels, world[:s], Coded(raw, rec, world, ref, s)
 
@@ -211,17 +213,24 @@ def level_widths(n: int, base_stride: int) -> list[int]:
     return [len(base)] + [len(idx) for idx, _, _ in levels]
 
 
-def decode_uvd(cmap: CardMap, strand_card: np.ndarray, residuals: np.ndarray, n: int, scale: np.ndarray,
-               plan: Prediction) -> np.ndarray:
-    """Card coordinates ``[S, n, 3]`` (float32) from the residuals of :func:`encode_uvd`, side by side in
-    one array ``[S, N, 3]`` (base samples, then each level). Raises InvalidContentError where float32
-    cannot hold them (a corrupt step or residuals)."""
-    uvd = np.empty((len(strand_card), n, 3), np.float32)
-    bad = _run_strands(cmap, strand_card, scale, np.ascontiguousarray(residuals, np.int64), n, plan, uvd=uvd)
+def decode_coordinates(cmap: CardMap, strand_card: np.ndarray, residuals: np.ndarray, n: int, scale: np.ndarray,
+                       plan: Prediction) -> np.ndarray:
+    """Card coordinates ``[S, n, 3]`` in float64 (spec 4.3's ``y / g``, before the rounding to float32)
+    from the residuals of :func:`encode_uvd`, side by side in one array ``[S, N, 3]`` (base samples,
+    then each level). Raises InvalidContentError where float32 cannot hold them (a corrupt step or
+    residuals)."""
+    coords = np.empty((len(strand_card), n, 3))
+    bad = _run_strands(cmap, strand_card, scale, np.ascontiguousarray(residuals, np.int64), n, plan, uvd=coords)
     if bad:
         raise InvalidContentError(f"{bad} strand point coordinates decode beyond float32's range (a corrupt "
                                   f"step, scale or residuals)", chunk="STRD")
-    return uvd
+    return coords
+
+
+def decode_uvd(cmap: CardMap, strand_card: np.ndarray, residuals: np.ndarray, n: int, scale: np.ndarray,
+               plan: Prediction) -> np.ndarray:
+    """:func:`decode_coordinates` rounded to float32: the decoded strands' ``uvd``."""
+    return decode_coordinates(cmap, strand_card, residuals, n, scale, plan).astype(np.float32)
 
 
 # --- neighbour prediction across the strands of a card (spec 4.3) ----------------------------------
@@ -245,7 +254,7 @@ def canonical_order(cards: Cards, strand_card: np.ndarray, uvd: np.ndarray) -> n
     by_card = np.lexsort((np.arange(len(card)), uvd[:, 0, 1], card))
     group_start = np.searchsorted(card[by_card], np.arange(cards.count + 1)).astype(np.int64)
     out = np.empty(len(card), np.int64)
-    _native.chain_order(features, by_card.astype(np.int64), group_start, CHAIN_WINDOW, out)
+    _writer.chain_order(features, by_card.astype(np.int64), group_start, CHAIN_WINDOW, out)
     return out
 
 
@@ -272,5 +281,5 @@ def neighbour_encode(r: np.ndarray, order: np.ndarray, starts: np.ndarray) -> np
 def neighbour_decode(values: np.ndarray, order: np.ndarray, starts: np.ndarray, mask: np.ndarray) -> None:
     """Inverse of :func:`neighbour_encode` on residuals ``[S, N, 3]`` (int64, C order), in place, for the
     columns and channels where ``mask [N, 3]`` is set: a sum that restarts at each card (compiled)."""
-    _native.undo_neighbour(values, np.ascontiguousarray(order, np.int64), starts.astype(np.uint8),
+    _decoder.undo_neighbour(values, np.ascontiguousarray(order, np.int64), starts.astype(np.uint8),
                            np.ascontiguousarray(mask, np.uint8))

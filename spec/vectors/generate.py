@@ -146,7 +146,10 @@ def main() -> None:
     flipped = bytearray(compact)
     flipped[len(compact) // 2] ^= 0x01
     bad("reject_flipped_byte", bytes(flipped), "ChecksumError", "checksum")
-    bad("reject_major_2", container.rewrite_header(compact, major=2, minor=0), "UnsupportedVersionError", "version 2.0")
+    bad("reject_major_3", container.rewrite_header(compact, major=3, minor=0), "UnsupportedVersionError", "version 3.0")
+    # a quantized file as format 1.0 wrote it (its bytes aside: 1.0 decoded them with other arithmetic)
+    bad("reject_quantized_1_0", container.rewrite_header(compact, major=1, minor=0), "UnsupportedVersionError",
+        "rewrite it")
     bad("reject_unknown_required", _rechunk(compact, lambda c: c + [container.Chunk("ZREQ", b"x")]),
         "UnknownRequiredChunkError", "ZREQ")
     bad("reject_missing_chunk", _rechunk(compact, lambda c: [x for x in c if x.type != "OPAC"]),

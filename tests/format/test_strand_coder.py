@@ -548,7 +548,7 @@ def test_the_writers_base_estimate_codes_what_the_compiled_coder_stores(order):
 
 
 def test_the_compiled_kernels_refuse_card_indices_they_would_read_outside():
-    from cghair_format import _native
+    from cghair_format import _decoder
     from cghair_format.examples import example_asset
     from cghair_format.geometry import CardMap
 
@@ -557,5 +557,5 @@ def test_the_compiled_kernels_refuse_card_indices_they_would_read_outside():
     with pytest.raises(ValueError, match="card index 2 outside"):
         cmap(np.array([2]), np.zeros((1, 3)))
     with pytest.raises(ValueError, match="mismatched"):
-        _native.map_points(cmap.frames, asset.cards.segments, np.zeros(2, np.int64), np.zeros((1, 3)),
+        _decoder.map_points(cmap.frames, asset.cards.segments, np.zeros(2, np.int64), np.zeros((1, 3)),
                            np.zeros((2, 3)))
