@@ -28,12 +28,14 @@ cdef void row_forward(const float* h, const float* wt, const float* bias, int n_
 
 
 def forward(const float[:, ::1] hidden, const float[:, :, ::1] weight_t, const float[:, ::1] bias,
-            const int64_t[::1] strand, const int64_t[::1] block, float[:, ::1] out):
+            const int64_t[::1] strand, const int64_t[::1] block, const int64_t[::1] by_block, float[:, ::1] out):
     """``out[i] = hidden[strand[i]] @ weight_t[block[i]] + bias[block[i]]``; ``weight_t`` is
-    ``[blocks, hidden, width]``."""
-    cdef Py_ssize_t n = strand.shape[0], i
+    ``[blocks, hidden, width]``. Rows are visited in ``by_block`` order (the rows block by block),
+    so that consecutive rows share their block's weights in the cache."""
+    cdef Py_ssize_t n = strand.shape[0], t, i
     cdef int n_hidden = hidden.shape[1], width = out.shape[1]
-    for i in prange(n, nogil=True, schedule="static"):
+    for t in prange(n, nogil=True, schedule="static"):
+        i = by_block[t]
         row_forward(&hidden[strand[i], 0], &weight_t[block[i], 0, 0], &bias[block[i], 0], n_hidden, width,
                     &out[i, 0])
 
@@ -80,11 +82,12 @@ def backward(const float[:, ::1] hidden, const float[:, :, ::1] weight, const in
     weight's and bias's (``grad_weight`` and ``grad_bias`` zeroed by the caller). ``weight`` is
     ``[blocks, width, hidden]``; ``by_block`` lists the rows block by block, block b's from
     ``block_start[b]`` to ``block_start[b + 1]``."""
-    cdef Py_ssize_t n = strand.shape[0], i, b
+    cdef Py_ssize_t n = strand.shape[0], t, i, b
     cdef int n_hidden = hidden.shape[1], width = grad.shape[1], blocks = weight.shape[0]
     if n == 0:
         return
-    for i in prange(n, nogil=True, schedule="static"):
+    for t in prange(n, nogil=True, schedule="static"):
+        i = by_block[t]
         row_grad_hidden(&grad[i, 0], &weight[block[i], 0, 0], n_hidden, width, &grad_rows_hidden[i, 0])
     for b in prange(blocks, nogil=True, schedule="dynamic"):
         block_grad(&hidden[0, 0], &grad[0, 0], &strand[0], &by_block[0] + block_start[b],

@@ -308,20 +308,20 @@ class _SegmentRows(torch.autograd.Function):
         width = weight.shape[0] // segments
         strand = torch.div(index, segments, rounding_mode="floor")
         block = index - strand * segments
+        by_block = torch.argsort(block, stable=True)
         h = hidden.detach().contiguous()
         w = weight.detach().reshape(segments, width, -1)
         out = hidden.new_empty((len(index), width))
         _rows.forward(h.numpy(), w.transpose(1, 2).contiguous().numpy(),
                       bias.detach().reshape(segments, width).contiguous().numpy(), strand.numpy(), block.numpy(),
-                      out.numpy())
-        ctx.save_for_backward(h, w, strand, block)
+                      by_block.numpy(), out.numpy())
+        ctx.save_for_backward(h, w, strand, block, by_block)
         return out
 
     @staticmethod
     def backward(ctx, grad):
-        h, w, strand, block = ctx.saved_tensors
+        h, w, strand, block, by_block = ctx.saved_tensors
         segments, width, _ = w.shape
-        by_block = torch.argsort(block, stable=True)
         block_start = torch.zeros(segments + 1, dtype=torch.int64)
         block_start[1:] = torch.cumsum(torch.bincount(block, minlength=segments), 0)
         grad_rows = h.new_empty((len(strand), h.shape[1]))
