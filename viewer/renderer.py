@@ -29,7 +29,7 @@ from cghair_format import Gaussians, HairAsset
 from cghair_format.camera import Camera
 
 from .context import check_gl, park_framebuffer
-from .decode import GpuScene, SceneTooLargeError, block_limit, upload_asset, upload_gaussians
+from .decode import GpuScene, SceneTooLargeError, block_limit, sh_texels, upload_asset, upload_gaussians
 from .lod import LodPlan, StrandLod
 from .pipeline import Programs, bind, dispatch, set_uniforms
 from .sort import SORT_MODES, GpuRadixSort, cpu_sort
@@ -42,6 +42,7 @@ PRIMITIVES = ("triangles", "quads")
 MAX_TARGET_SIZES = 2  # render target sizes kept allocated at once
 RECORD_BYTES = 64  # per sorted splat: 4 vec4s (splat_records.comp.glsl)
 RASTERIZERS = ("compute", "raster")
+SH_UNIT = 2  # texture unit of the SH chunk the preprocess reads
 
 
 @dataclass
@@ -170,8 +171,8 @@ class Renderer:
         set_uniforms(prog, u_trans=tuple(float(x) for x in w2c[:3, 3]),
                      u_cam_center=tuple(float(x) for x in camera.center),
                      u_intrinsics=(float(camera.fx), float(camera.fy), float(camera.cx), float(camera.cy)),
-                     u_viewport=(float(camera.width), float(camera.height)), u_coeffs=scene.sh_coeffs,
-                     u_degree=degree, u_scale=float(s.splat_scale), u_color_mode=int(s.color_by_group),
+                     u_viewport=(float(camera.width), float(camera.height)), u_sh_texels=sh_texels(scene.sh_coeffs),
+                     u_sh=SH_UNIT, u_degree=degree, u_scale=float(s.splat_scale), u_color_mode=int(s.color_by_group),
                      u_segments=scene.segments)
         prog["u_rot"].write(_mat_bytes(w2c[:3, :3]))
         self.plan = plan = self.lod.plan(self.budget)
@@ -182,7 +183,8 @@ class Renderer:
             self.binner.records.bind_to_image(1, read=False, write=True)
         self.visible_count.clear()
         for k, chunk in enumerate(scene.sh):
-            bind(scene.means, scene.rotations, scene.scales, chunk.buffer, self.center, self.conic,
+            chunk.texture.use(SH_UNIT)
+            bind(scene.means, scene.rotations, scene.scales, None, self.center, self.conic,
                  self.color, self.keys, self.values, scene.strand_card, scene.card_group, self.axes,
                  self.visible_count, self.lod.buffer)
             if plan.full:

@@ -24,11 +24,10 @@ from typing import Any
 
 import numpy as np
 
-from .pipeline import Programs, bind, dispatch, set_uniforms
+from .pipeline import TEXELS_PER_ROW, Programs, bind, data_image, dispatch, max_texture_size, set_uniforms
 from .sort import GpuRadixSort, cpu_sort
 
 TILE = 16  # pixels per tile side (tile_common.glsl)
-TEXELS_PER_ROW = 4096  # width of the record and entry images
 RECORD_TEXELS = 4  # texels per splat record (preprocess.comp.glsl)
 BLOCK = 256 * 16  # sorted splats per binning work group (tile_common.glsl)
 MIN_ENTRIES = 1 << 20  # first allocation of the entry buffers
@@ -37,7 +36,7 @@ GROWTH = 1.25  # head room when the entry buffers grow
 
 def max_splats(ctx: Any) -> int:
     """Most splats the record image of this context holds (GL_MAX_TEXTURE_SIZE rows)."""
-    return TEXELS_PER_ROW * int(ctx.info.get("GL_MAX_TEXTURE_SIZE") or 16384) // RECORD_TEXELS
+    return TEXELS_PER_ROW * max_texture_size(ctx) // RECORD_TEXELS
 
 
 def tile_grid(width: int, height: int) -> tuple[int, int]:
@@ -51,8 +50,7 @@ class TileBinner:
         self.ctx = ctx
         self.programs = programs
         self.sort_mode = sort_mode  # of the tile entries: the renderer's ("cpu" on llvmpipe, measured faster)
-        max_rows = int(ctx.info.get("GL_MAX_TEXTURE_SIZE") or 16384)
-        self.capacity = min(int(capacity), TEXELS_PER_ROW * max_rows)  # most entries one frame may need
+        self.capacity = min(int(capacity), TEXELS_PER_ROW * max_texture_size(ctx))  # most entries one frame may need
         n = max(splats, 1)
         self.splats = n
         self._records = None
@@ -70,15 +68,8 @@ class TileBinner:
     def records(self) -> Any:
         """The splat record image the preprocess writes (allocated on first use: 64 bytes a splat)."""
         if self._records is None:
-            self._records = self._image(RECORD_TEXELS * self.splats, 4, "f4")
+            self._records = data_image(self.ctx, RECORD_TEXELS * self.splats, 4, "f4")
         return self._records
-
-    def _image(self, texels: int, components: int, dtype: str) -> Any:
-        """A ``TEXELS_PER_ROW``-wide 2D texture holding at least ``texels`` texels, fetched exactly."""
-        tex = self.ctx.texture((TEXELS_PER_ROW, max(1, math.ceil(texels / TEXELS_PER_ROW))), components,
-                               dtype=dtype)
-        tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
-        return tex
 
     def _reserve(self, entries: int) -> None:
         if entries <= self.allocated and self.keys is not None:
@@ -91,7 +82,7 @@ class TileBinner:
             self.sorter.release()
         self.keys = self.ctx.buffer(reserve=4 * size)
         self.values = self.ctx.buffer(reserve=4 * size)
-        self.entry_image = self._image(size, 1, "u4")
+        self.entry_image = data_image(self.ctx, size, 1, "u4")
         self.sorter = GpuRadixSort(self.ctx, self.programs, size) if self.sort_mode == "gpu" else None
         self.allocated = size
 

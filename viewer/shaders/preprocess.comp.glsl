@@ -12,7 +12,6 @@ layout(local_size_x = 256) in;
 layout(std430, binding = 0) readonly buffer Means { vec4 means[]; };          // xyz, opacity
 layout(std430, binding = 1) readonly buffer Rotations { vec4 rotations[]; };  // wxyz
 layout(std430, binding = 2) readonly buffer Scales { vec4 scales[]; };
-layout(std430, binding = 3) readonly buffer Sh { float sh[]; };              // this chunk: [n*C*3]
 layout(std430, binding = 4) writeonly buffer Center { vec4 center[]; };      // mx, my, z, radius
 layout(std430, binding = 5) writeonly buffer Conic { vec4 conic[]; };        // a, b, c, opacity
 layout(std430, binding = 6) writeonly buffer Color { vec4 color[]; };        // rgb, 1
@@ -26,6 +25,8 @@ layout(std430, binding = 13) readonly buffer LodStrands { uint lod_strands[]; };
 // The compute rasterizer's splat records, 4 texels from texel 4 * slot (viewer/tiles.py): llvmpipe
 // fetches texels as vectors, but loads storage and shared memory one invocation at a time.
 layout(rgba32f, binding = 1) uniform writeonly image2D u_records;
+// This chunk's SH coefficients, Gaussian i's 3 C floats from texel i * u_sh_texels (viewer/decode.py).
+uniform sampler2D u_sh;
 
 uniform uint u_base;
 uniform uint u_count;
@@ -34,7 +35,7 @@ uniform vec3 u_trans;        // world-to-camera translation
 uniform vec3 u_cam_center;   // camera centre in world space
 uniform vec4 u_intrinsics;   // fx, fy, cx, cy
 uniform vec2 u_viewport;     // width, height in pixels
-uniform uint u_coeffs;       // stored SH coefficients per Gaussian, (deg+1)^2
+uniform uint u_sh_texels;    // texels per Gaussian in u_sh
 uniform int u_degree;        // SH degree to evaluate, <= stored degree
 uniform float u_scale;       // splat scale multiplier (1 = as stored)
 uniform int u_color_mode;    // 0: SH colour, 1: colour by card group
@@ -58,29 +59,44 @@ const float SH_C3[7] = float[](-0.5900435899266435, 2.890611442640554, -0.457045
                                0.3731763325901154, -0.4570457994644658, 1.445305721320277,
                                -0.5900435899266435);
 
-vec3 coeff(uint base, uint j) {
-    uint o = base + 3u * j;
-    return vec3(sh[o], sh[o + 1u], sh[o + 2u]);
+#include "tile_texel.glsl"
+
+// The coefficients' floats as texels: sh[k] holds floats 4k .. 4k + 3 of the Gaussian's 3 C.
+vec4 sh[12];
+
+vec3 coeff(uint j) {  // j is a constant once unrolled, so the selects below are resolved at compile time
+    uint o = 3u * j, r = o % 4u;
+    vec4 a = sh[o / 4u], b = sh[(o + 2u) / 4u];
+    return r == 0u ? a.xyz : r == 1u ? a.yzw : r == 2u ? vec3(a.zw, b.x) : vec3(a.w, b.xy);
 }
 
-vec3 eval_sh(uint base, vec3 dir) {
-    vec3 res = SH_C0 * coeff(base, 0u);
+// Fetches texels [lo, hi) of the Gaussian's coefficients: each degree only the texels it reads.
+void fetch_sh(int base, int lo, int hi) {
+    for (int k = lo; k < hi; ++k) sh[k] = texelFetch(u_sh, texel(base + k), 0);
+}
+
+vec3 eval_sh(int base, vec3 dir) {
+    fetch_sh(base, 0, 1);
+    vec3 res = SH_C0 * coeff(0u);
     if (u_degree > 0) {
+        fetch_sh(base, 1, 3);
         float x = dir.x, y = dir.y, z = dir.z;
-        res = res - SH_C1 * y * coeff(base, 1u) + SH_C1 * z * coeff(base, 2u) - SH_C1 * x * coeff(base, 3u);
+        res = res - SH_C1 * y * coeff(1u) + SH_C1 * z * coeff(2u) - SH_C1 * x * coeff(3u);
         if (u_degree > 1) {
+            fetch_sh(base, 3, 7);
             float xx = x * x, yy = y * y, zz = z * z, xy = x * y, yz = y * z, xz = x * z;
-            res = res + SH_C2[0] * xy * coeff(base, 4u) + SH_C2[1] * yz * coeff(base, 5u)
-                + SH_C2[2] * (2.0 * zz - xx - yy) * coeff(base, 6u) + SH_C2[3] * xz * coeff(base, 7u)
-                + SH_C2[4] * (xx - yy) * coeff(base, 8u);
+            res = res + SH_C2[0] * xy * coeff(4u) + SH_C2[1] * yz * coeff(5u)
+                + SH_C2[2] * (2.0 * zz - xx - yy) * coeff(6u) + SH_C2[3] * xz * coeff(7u)
+                + SH_C2[4] * (xx - yy) * coeff(8u);
             if (u_degree > 2) {
-                res = res + SH_C3[0] * y * (3.0 * xx - yy) * coeff(base, 9u)
-                    + SH_C3[1] * xy * z * coeff(base, 10u)
-                    + SH_C3[2] * y * (4.0 * zz - xx - yy) * coeff(base, 11u)
-                    + SH_C3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy) * coeff(base, 12u)
-                    + SH_C3[4] * x * (4.0 * zz - xx - yy) * coeff(base, 13u)
-                    + SH_C3[5] * z * (xx - yy) * coeff(base, 14u)
-                    + SH_C3[6] * x * (xx - 3.0 * yy) * coeff(base, 15u);
+                fetch_sh(base, 7, 12);
+                res = res + SH_C3[0] * y * (3.0 * xx - yy) * coeff(9u)
+                    + SH_C3[1] * xy * z * coeff(10u)
+                    + SH_C3[2] * y * (4.0 * zz - xx - yy) * coeff(11u)
+                    + SH_C3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy) * coeff(12u)
+                    + SH_C3[4] * x * (4.0 * zz - xx - yy) * coeff(13u)
+                    + SH_C3[5] * z * (xx - yy) * coeff(14u)
+                    + SH_C3[6] * x * (xx - 3.0 * yy) * coeff(15u);
             }
         }
     }
@@ -161,7 +177,7 @@ void main() {
     axes[slot] = ax;
     vec3 rgb;
     if (u_color_mode == 1) rgb = group_color(card_group[strand_card[g / u_segments]]);
-    else rgb = eval_sh((g - u_base) * u_coeffs * 3u, normalize(mo.xyz - u_cam_center));
+    else rgb = eval_sh(int((g - u_base) * u_sh_texels), normalize(mo.xyz - u_cam_center));
     color[slot] = vec4(rgb, 1.0);
     if (u_write_records) {
         // (mx, my, radius, opacity), conic, the half-axes over their squared lengths (|dot(d, .)|
