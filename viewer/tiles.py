@@ -3,10 +3,10 @@
 After the preprocess and the depth sort (:class:`viewer.renderer.Renderer`), every visible splat
 is duplicated into the 16 x 16 tiles its oriented footprint touches (``tile_count``, a scan of the
 block totals, ``tile_emit``: entries in depth order), the entries are sorted by tile with the
-stable GPU radix sort, or numpy's where the renderer sorts on the CPU (so each tile's entries
-stay in depth order), and each tile's range is
-found (``tile_ranges``, which also copies the entries into an image). ``tile_blend`` then runs
-one work group per tile, blending the tile's splats front to back and stopping each pixel at
+stable GPU radix sort (so each tile's entries stay in depth order), and each tile's range is
+found (``tile_ranges``, which also copies the entries into an image); where the renderer sorts on
+the CPU, numpy sorts the entries, counts each tile's and writes the entry image itself.
+``tile_blend`` then runs one work group per tile, blending the tile's splats front to back and stopping each pixel at
 T < 1e-4: the cost follows the visible splats, not all the splats over a pixel as fixed-function
 blending does. The blend reads splats as texels (the preprocess writes a record image next to its
 buffers): llvmpipe fetches texels as vectors but loads storage and shared memory one invocation
@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from .pipeline import TEXELS_PER_ROW, Programs, bind, data_image, dispatch, max_texture_size, set_uniforms
-from .sort import GpuRadixSort, cpu_sort
+from .sort import GpuRadixSort, sort_order
 
 TILE = 16  # pixels per tile side (tile_common.glsl)
 RECORD_TEXELS = 4  # texels per splat record (preprocess.comp.glsl)
@@ -130,10 +130,10 @@ class TileBinner:
         prog.run(blocks, 1, 1)
         self.ctx.memory_barrier()
         key_bits = max(1, (tiles_x * tiles_y - 1).bit_length())
-        if self.sorter is not None:
-            self.sorter.sort(self.keys, self.values, entries, key_bits=key_bits)
-        else:
-            cpu_sort(self.keys, self.values, entries, key_bits=key_bits)
+        if self.sorter is None:
+            self._sort_on_cpu(entries, key_bits)
+            return True
+        self.sorter.sort(self.keys, self.values, entries, key_bits=key_bits)
         self.ranges.clear()
         prog = self.programs.compute("tile_ranges")
         bind(self.keys, self.ranges, self.values)
@@ -141,6 +141,19 @@ class TileBinner:
         set_uniforms(prog, u_count=entries)
         dispatch(self.ctx, prog, entries)
         return True
+
+    def _sort_on_cpu(self, entries: int, key_bits: int) -> None:
+        """Sort the entries by tile with numpy, which also gives the tiles' ranges (a count per
+        tile), and write the sorted slots straight into the entry image: no ranges pass."""
+        tiles = np.frombuffer(self.keys.read(size=4 * entries), np.uint32)
+        slots = np.frombuffer(self.values.read(size=4 * entries), np.uint32)
+        ends = np.cumsum(np.bincount(tiles, minlength=self.tiles[0] * self.tiles[1]), dtype=np.uint32)
+        starts = np.concatenate([np.zeros(1, np.uint32), ends[:-1]])
+        self.ranges.write(np.stack([starts, ends], axis=1).tobytes())
+        rows = -(-entries // TEXELS_PER_ROW)
+        image = np.zeros(rows * TEXELS_PER_ROW, np.uint32)
+        image[:entries] = slots[sort_order(tiles, key_bits)]
+        self.entry_image.write(image.tobytes(), viewport=(0, 0, TEXELS_PER_ROW, rows))
 
     def blend(self, image: Any, width: int, height: int) -> None:
         """Blend every tile into ``image`` (an RGBA32F texture of ``width`` x ``height``)."""
