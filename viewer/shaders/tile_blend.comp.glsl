@@ -4,7 +4,8 @@
 // The tile's splats, front to back, are blended with the
 // rendering contract's formula (alpha = min(0.99, o exp(-q/2)) at the pixel centre, zero below
 // 1/255, outside the 3-sigma square or outside the rectangle spanned by the half-axes, which
-// holds every alpha >= 1/255): C += T alpha c, T *= 1 - alpha. A pixel stops once T < 1e-4 (its
+// holds every alpha >= 1/255): C += T alpha c, T *= 1 - alpha. Each invocation first finds the
+// rows of its column inside both (an interval), so the per-pixel test is two compares. A pixel stops once T < 1e-4 (its
 // remaining splats could add at most 1e-4 x colour), an invocation once all its pixels have.
 // Splat data come as texels (u_entries: the tile-sorted slots; u_records: 4 texels per slot,
 // preprocess.comp.glsl): llvmpipe fetches texels as vectors but loads storage and shared memory
@@ -26,6 +27,17 @@ const float T_MIN = 1e-4;
 const uint ROWS = 16u;  // pixels per invocation: the tile's column
 
 #include "tile_texel.glsl"
+
+// Narrows [lo, hi] to the dy with |u + dy v| <= 1 (one slab of the half-axes' rectangle).
+void slab(float u, float v, inout float lo, inout float hi) {
+    if (abs(v) > 1e-20) {
+        float a = (-1.0 - u) / v, b = (1.0 - u) / v;
+        lo = max(lo, min(a, b));
+        hi = min(hi, max(a, b));
+    } else if (abs(u) > 1.0) {
+        hi = -1e30;
+    }
+}
 
 void main() {
     uvec2 tile = gl_WorkGroupID.xy;
@@ -52,11 +64,15 @@ void main() {
         vec4 ax = texelFetch(u_records, at + ivec2(2, 0), 0);
         vec3 col = texelFetch(u_records, at + ivec2(3, 0), 0).rgb;
         float dx = px - c.x;
+        // dy = py0 + r - my of this column's pixels inside the square and the rectangle
+        float lo = -c.z, hi = abs(dx) <= c.z ? c.z : -1e30;
+        slab(dx * ax.x, ax.y, lo, hi);
+        slab(dx * ax.z, ax.w, lo, hi);
+        float r_lo = lo + c.y - py0, r_hi = hi + c.y - py0;
         any_live = false;
         for (uint r = 0u; r < ROWS; ++r) {
             float dy = py0 + float(r) - c.y;
-            bool hit = live[r] && abs(dx * ax.x + dy * ax.y) <= 1.0 && abs(dx * ax.z + dy * ax.w) <= 1.0
-                && max(abs(dx), abs(dy)) <= c.z;
+            bool hit = live[r] && float(r) >= r_lo && float(r) <= r_hi;
             float power = -0.5 * (con.x * dx * dx + con.z * dy * dy) - con.y * dx * dy;
             float alpha = min(ALPHA_MAX, c.w * exp(power));
             alpha = hit && alpha >= ALPHA_MIN ? alpha : 0.0;  // selects, not branches: SIMD-friendly
