@@ -2,7 +2,7 @@
 
 After the preprocess and the depth sort (:class:`viewer.renderer.Renderer`), every visible splat
 is duplicated into the 16 x 16 tiles its oriented footprint touches (``tile_count``, a scan of the
-block totals, ``tile_emit``: entries in depth order), the entries are sorted by tile with the
+totals of runs of 16 splats, ``tile_emit``: entries in depth order), the entries are sorted by tile with the
 stable GPU radix sort (so each tile's entries stay in depth order), and each tile's range is
 found (``tile_ranges``, which also copies the entries into an image); where the renderer sorts on
 the CPU, numpy sorts the entries, counts each tile's and writes the entry image itself.
@@ -29,7 +29,7 @@ from .sort import GpuRadixSort, sort_order
 
 TILE = 16  # pixels per tile side (tile_common.glsl)
 RECORD_TEXELS = 4  # texels per splat record (preprocess.comp.glsl)
-BLOCK = 256 * 16  # sorted splats per binning work group (tile_common.glsl)
+RUN = 16  # consecutive sorted splats per binning invocation (tile_common.glsl ITEMS)
 MIN_ENTRIES = 1 << 20  # first allocation of the entry buffers
 GROWTH = 1.25  # head room when the entry buffers grow
 
@@ -55,7 +55,7 @@ class TileBinner:
         self.splats = n
         self._records = None
         self.counts = ctx.buffer(reserve=4 * n)
-        self.block_sums = ctx.buffer(reserve=4 * max(1, math.ceil(n / BLOCK)))
+        self.run_sums = ctx.buffer(reserve=4 * max(1, math.ceil(n / RUN)))
         self.total = ctx.buffer(reserve=4)
         self.entries = 0  # entries of the last bin()
         self.entries_needed = 0  # entries the last bin() needed (more than entries if over capacity)
@@ -101,21 +101,20 @@ class TileBinner:
         tiles_x, tiles_y = self.tiles
         self.total.clear()
         self.entries = self.entries_needed = 0
-        blocks = math.ceil(visible / BLOCK)
+        runs = math.ceil(visible / RUN)
         if visible == 0:
             self._reserve(0)
             self.ranges.clear()
             return True
         viewport = (float(width), float(height))
         prog = self.programs.compute("tile_count")
-        bind(order, self.counts, self.block_sums, self.total)
+        bind(order, self.counts, self.run_sums, self.total)
         self.records.use(0)
         set_uniforms(prog, u_count=visible, u_viewport=viewport, u_tiles_x=tiles_x, u_records=0)
-        prog.run(blocks, 1, 1)
-        self.ctx.memory_barrier()
+        dispatch(self.ctx, prog, runs)
         scan = self.programs.compute("radix_scan")  # exclusive scan in place, one work group
-        bind(self.block_sums)
-        set_uniforms(scan, u_count=blocks)
+        bind(self.run_sums)
+        set_uniforms(scan, u_count=runs)
         scan.run(1, 1, 1)
         self.ctx.memory_barrier()
         entries = self.entries_needed = int(np.frombuffer(self.total.read(), np.uint32)[0])
@@ -124,11 +123,10 @@ class TileBinner:
         self._reserve(entries)
         self.entries = entries
         prog = self.programs.compute("tile_emit")
-        bind(order, self.counts, self.block_sums, self.keys, self.values)
+        bind(order, self.counts, self.run_sums, self.keys, self.values)
         self.records.use(0)
         set_uniforms(prog, u_count=visible, u_viewport=viewport, u_tiles_x=tiles_x, u_records=0)
-        prog.run(blocks, 1, 1)
-        self.ctx.memory_barrier()
+        dispatch(self.ctx, prog, runs)
         key_bits = max(1, (tiles_x * tiles_y - 1).bit_length())
         if self.sorter is None:
             self._sort_on_cpu(entries, key_bits)
@@ -168,7 +166,7 @@ class TileBinner:
         self.ctx.memory_barrier()
 
     def release(self) -> None:
-        for obj in (self.counts, self.block_sums, self.total, self.keys, self.values, self.ranges, self._records,
+        for obj in (self.counts, self.run_sums, self.total, self.keys, self.values, self.ranges, self._records,
                     self.entry_image):
             if obj is not None:
                 obj.release()

@@ -4,8 +4,7 @@
 // half-axes (preprocess.comp.glsl), which contains every pixel where alpha >= 1/255: the tiles
 // found by the separating-axis test below are a superset of the tiles with a visible pixel.
 const uint TILE = 16u;
-const uint ITEMS = 16u;              // consecutive sorted splats per thread
-const uint BLOCK = 256u * ITEMS;     // splats per work group
+const uint ITEMS = 16u;  // consecutive sorted splats per invocation (a run; viewer/tiles.py RUN)
 
 struct Footprint { ivec2 lo; ivec2 hi; vec2 m; vec2 a1; vec2 a2; };
 
