@@ -30,12 +30,13 @@ void main() {
         if (counts[idx] == 0u) continue;
         uint slot = order[idx];
         Footprint f = footprint(slot);
-        for (int ty = f.lo.y; ty <= f.hi.y; ++ty)
-            for (int tx = f.lo.x; tx <= f.hi.x; ++tx)
-                if (touches(f, ivec2(tx, ty))) {
-                    tile_keys[pos] = uint(ty) * u_tiles_x + uint(tx);
-                    tile_values[pos] = slot;
-                    pos += 1u;
-                }
+        for (int ty = f.lo.y; ty <= f.hi.y; ++ty) {
+            ivec2 span = row_span(f, ty);
+            for (int tx = span.x; tx <= span.y; ++tx) {
+                tile_keys[pos] = uint(ty) * u_tiles_x + uint(tx);
+                tile_values[pos] = slot;
+                pos += 1u;
+            }
+        }
     }
 }
