@@ -134,6 +134,7 @@ class Renderer:
         self.plan: LodPlan = self.lod.plan(None)  # what the last preprocess drew
         self.binner = TileBinner(ctx, self.programs, n, capacity=block_limit(ctx) // 4, sort_mode=self.sort_mode)
         self.frame_rasterizer = self.rasterizer  # the last frame's: raster where the tiles overflowed
+        self._view: tuple[Camera, ViewSettings | None] | None = None  # the last preprocess's camera, settings
         self._size = (0, 0)
         self._targets: dict[tuple[int, int], tuple[Any, Any, Any, Any]] = {}
         self._empty_vao: dict[str, Any] = {}
@@ -163,6 +164,11 @@ class Renderer:
 
     def preprocess(self, camera: Camera, settings: ViewSettings | None = None) -> None:
         """Project, colour and key every Gaussian for ``camera``."""
+        self._view = (camera, settings)
+        self._preprocess(camera, settings, records=self.rasterizer == "compute")
+
+    def _preprocess(self, camera: Camera, settings: ViewSettings | None, records: bool) -> None:
+        """The preprocess, writing the compute rasterizer's records or the raster path's buffers."""
         s = settings or ViewSettings()
         scene = self.scene
         degree = scene.sh_degree if s.sh_degree is None else max(0, min(int(s.sh_degree), scene.sh_degree))
@@ -178,8 +184,8 @@ class Renderer:
         self.plan = plan = self.lod.plan(self.budget)
         self._size = (int(camera.width), int(camera.height))
         set_uniforms(prog, u_indexed=not plan.full, u_lod_opacity=float(plan.opacity_power),
-                     u_lod_width=float(plan.width), u_write_records=self.rasterizer == "compute")
-        if self.rasterizer == "compute":
+                     u_lod_width=float(plan.width), u_write_records=records, u_write_buffers=not records)
+        if records:
             self.binner.records.bind_to_image(1, read=False, write=True)
         self.visible_count.clear()
         for k, chunk in enumerate(scene.sh):
@@ -222,6 +228,8 @@ class Renderer:
                               f"rasterizer's {self.binner.capacity:,}: drawing it with the raster path instead",
                               RuntimeWarning, stacklevel=2)
                 self._warned = True
+            self._preprocess(*self._view, records=False)  # the raster path's buffers, sorted again
+            self.sort()
         self._gather_records()
 
     def _gather_records(self) -> None:

@@ -1,7 +1,9 @@
 #version 430
 // Per frame, per Gaussian (rendering contract steps 1-4): camera-space depth, EWA 2D covariance
 // with 0.3 px^2 dilation, its inverse (conic), the 3-sigma support radius, colour from SH in the
-// direction camera -> mean, and the depth sort key (culled Gaussians get the largest key).
+// direction camera -> mean, and the depth sort key (culled Gaussians get the largest key). The
+// splat goes to the storage buffers the raster path gathers, or to the compute rasterizer's
+// record image, whichever the frame's rasterizer reads.
 // Dispatched once per SH chunk: Gaussians [u_base, u_base + u_count), each written to slot g; or,
 // with level of detail (viewer/lod.py), the first u_count Gaussians of the chunk's strands in
 // priority order (lod_strands[u_list_base...]), written to slots u_out_base + i, with opacity and
@@ -45,7 +47,8 @@ uniform uint u_list_base;    // this chunk's first entry in lod_strands
 uniform uint u_out_base;     // this chunk's first output slot
 uniform float u_lod_opacity; // drawn strands' opacity o -> 1 - (1 - o)^u_lod_opacity (1: as stored)
 uniform float u_lod_width;   // drawn strands' thickness (scales x, y) multiplier (1: as stored)
-uniform bool u_write_records; // also write u_records (compute rasterizer)
+uniform bool u_write_records; // write u_records (compute rasterizer)
+uniform bool u_write_buffers; // write center, conic, axes, color (raster path)
 
 const float NEAR_PLANE = 0.01;
 const float DILATION = 0.3;
@@ -133,7 +136,7 @@ void main() {
     values[slot] = slot;
     if (t.z <= NEAR_PLANE) {
         keys[slot] = 0xFFFFFFFFu;
-        center[slot] = vec4(0.0);
+        if (u_write_buffers) center[slot] = vec4(0.0);
         return;
     }
     float fx = u_intrinsics.x, fy = u_intrinsics.y;
@@ -153,13 +156,11 @@ void main() {
         || m2.y + radius < 0.0 || m2.y - radius > u_viewport.y;
     if (offscreen || !(det > 0.0) || mo.w < ALPHA_MIN) {
         keys[slot] = 0xFFFFFFFFu;
-        center[slot] = vec4(0.0);
+        if (u_write_buffers) center[slot] = vec4(0.0);
         return;
     }
     keys[slot] = floatBitsToUint(t.z);  // positive floats order like their bit patterns
     atomicAdd(visible, 1u);
-    center[slot] = vec4(m2, t.z, radius);
-    conic[slot] = vec4(cc / det, -cb / det, ca / det, mo.w);
     // The primitive's half-axes (a triangle circumscribes the unit disc in these units; a quad
     // is the unit square): alpha >= 1/255 only inside the ellipse q <= 2 ln(255 o), whose
     // half-axes are sqrt(q lambda) along the eigenvectors; thin hair splats cover far fewer
@@ -174,20 +175,22 @@ void main() {
     float e1 = sqrt(q * lam1) * 1.0001 + 0.01, e2 = sqrt(q * lam2) * 1.0001 + 0.01;
     float disc = 1.41421357 * (radius + 0.5);
     vec4 ax = e1 * e2 < disc * disc ? vec4(v1 * e1, vec2(-v1.y, v1.x) * e2) : vec4(disc, 0.0, 0.0, disc);
-    axes[slot] = ax;
     vec3 rgb;
     if (u_color_mode == 1) rgb = group_color(card_group[strand_card[g / u_segments]]);
     else rgb = eval_sh(int((g - u_base) * u_sh_texels), normalize(mo.xyz - u_cam_center));
-    color[slot] = vec4(rgb, 1.0);
+    if (u_write_buffers) {
+        center[slot] = vec4(m2, t.z, radius);
+        conic[slot] = vec4(cc / det, -cb / det, ca / det, mo.w);
+        axes[slot] = ax;
+        color[slot] = vec4(rgb, 1.0);
+    }
     if (u_write_records) {
         // (mx, my, radius, opacity), conic, the half-axes over their squared lengths (|dot(d, .)|
         // <= 1 inside the rectangle they span), colour
-        int k = int(4u * slot);
-        int w = imageSize(u_records).x;
-        imageStore(u_records, ivec2(k % w, k / w), vec4(m2, radius, mo.w));
-        imageStore(u_records, ivec2((k + 1) % w, (k + 1) / w), vec4(cc / det, -cb / det, ca / det, 0.0));
-        imageStore(u_records, ivec2((k + 2) % w, (k + 2) / w),
-                   vec4(ax.xy / dot(ax.xy, ax.xy), ax.zw / dot(ax.zw, ax.zw)));
-        imageStore(u_records, ivec2((k + 3) % w, (k + 3) / w), vec4(rgb, 0.0));
+        int k = int(4u * slot);  // a record's 4 texels share a row
+        imageStore(u_records, texel(k), vec4(m2, radius, mo.w));
+        imageStore(u_records, texel(k + 1), vec4(cc / det, -cb / det, ca / det, 0.0));
+        imageStore(u_records, texel(k + 2), vec4(ax.xy / dot(ax.xy, ax.xy), ax.zw / dot(ax.zw, ax.zw)));
+        imageStore(u_records, texel(k + 3), vec4(rgb, 0.0));
     }
 }
