@@ -32,7 +32,7 @@ from .context import check_gl, park_framebuffer
 from .decode import GpuScene, SceneTooLargeError, block_limit, sh_texels, upload_asset, upload_gaussians
 from .lod import LodPlan, StrandLod
 from .pipeline import Programs, bind, dispatch, set_uniforms
-from .sort import SORT_MODES, GpuRadixSort, cpu_sort
+from .sort import SORT_MODES, GpuRadixSort, stable_order
 from .tiles import TileBinner, max_splats
 
 NEAR, FAR = 0.01, 1.0e4  # clip planes of the overlays (the splats use the contract's near plane)
@@ -210,8 +210,11 @@ class Renderer:
         """Order the splats front to back (values become the draw order)."""
         if self.sorter is not None:
             self.sorter.sort(self.keys, self.values, self.drawn)
-        else:
-            cpu_sort(self.keys, self.values, self.drawn)
+        elif self.drawn:
+            # the preprocess writes values[slot] = slot, so the sorting permutation is the sorted
+            # values: no values to read back, no sorted keys to write (nothing reads them)
+            keys = np.frombuffer(self.keys.read(size=4 * self.drawn), np.uint32)
+            self.values.write(stable_order(keys).astype(np.uint32).tobytes())
 
     def gather(self) -> None:
         """After :meth:`sort`: bin the visible splats into tiles (compute rasterizer), or write
