@@ -43,9 +43,9 @@ class GpuScene:
     count: int  # G
     sh_coeffs: int  # (deg+1)^2 stored per Gaussian
     segments: int  # Gaussians per strand (P - 1); 1 for plain Gaussians
-    means: Any  # [G] vec4: xyz, opacity
-    rotations: Any  # [G] vec4: wxyz
-    scales: Any  # [G] vec4: xyz, 0
+    means: Any  # data image (RGBA32F, texel g): xyz, opacity
+    rotations: Any  # data image: wxyz
+    scales: Any  # data image: xyz, 0
     sh: list[ShChunk]
     strand_card: Any  # [S] uint
     card_group: Any  # [C] uint
@@ -149,10 +149,12 @@ def upload_asset(ctx: Any, programs: Programs, asset: HairAsset) -> GpuScene:
     strand_card = _buffer(ctx, asset.strand_card.astype(np.uint32))
     uvd = _buffer(ctx, asset.uvd.astype(np.float32).reshape(-1))
     opacity = _buffer(ctx, asset.opacity.astype(np.float32).reshape(-1))
-    means, rotations, scales = (_buffer(ctx, nbytes=g * 16) for _ in range(3))
+    means, rotations, scales = (data_image(ctx, g, 4, "f4") for _ in range(3))
     points = _buffer(ctx, nbytes=s * p * 16)
     prog = programs.compute("decode_geometry")
-    bind(mesh_pos, mesh_nrm, strand_card, uvd, opacity, means, rotations, scales, points)
+    bind(mesh_pos, mesh_nrm, strand_card, uvd, opacity, points)
+    for unit, image in enumerate((means, rotations, scales)):
+        image.bind_to_image(unit, read=False, write=True)
     set_uniforms(prog, u_count=g, u_points=p, u_segments=m1 - 1, u_thickness=float(asset.thickness))
     dispatch(ctx, prog, g)
 
@@ -231,6 +233,21 @@ def _decode_appearance(ctx: Any, programs: Programs, asset: HairAsset, strand_ca
     return chunks
 
 
+def _image_of(ctx: Any, data: np.ndarray) -> Any:
+    """A data image holding ``data``'s float32 values, 4 a texel, in order (the tail zero)."""
+    flat = np.ascontiguousarray(data, np.float32).reshape(-1)
+    image = data_image(ctx, -(-flat.size // 4), 4, "f4")
+    texels = np.zeros(image.width * image.height * 4, np.float32)
+    texels[:flat.size] = flat
+    image.write(texels.tobytes())
+    return image
+
+
+def _read_image(image: Any, count: int) -> np.ndarray:
+    """The first ``count`` texels of a data image, ``[count, 4]`` float32."""
+    return np.frombuffer(image.read(), np.float32).reshape(-1, 4)[:count]
+
+
 def upload_gaussians(ctx: Any, gaussians: Gaussians) -> GpuScene:
     """Upload a plain Gaussian set (no strands or cards: overlays and group colours unavailable)."""
     g = gaussians.count
@@ -239,19 +256,13 @@ def upload_gaussians(ctx: Any, gaussians: Gaussians) -> GpuScene:
     per_chunk = max(1, min(sh_chunk_bytes(ctx) // (coeffs * 3 * 4), sh_chunk_gaussians(ctx, coeffs)))
     sh = np.zeros((g, 4 * sh_texels(coeffs)), np.float32)  # each Gaussian on whole texels
     sh[:, :3 * coeffs] = gaussians.sh.reshape(g, -1)
-    chunks = []
-    for first in range(0, g, per_chunk):
-        part = sh[first:first + per_chunk]
-        image = data_image(ctx, part.size // 4, 4, "f4")
-        rows = np.zeros(image.width * image.height * 4, np.float32)
-        rows[:part.size] = part.reshape(-1)
-        image.write(rows.tobytes())
-        chunks.append(ShChunk(first, len(part), image))
+    chunks = [ShChunk(first, len(sh[first:first + per_chunk]), _image_of(ctx, sh[first:first + per_chunk]))
+              for first in range(0, g, per_chunk)]
     means = np.concatenate([gaussians.means, gaussians.opacities[:, None]], axis=1).astype(np.float32)
     return GpuScene(
-        count=g, sh_coeffs=coeffs, segments=1, means=_buffer(ctx, means),
-        rotations=_buffer(ctx, gaussians.rotations.astype(np.float32)),
-        scales=_buffer(ctx, _vec4(gaussians.scales.astype(np.float32))), sh=chunks,
+        count=g, sh_coeffs=coeffs, segments=1, means=_image_of(ctx, means),
+        rotations=_image_of(ctx, gaussians.rotations.astype(np.float32)),
+        scales=_image_of(ctx, _vec4(gaussians.scales.astype(np.float32))), sh=chunks,
         strand_card=_buffer(ctx, np.zeros(max(g, 1), np.uint32)),
         card_group=_buffer(ctx, np.zeros(1, np.uint32)),
         bounds=(gaussians.means.min(axis=0), gaussians.means.max(axis=0)), n_strands=g)
@@ -260,12 +271,10 @@ def upload_gaussians(ctx: Any, gaussians: Gaussians) -> GpuScene:
 def read_gaussians(scene: GpuScene) -> Gaussians:
     """Read the decoded Gaussians back from the GPU (for tests and exports)."""
     g = scene.count
-    means = np.frombuffer(scene.means.read(), np.float32).reshape(-1, 4)[:g]
-    rotations = np.frombuffer(scene.rotations.read(), np.float32).reshape(-1, 4)[:g]
-    scales = np.frombuffer(scene.scales.read(), np.float32).reshape(-1, 4)[:g]
-    stride = 4 * sh_texels(scene.sh_coeffs)
-    sh = np.concatenate([np.frombuffer(c.texture.read(), np.float32)[:c.count * stride].reshape(c.count, stride)
-                         for c in scene.sh]).reshape(-1, stride)[:, :3 * scene.sh_coeffs].reshape(g, -1, 3)
+    means, rotations, scales = (_read_image(image, g) for image in (scene.means, scene.rotations, scene.scales))
+    texels = sh_texels(scene.sh_coeffs)
+    sh = np.concatenate([_read_image(c.texture, c.count * texels).reshape(c.count, 4 * texels) for c in scene.sh])
+    sh = sh[:, :3 * scene.sh_coeffs].reshape(g, -1, 3)
     return Gaussians(means[:, :3].copy(), rotations.copy(), scales[:, :3].copy(), means[:, 3].copy(), sh)
 
 

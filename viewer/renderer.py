@@ -43,6 +43,7 @@ MAX_TARGET_SIZES = 2  # render target sizes kept allocated at once
 RECORD_BYTES = 64  # per sorted splat: 4 vec4s (splat_records.comp.glsl)
 RASTERIZERS = ("compute", "raster")
 SH_UNIT = 2  # texture unit of the SH chunk the preprocess reads
+MEANS_UNIT = 3  # texture units of the Gaussians' means, rotations and scales
 
 
 @dataclass
@@ -178,19 +179,22 @@ class Renderer:
                      u_cam_center=tuple(float(x) for x in camera.center),
                      u_intrinsics=(float(camera.fx), float(camera.fy), float(camera.cx), float(camera.cy)),
                      u_viewport=(float(camera.width), float(camera.height)), u_sh_texels=sh_texels(scene.sh_coeffs),
-                     u_sh=SH_UNIT, u_degree=degree, u_scale=float(s.splat_scale), u_color_mode=int(s.color_by_group),
+                     u_sh=SH_UNIT, u_means=MEANS_UNIT, u_rotations=MEANS_UNIT + 1, u_scales=MEANS_UNIT + 2,
+                     u_degree=degree, u_scale=float(s.splat_scale), u_color_mode=int(s.color_by_group),
                      u_segments=scene.segments)
         prog["u_rot"].write(_mat_bytes(w2c[:3, :3]))
         self.plan = plan = self.lod.plan(self.budget)
         self._size = (int(camera.width), int(camera.height))
         set_uniforms(prog, u_indexed=not plan.full, u_lod_opacity=float(plan.opacity_power),
                      u_lod_width=float(plan.width), u_write_records=records, u_write_buffers=not records)
+        for unit, image in enumerate((scene.means, scene.rotations, scene.scales), MEANS_UNIT):
+            image.use(unit)
         if records:
             self.binner.records.bind_to_image(1, read=False, write=True)
         self.visible_count.clear()
         for k, chunk in enumerate(scene.sh):
             chunk.texture.use(SH_UNIT)
-            bind(scene.means, scene.rotations, scene.scales, None, self.center, self.conic,
+            bind(None, None, None, None, self.center, self.conic,
                  self.color, self.keys, self.values, scene.strand_card, scene.card_group, self.axes,
                  self.visible_count, self.lod.buffer)
             if plan.full:

@@ -11,9 +11,6 @@
 layout(local_size_x = 256) in;
 #include "common.glsl"
 
-layout(std430, binding = 0) readonly buffer Means { vec4 means[]; };          // xyz, opacity
-layout(std430, binding = 1) readonly buffer Rotations { vec4 rotations[]; };  // wxyz
-layout(std430, binding = 2) readonly buffer Scales { vec4 scales[]; };
 layout(std430, binding = 4) writeonly buffer Center { vec4 center[]; };      // mx, my, z, radius
 layout(std430, binding = 5) writeonly buffer Conic { vec4 conic[]; };        // a, b, c, opacity
 layout(std430, binding = 6) writeonly buffer Color { vec4 color[]; };        // rgb, 1
@@ -27,7 +24,12 @@ layout(std430, binding = 13) readonly buffer LodStrands { uint lod_strands[]; };
 // The compute rasterizer's splat records, 4 texels from texel 4 * slot (viewer/tiles.py): llvmpipe
 // fetches texels as vectors, but loads storage and shared memory one invocation at a time.
 layout(rgba32f, binding = 1) uniform writeonly image2D u_records;
-// This chunk's SH coefficients, Gaussian i's 3 C floats from texel i * u_sh_texels (viewer/decode.py).
+// The Gaussians, texel g (xyz and opacity; wxyz; scales), and this chunk's SH coefficients,
+// Gaussian i's 3 C floats from texel i * u_sh_texels (viewer/decode.py): data images, which
+// llvmpipe fetches as vectors, while it loads storage one invocation and component at a time.
+uniform sampler2D u_means;
+uniform sampler2D u_rotations;
+uniform sampler2D u_scales;
 uniform sampler2D u_sh;
 
 uniform uint u_base;
@@ -130,7 +132,8 @@ void main() {
         g = lod_strands[u_list_base + local / u_segments] * u_segments + local % u_segments;
         slot = u_out_base + local;
     }
-    vec4 mo = means[g];
+    ivec2 at = texel(int(g));
+    vec4 mo = texelFetch(u_means, at, 0);
     if (u_lod_opacity != 1.0) mo.w = 1.0 - pow(max(1.0 - mo.w, 0.0), u_lod_opacity);
     vec3 t = u_rot * mo.xyz + u_trans;
     values[slot] = slot;
@@ -140,8 +143,8 @@ void main() {
         return;
     }
     float fx = u_intrinsics.x, fy = u_intrinsics.y;
-    vec3 sc = scales[g].xyz * u_scale * vec3(u_lod_width, u_lod_width, 1.0);
-    mat3 m = quat_to_mat(rotations[g]) * mat3(sc.x, 0.0, 0.0, 0.0, sc.y, 0.0, 0.0, 0.0, sc.z);
+    vec3 sc = texelFetch(u_scales, at, 0).xyz * u_scale * vec3(u_lod_width, u_lod_width, 1.0);
+    mat3 m = quat_to_mat(texelFetch(u_rotations, at, 0)) * mat3(sc.x, 0.0, 0.0, 0.0, sc.y, 0.0, 0.0, 0.0, sc.z);
     // J as a 3x2 (3 columns, 2 rows) matrix
     mat3x2 jac = mat3x2(fx / t.z, 0.0, 0.0, fy / t.z, -fx * t.x / (t.z * t.z), -fy * t.y / (t.z * t.z));
     mat3x2 a = jac * u_rot * m;
