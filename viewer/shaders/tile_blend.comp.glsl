@@ -1,11 +1,11 @@
 #version 430
 // One work group of 16 invocations per 16 x 16 tile; each owns a column of it, so one fetch of a
 // splat serves 16 pixels (on llvmpipe quicker than 4 rows per invocation; docs/viewer.md).
-// The tile's splats, front to back, are blended with the
-// rendering contract's formula (alpha = min(0.99, o exp(-q/2)) at the pixel centre, zero below
-// 1/255, outside the 3-sigma square or outside the rectangle spanned by the half-axes, which
-// holds every alpha >= 1/255): C += T alpha c, T *= 1 - alpha. Each invocation first finds the
-// rows of its column inside both (an interval), so the per-pixel test is two compares. A pixel stops once T < 1e-4 (its
+// The tile's splats, front to back, are blended with the rendering contract's formula
+// (alpha = min(0.99, o exp(-q/2)) at the pixel centre, zero below 1/255, outside the 3-sigma
+// square or outside the rectangle spanned by the half-axes, which holds every alpha >= 1/255):
+// C += T alpha c, T *= 1 - alpha. Each invocation first finds the rows of its column inside both
+// (an interval), so the per-pixel test is two compares. A pixel stops once T < 1e-4 (its
 // remaining splats could add at most 1e-4 x colour), an invocation once all its pixels have
 // (T alone marks a pixel still blending: no separate flags, fewer registers to spill).
 // Splat data come as texels (u_entries: the tile-sorted slots; u_records: 4 texels per slot,
