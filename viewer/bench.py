@@ -4,7 +4,7 @@ Stages are separated by ``glFinish`` so each time is the stage's own. Load = rea
 :class:`HairAsset`) + decode and upload (GPU decode of geometry and MLP). Every frame is the
 default view (``cgh render``'s: the asset framed, azimuth 0, elevation 10). Each rasterizer first
 draws one untimed frame (shader compilation, first use of buffers); then for each budget the frame
-is timed by stage: preprocess (projection, SH colour, keys), sort, then
+is timed by stage, the rasterizers taking turns frame by frame: preprocess (projection, SH colour, keys), sort, then
 gather (raster: draw records in sorted order; compute: tile binning) and draw (raster: one pulled
 triangle per splat; compute: per-tile blending). Quality: the PSNR (RGB) of each image against
 the same rasterizer's full-quality image, and against the reference splatter's full-quality render
@@ -110,40 +110,55 @@ def benchmark(path: str | None = None, synthetic: int | None = None, points: int
         t0 = time.perf_counter()
         reference = _reference_rgb(asset, small)
         t_reference = time.perf_counter() - t0
-    runs = []
-    for rasterizer in rasterizers:
-        full_image = None
+    for rasterizer in rasterizers:  # warm-up, untimed: shader compilation, buffers' first use
         renderer.rasterizer, renderer.budget = rasterizer, None
-        renderer.render(cam, settings)  # warm-up, untimed: shader compilation, buffers' first use
-        for budget in (None, *budgets):
-            renderer.budget = budget
-            rows: dict[str, list[float]] = {k: [] for k in ("preprocess", "sort", "gather", "draw")}
-            for _ in range(frames):
-                rows["preprocess"].append(_timed(ctx, lambda: renderer.preprocess(cam, settings)))
-                rows["sort"].append(_timed(ctx, renderer.sort))
-                rows["gather"].append(_timed(ctx, renderer.gather))
-                rows["draw"].append(_timed(ctx, lambda: renderer.draw(width, height)))
-            med = {k: statistics.median(v) for k, v in rows.items()}
-            renderer.composite(cam, settings)
-            image = np.frombuffer(renderer._target(width, height)[2].read(), np.float32)
-            image = image.reshape(height, width, 4)[..., :3].copy()
-            full_image = image if full_image is None else full_image
-            run = {"rasterizer": renderer.frame_rasterizer, "budget": budget, "gaussians_drawn": renderer.drawn,
-                   "strands_drawn": renderer.plan.strands, "visible": renderer.visible,
-                   "tile_entries": renderer.binner.entries if renderer.frame_rasterizer == "compute" else None,
-                   **{f"{k}_s": v for k, v in med.items()}, "frame_s": sum(med.values()),
-                   "psnr_vs_full_db": psnr(image, full_image) if budget is not None else None,
+        renderer.render(cam, settings)
+    runs: dict[str, list[dict]] = {r: [] for r in rasterizers}
+    full_images = {}
+    for budget in (None, *budgets):
+        # the rasterizers take turns frame by frame, so a change of the machine's load between
+        # them (llvmpipe shares the CPU) weighs on both alike
+        rows = {r: {k: [] for k in ("preprocess", "sort", "gather", "draw")} for r in rasterizers}
+        images, drawn = {}, {}
+        for frame in range(frames):
+            for rasterizer in rasterizers:
+                renderer.rasterizer, renderer.budget = rasterizer, budget
+                row = rows[rasterizer]
+                row["preprocess"].append(_timed(ctx, lambda: renderer.preprocess(cam, settings)))
+                row["sort"].append(_timed(ctx, renderer.sort))
+                row["gather"].append(_timed(ctx, renderer.gather))
+                row["draw"].append(_timed(ctx, lambda: renderer.draw(width, height)))
+                if frame == frames - 1:
+                    renderer.composite(cam, settings)
+                    image = np.frombuffer(renderer._target(width, height)[2].read(), np.float32)
+                    images[rasterizer] = image.reshape(height, width, 4)[..., :3].copy()
+                    drawn[rasterizer] = {
+                        "rasterizer": renderer.frame_rasterizer, "budget": budget,
+                        "gaussians_drawn": renderer.drawn, "strands_drawn": renderer.plan.strands,
+                        "visible": renderer.visible,
+                        "tile_entries": renderer.binner.entries if renderer.frame_rasterizer == "compute" else None}
+        for rasterizer in rasterizers:
+            med = {k: statistics.median(v) for k, v in rows[rasterizer].items()}
+            image = images[rasterizer]
+            full = full_images.setdefault(rasterizer, image)
+            run = {**drawn[rasterizer], **{f"{k}_s": v for k, v in med.items()}, "frame_s": sum(med.values()),
+                   "psnr_vs_full_db": psnr(image, full) if budget is not None else None,
                    "psnr_vs_reference_db": None}
             if reference is not None:
+                renderer.rasterizer, renderer.budget = rasterizer, budget
                 run["psnr_vs_reference_db"] = psnr(renderer.render(small, settings)[..., :3], reference)
-            runs.append(run)
+            runs[rasterizer].append(run)
     result = {
         "source": source, "file_bytes": file_bytes, "gaussians": scene.count, "strands": renderer.lod.n_strands,
         "width": width, "height": height, "frames": frames, "renderer": ctx.info.get("GL_RENDERER"),
         "sort_mode": renderer.sort_mode, "read_s": t_read, "decode_upload_s": t_upload,
         "reference_size": list(reference_size) if reference is not None else None,
-        "reference_s": t_reference if reference is not None else None, "runs": runs,
+        "reference_s": t_reference if reference is not None else None,
+        "runs": [run for r in rasterizers for run in runs[r]],
     }
+    full = {run["rasterizer"]: run["frame_s"] for run in result["runs"] if run["budget"] is None}
+    if "compute" in full and "raster" in full:
+        result["compute_over_raster"] = full["compute"] / full["raster"]  # full quality, same run
     if "raster" in rasterizers:
         result.update(_raster_baselines(ctx, renderer, cam, settings, frames))
     renderer.release()
@@ -195,6 +210,8 @@ def format_report(r: dict) -> str:
         lines.append(f"{run['rasterizer']:<8} {budget:>12} {run['gaussians_drawn']:>10,} {ms(run['preprocess_s'])} "
                      f"{ms(run['sort_s'])} {ms(run['gather_s'])}  {ms(run['draw_s'])}  {ms(run['frame_s'])}   "
                      f"{1 / run['frame_s']:5.2f} {db(run['psnr_vs_full_db'])} {db(run['psnr_vs_reference_db'])}")
+    if "compute_over_raster" in r:
+        lines.append(f"compute / raster frame time at full quality: {r['compute_over_raster']:.2f}x")
     if "bare_quads_s" in r:
         lines += [
             f"raster   sorts: gpu radix {ms(r['sort_gpu_s'])} ms, cpu numpy {ms(r['sort_cpu_s'])} ms; "

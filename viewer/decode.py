@@ -3,12 +3,14 @@
 Compute shaders rebuild the card strips, the strand points (card triangle + barycentrics +
 delta), the segment Gaussians' frames, the strand latents and the appearance MLP, reproducing
 :func:`cghair_format.decode_gaussians` in float32. SH coefficients can exceed one storage
-block (2.5 M Gaussians x 48 floats is 480 MB; llvmpipe allows 128 MiB per block), so they live
-in chunks of whole strands, each in its own buffer.
+block (2.5 M Gaussians x 48 floats is 480 MB; llvmpipe allows 128 MiB per block), so they are
+decoded in chunks of whole strands, and each chunk is kept as an image (``sh_texture``) that the
+preprocess fetches as texels, each Gaussian's coefficients on whole texels.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -17,7 +19,7 @@ import numpy as np
 from cghair_format import Gaussians, HairAsset
 from cghair_format.errors import CghError
 
-from .pipeline import Programs, bind, dispatch, set_uniforms
+from .pipeline import TEXELS_PER_ROW, Programs, bind, data_image, dispatch, max_texture_size, set_uniforms
 
 DEFAULT_BLOCK_LIMIT = 128 << 20
 
@@ -26,7 +28,12 @@ DEFAULT_BLOCK_LIMIT = 128 << 20
 class ShChunk:
     first: int  # first Gaussian
     count: int  # Gaussians in this chunk
-    buffer: Any  # [count * coeffs * 3] float32
+    texture: Any  # RGBA32F data image: Gaussian i's coeffs * 3 floats from texel i * sh_texels(coeffs)
+
+
+def sh_texels(coeffs: int) -> int:
+    """Texels a Gaussian's SH coefficients take in an :class:`ShChunk`'s image."""
+    return math.ceil(3 * coeffs / 4)
 
 
 @dataclass
@@ -36,9 +43,9 @@ class GpuScene:
     count: int  # G
     sh_coeffs: int  # (deg+1)^2 stored per Gaussian
     segments: int  # Gaussians per strand (P - 1); 1 for plain Gaussians
-    means: Any  # [G] vec4: xyz, opacity
-    rotations: Any  # [G] vec4: wxyz
-    scales: Any  # [G] vec4: xyz, 0
+    means: Any  # data image (RGBA32F, texel g): xyz, opacity
+    rotations: Any  # data image: wxyz
+    scales: Any  # data image: xyz, 0
     sh: list[ShChunk]
     strand_card: Any  # [S] uint
     card_group: Any  # [C] uint
@@ -60,7 +67,7 @@ class GpuScene:
             if buf is not None:
                 buf.release()
         for chunk in self.sh:
-            chunk.buffer.release()
+            chunk.texture.release()
         self.sh = []
 
 
@@ -73,6 +80,24 @@ def block_limit(ctx: Any) -> int:
 def sh_chunk_bytes(ctx: Any) -> int:
     """Size limit of one SH (and MLP activation) chunk buffer."""
     return block_limit(ctx)
+
+
+def sh_chunk_gaussians(ctx: Any, coeffs: int) -> int:
+    """Most Gaussians one SH chunk's image holds (GL_MAX_TEXTURE_SIZE rows)."""
+    return TEXELS_PER_ROW * max_texture_size(ctx) // sh_texels(coeffs)
+
+
+def _sh_image(ctx: Any, programs: Programs, sh: Any, count: int, coeffs: int) -> Any:
+    """The SH chunk buffer ``sh`` (``count`` Gaussians) copied into its image; releases ``sh``."""
+    texels = count * sh_texels(coeffs)
+    image = data_image(ctx, texels, 4, "f4")
+    prog = programs.compute("sh_texture")
+    bind(sh)
+    image.bind_to_image(0, read=False, write=True)
+    set_uniforms(prog, u_count=texels, u_floats=3 * coeffs, u_stride=sh_texels(coeffs))
+    dispatch(ctx, prog, texels)
+    sh.release()
+    return image
 
 
 class SceneTooLargeError(CghError):
@@ -124,10 +149,12 @@ def upload_asset(ctx: Any, programs: Programs, asset: HairAsset) -> GpuScene:
     strand_card = _buffer(ctx, asset.strand_card.astype(np.uint32))
     uvd = _buffer(ctx, asset.uvd.astype(np.float32).reshape(-1))
     opacity = _buffer(ctx, asset.opacity.astype(np.float32).reshape(-1))
-    means, rotations, scales = (_buffer(ctx, nbytes=g * 16) for _ in range(3))
+    means, rotations, scales = (data_image(ctx, g, 4, "f4") for _ in range(3))
     points = _buffer(ctx, nbytes=s * p * 16)
     prog = programs.compute("decode_geometry")
-    bind(mesh_pos, mesh_nrm, strand_card, uvd, opacity, means, rotations, scales, points)
+    bind(mesh_pos, mesh_nrm, strand_card, uvd, opacity, points)
+    for unit, image in enumerate((means, rotations, scales)):
+        image.bind_to_image(unit, read=False, write=True)
     set_uniforms(prog, u_count=g, u_points=p, u_segments=m1 - 1, u_thickness=float(asset.thickness))
     dispatch(ctx, prog, g)
 
@@ -170,7 +197,7 @@ def _decode_appearance(ctx: Any, programs: Programs, asset: HairAsset, strand_ca
     out_width = widths[-1]
     widest = max([app.latent_dim, *widths])
     per_chunk = max(1, sh_chunk_bytes(ctx) // (4 * widest))
-    per_chunk = min(per_chunk, s)
+    per_chunk = min(per_chunk, s, max(1, sh_chunk_gaussians(ctx, app.sh_coeffs) // segs))
     logits = _buffer(ctx, app.logits.astype(np.float32).reshape(-1))
     codebooks = _buffer(ctx, app.codebooks.astype(np.float32).reshape(-1))
     layers = [(_buffer(ctx, _weights_vec4(layer.weight)), _buffer(ctx, _pad4(layer.bias.astype(np.float32))),
@@ -197,7 +224,7 @@ def _decode_appearance(ctx: Any, programs: Programs, asset: HairAsset, strand_ca
                          u_relu=relu)
             dispatch(ctx, layer_prog, count)
             src = 1 - src
-        chunks.append(ShChunk(first * segs, n * segs, out))
+        chunks.append(ShChunk(first * segs, n * segs, _sh_image(ctx, programs, out, n * segs, app.sh_coeffs)))
     for buf in (logits, codebooks, *hidden):
         buf.release()
     for w, b, *_ in layers:
@@ -206,20 +233,36 @@ def _decode_appearance(ctx: Any, programs: Programs, asset: HairAsset, strand_ca
     return chunks
 
 
+def _image_of(ctx: Any, data: np.ndarray) -> Any:
+    """A data image holding ``data``'s float32 values, 4 a texel, in order (the tail zero)."""
+    flat = np.ascontiguousarray(data, np.float32).reshape(-1)
+    image = data_image(ctx, -(-flat.size // 4), 4, "f4")
+    texels = np.zeros(image.width * image.height * 4, np.float32)
+    texels[:flat.size] = flat
+    image.write(texels.tobytes())
+    return image
+
+
+def _read_image(image: Any, count: int) -> np.ndarray:
+    """The first ``count`` texels of a data image, ``[count, 4]`` float32."""
+    return np.frombuffer(image.read(), np.float32).reshape(-1, 4)[:count]
+
+
 def upload_gaussians(ctx: Any, gaussians: Gaussians) -> GpuScene:
     """Upload a plain Gaussian set (no strands or cards: overlays and group colours unavailable)."""
     g = gaussians.count
     check_capacity(ctx, g)
     coeffs = gaussians.sh.shape[1]
-    per_chunk = max(1, sh_chunk_bytes(ctx) // (coeffs * 3 * 4))
-    sh = gaussians.sh.astype(np.float32).reshape(g, -1)
-    chunks = [ShChunk(first, min(per_chunk, g - first), _buffer(ctx, sh[first:first + per_chunk]))
+    per_chunk = max(1, min(sh_chunk_bytes(ctx) // (coeffs * 3 * 4), sh_chunk_gaussians(ctx, coeffs)))
+    sh = np.zeros((g, 4 * sh_texels(coeffs)), np.float32)  # each Gaussian on whole texels
+    sh[:, :3 * coeffs] = gaussians.sh.reshape(g, -1)
+    chunks = [ShChunk(first, len(sh[first:first + per_chunk]), _image_of(ctx, sh[first:first + per_chunk]))
               for first in range(0, g, per_chunk)]
     means = np.concatenate([gaussians.means, gaussians.opacities[:, None]], axis=1).astype(np.float32)
     return GpuScene(
-        count=g, sh_coeffs=coeffs, segments=1, means=_buffer(ctx, means),
-        rotations=_buffer(ctx, gaussians.rotations.astype(np.float32)),
-        scales=_buffer(ctx, _vec4(gaussians.scales.astype(np.float32))), sh=chunks,
+        count=g, sh_coeffs=coeffs, segments=1, means=_image_of(ctx, means),
+        rotations=_image_of(ctx, gaussians.rotations.astype(np.float32)),
+        scales=_image_of(ctx, _vec4(gaussians.scales.astype(np.float32))), sh=chunks,
         strand_card=_buffer(ctx, np.zeros(max(g, 1), np.uint32)),
         card_group=_buffer(ctx, np.zeros(1, np.uint32)),
         bounds=(gaussians.means.min(axis=0), gaussians.means.max(axis=0)), n_strands=g)
@@ -228,11 +271,10 @@ def upload_gaussians(ctx: Any, gaussians: Gaussians) -> GpuScene:
 def read_gaussians(scene: GpuScene) -> Gaussians:
     """Read the decoded Gaussians back from the GPU (for tests and exports)."""
     g = scene.count
-    means = np.frombuffer(scene.means.read(), np.float32).reshape(-1, 4)[:g]
-    rotations = np.frombuffer(scene.rotations.read(), np.float32).reshape(-1, 4)[:g]
-    scales = np.frombuffer(scene.scales.read(), np.float32).reshape(-1, 4)[:g]
-    sh = np.concatenate([np.frombuffer(c.buffer.read(), np.float32)[:c.count * scene.sh_coeffs * 3]
-                         for c in scene.sh]).reshape(g, scene.sh_coeffs, 3)
+    means, rotations, scales = (_read_image(image, g) for image in (scene.means, scene.rotations, scene.scales))
+    texels = sh_texels(scene.sh_coeffs)
+    sh = np.concatenate([_read_image(c.texture, c.count * texels).reshape(c.count, 4 * texels) for c in scene.sh])
+    sh = sh[:, :3 * scene.sh_coeffs].reshape(g, -1, 3)
     return Gaussians(means[:, :3].copy(), rotations.copy(), scales[:, :3].copy(), means[:, 3].copy(), sh)
 
 

@@ -15,6 +15,7 @@ from typing import Any
 from .context import GLError
 
 LOCAL_SIZE = 256  # work-group size of the one-invocation-per-item compute shaders
+TEXELS_PER_ROW = 4096  # width of the data images (tile_texel.glsl)
 MAX_GROUPS = 65535  # guaranteed per-axis work-group count limit
 SHADER_DIR = Path(__file__).resolve().parent / "shaders"
 _INCLUDE = re.compile(r'^#include "([\w.]+)"\s*$', re.MULTILINE)
@@ -83,6 +84,19 @@ def dispatch(ctx: Any, program: Any, count: int, local_size: int = LOCAL_SIZE) -
     gy = math.ceil(groups / gx)
     program.run(gx, gy, 1)
     ctx.memory_barrier()
+
+
+def max_texture_size(ctx: Any) -> int:
+    return int(ctx.info.get("GL_MAX_TEXTURE_SIZE") or 16384)
+
+
+def data_image(ctx: Any, texels: int, components: int, dtype: str) -> Any:
+    """A ``TEXELS_PER_ROW``-wide 2D texture holding at least ``texels`` texels, fetched exactly.
+    Shaders read per-item data from such images rather than storage buffers where it is fetched
+    often: llvmpipe fetches texels as vectors but loads storage one invocation at a time."""
+    tex = ctx.texture((TEXELS_PER_ROW, max(1, math.ceil(texels / TEXELS_PER_ROW))), components, dtype=dtype)
+    tex.filter = (ctx.NEAREST, ctx.NEAREST)
+    return tex
 
 
 def bind(*buffers: Any) -> None:

@@ -29,10 +29,10 @@ from cghair_format import Gaussians, HairAsset
 from cghair_format.camera import Camera
 
 from .context import check_gl, park_framebuffer
-from .decode import GpuScene, SceneTooLargeError, block_limit, upload_asset, upload_gaussians
+from .decode import GpuScene, SceneTooLargeError, block_limit, sh_texels, upload_asset, upload_gaussians
 from .lod import LodPlan, StrandLod
 from .pipeline import Programs, bind, dispatch, set_uniforms
-from .sort import SORT_MODES, GpuRadixSort, cpu_sort
+from .sort import SORT_MODES, GpuRadixSort, stable_order
 from .tiles import TileBinner, max_splats
 
 NEAR, FAR = 0.01, 1.0e4  # clip planes of the overlays (the splats use the contract's near plane)
@@ -42,6 +42,8 @@ PRIMITIVES = ("triangles", "quads")
 MAX_TARGET_SIZES = 2  # render target sizes kept allocated at once
 RECORD_BYTES = 64  # per sorted splat: 4 vec4s (splat_records.comp.glsl)
 RASTERIZERS = ("compute", "raster")
+SH_UNIT = 2  # texture unit of the SH chunk the preprocess reads
+MEANS_UNIT = 3  # texture units of the Gaussians' means, rotations and scales
 
 
 @dataclass
@@ -133,6 +135,7 @@ class Renderer:
         self.plan: LodPlan = self.lod.plan(None)  # what the last preprocess drew
         self.binner = TileBinner(ctx, self.programs, n, capacity=block_limit(ctx) // 4, sort_mode=self.sort_mode)
         self.frame_rasterizer = self.rasterizer  # the last frame's: raster where the tiles overflowed
+        self._view: tuple[Camera, ViewSettings | None] | None = None  # the last preprocess's camera, settings
         self._size = (0, 0)
         self._targets: dict[tuple[int, int], tuple[Any, Any, Any, Any]] = {}
         self._empty_vao: dict[str, Any] = {}
@@ -162,6 +165,11 @@ class Renderer:
 
     def preprocess(self, camera: Camera, settings: ViewSettings | None = None) -> None:
         """Project, colour and key every Gaussian for ``camera``."""
+        self._view = (camera, settings)
+        self._preprocess(camera, settings, records=self.rasterizer == "compute")
+
+    def _preprocess(self, camera: Camera, settings: ViewSettings | None, records: bool) -> None:
+        """The preprocess, writing the compute rasterizer's records or the raster path's buffers."""
         s = settings or ViewSettings()
         scene = self.scene
         degree = scene.sh_degree if s.sh_degree is None else max(0, min(int(s.sh_degree), scene.sh_degree))
@@ -170,19 +178,23 @@ class Renderer:
         set_uniforms(prog, u_trans=tuple(float(x) for x in w2c[:3, 3]),
                      u_cam_center=tuple(float(x) for x in camera.center),
                      u_intrinsics=(float(camera.fx), float(camera.fy), float(camera.cx), float(camera.cy)),
-                     u_viewport=(float(camera.width), float(camera.height)), u_coeffs=scene.sh_coeffs,
+                     u_viewport=(float(camera.width), float(camera.height)), u_sh_texels=sh_texels(scene.sh_coeffs),
+                     u_sh=SH_UNIT, u_means=MEANS_UNIT, u_rotations=MEANS_UNIT + 1, u_scales=MEANS_UNIT + 2,
                      u_degree=degree, u_scale=float(s.splat_scale), u_color_mode=int(s.color_by_group),
                      u_segments=scene.segments)
         prog["u_rot"].write(_mat_bytes(w2c[:3, :3]))
         self.plan = plan = self.lod.plan(self.budget)
         self._size = (int(camera.width), int(camera.height))
         set_uniforms(prog, u_indexed=not plan.full, u_lod_opacity=float(plan.opacity_power),
-                     u_lod_width=float(plan.width), u_write_records=self.rasterizer == "compute")
-        if self.rasterizer == "compute":
+                     u_lod_width=float(plan.width), u_write_records=records, u_write_buffers=not records)
+        for unit, image in enumerate((scene.means, scene.rotations, scene.scales), MEANS_UNIT):
+            image.use(unit)
+        if records:
             self.binner.records.bind_to_image(1, read=False, write=True)
         self.visible_count.clear()
         for k, chunk in enumerate(scene.sh):
-            bind(scene.means, scene.rotations, scene.scales, chunk.buffer, self.center, self.conic,
+            chunk.texture.use(SH_UNIT)
+            bind(None, None, None, None, self.center, self.conic,
                  self.color, self.keys, self.values, scene.strand_card, scene.card_group, self.axes,
                  self.visible_count, self.lod.buffer)
             if plan.full:
@@ -202,8 +214,11 @@ class Renderer:
         """Order the splats front to back (values become the draw order)."""
         if self.sorter is not None:
             self.sorter.sort(self.keys, self.values, self.drawn)
-        else:
-            cpu_sort(self.keys, self.values, self.drawn)
+        elif self.drawn:
+            # the preprocess writes values[slot] = slot, so the sorting permutation is the sorted
+            # values: no values to read back, no sorted keys to write (nothing reads them)
+            keys = np.frombuffer(self.keys.read(size=4 * self.drawn), np.uint32)
+            self.values.write(stable_order(keys).astype(np.uint32).tobytes())
 
     def gather(self) -> None:
         """After :meth:`sort`: bin the visible splats into tiles (compute rasterizer), or write
@@ -220,6 +235,8 @@ class Renderer:
                               f"rasterizer's {self.binner.capacity:,}: drawing it with the raster path instead",
                               RuntimeWarning, stacklevel=2)
                 self._warned = True
+            self._preprocess(*self._view, records=False)  # the raster path's buffers, sorted again
+            self.sort()
         self._gather_records()
 
     def _gather_records(self) -> None:

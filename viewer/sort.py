@@ -68,9 +68,14 @@ def cpu_sort(keys: Any, values: Any, count: int, key_bits: int = 32) -> None:
     Keys below ``2 ** key_bits``; up to 16 bits take one radix pass."""
     k = np.frombuffer(keys.read(size=4 * count), np.uint32)
     v = np.frombuffer(values.read(size=4 * count), np.uint32)
-    order = np.argsort(k.astype(np.uint16), kind="stable") if key_bits <= 16 else stable_order(k)
+    order = sort_order(k, key_bits)
     keys.write(k[order].tobytes())
     values.write(v[order].tobytes())
+
+
+def sort_order(keys: np.ndarray, key_bits: int = 32) -> np.ndarray:
+    """The stable sorting permutation of uint32 ``keys`` below ``2 ** key_bits``."""
+    return np.argsort(keys.astype(np.uint16), kind="stable") if key_bits <= 16 else stable_order(keys)
 
 
 def stable_order(keys: np.ndarray) -> np.ndarray:

@@ -48,6 +48,18 @@ def test_asset_matches_reference(gl_ctx, azimuth):
     renderer.release()
 
 
+@pytest.mark.parametrize("sh_degree", [0, 1, 2])
+def test_stored_sh_degrees_match_reference(gl_ctx, sh_degree):
+    """Each Gaussian's 3 (deg + 1)^2 SH floats take 1, 3 or 7 texels of the SH image (3 and 27
+    floats do not fill whole texels): every stored degree must colour like the reference."""
+    asset = example_asset(seed=5, strands=64, points=10, sh_degree=sh_degree)
+    renderer = Renderer.from_asset(gl_ctx, asset, rasterizer="compute")
+    lo, hi = renderer.scene.bounds
+    cam = Camera.orbit((lo + hi) / 2, 0.45, 30.0, 15.0, 80, 64)
+    _check(renderer, decode_gaussians(asset), cam)
+    renderer.release()
+
+
 @pytest.mark.parametrize("sort", ["gpu", "cpu"])
 def test_random_gaussians_odd_camera(gl_ctx, sort):
     """Anisotropic and large Gaussians over many tiles, some behind or across the near plane or

@@ -84,3 +84,50 @@ def test_fixed_budget_and_raster(gl_ctx, monkeypatch):
     assert "| raster | 60 of 200 Gaussians (30 % of strands) | budget 60 |" in glfw.titles[-1]
     image = np.frombuffer(ctx.screen.read(components=3), np.uint8)
     assert image.max() > 40  # hair on the stand-in window
+
+
+def test_adaptive_budget_while_dragging_full_quality_at_rest(gl_ctx, monkeypatch):
+    """Dragging the camera draws a reduced budget once a frame has shown the full one too slow;
+    the frame after the camera stops is drawn at full quality, and then nothing is redrawn."""
+    from viewer import app, camera_control
+
+    glfw = _fake_glfw(64, 48)
+    callbacks = {}
+    glfw.set_mouse_button_callback = lambda w, f: callbacks.__setitem__("button", f)
+    glfw.set_cursor_pos_callback = lambda w, f: callbacks.__setitem__("move", f)
+    polls = iter(range(1000))
+
+    def poll(*_):  # frame n: the left button goes down at 1, the cursor moves at 1-6, the button goes up at 7
+        n = next(polls)
+        if n == 1:
+            callbacks["button"](None, 99, glfw.PRESS, 0)
+        if 1 <= n <= 6:
+            callbacks["move"](None, 10.0 * n, 0.0)
+        if n == 7:
+            callbacks["button"](None, 99, glfw.RELEASE, 0)
+
+    glfw.poll_events = glfw.wait_events_timeout = poll
+    monkeypatch.setitem(sys.modules, "glfw", glfw)
+    monkeypatch.setattr(app, "create_window", lambda w, h, t: ("window", _Context(gl_ctx, w, h)))
+    # every frame is far too slow for this target: while moving the budget drops to its floor
+    monkeypatch.setattr(camera_control, "TARGET_FRAME_S", 1e-9)
+    asset = example_asset(seed=9, strands=64, points=6, sh_degree=1)  # 320 Gaussians, 5 a strand
+    draws = []
+    real_create = app.create_renderer
+
+    def counting_renderer(*args, **kwargs):
+        renderer = real_create(*args, **kwargs)
+        original = renderer.preprocess
+        renderer.preprocess = lambda *a, **k: (draws.append(renderer.budget), original(*a, **k))
+        return renderer
+
+    monkeypatch.setattr(app, "create_renderer", counting_renderer)
+    frames = app.run_viewer(asset, title="v", file_size=0, width=64, height=48, rasterizer="compute",
+                            max_frames=10)
+    assert frames == 10
+    floor = int(320 * camera_control.MIN_BUDGET_FRACTION)  # 5 Gaussians: one strand
+    # rest (full), the first drag frame (full: nothing learned yet), four drag frames at the floor,
+    # then at rest full quality once
+    assert draws == [None, None, floor, floor, floor, floor, None]
+    assert "| 5 of 320 Gaussians (2 % of strands) | budget adaptive |" in glfw.titles[5]
+    assert "| 320 Gaussians | budget adaptive |" in glfw.titles[-1]

@@ -140,6 +140,8 @@ def test_bench_viewer_small(gl_ctx, cgh_file, tmp_path, capsys):
                 "draw_instanced_quads_s", "reference_s"):
         assert figures[key] > 0
     runs = figures["runs"]
+    assert figures["compute_over_raster"] == runs[0]["frame_s"] / runs[3]["frame_s"]
+    assert "compute / raster frame time at full quality" in stdout
     assert [(r["rasterizer"], r["budget"]) for r in runs] == [
         (ras, b) for ras in ("compute", "raster") for b in (None, 500, 1000)]
     for run in runs:

@@ -10,15 +10,18 @@ layout(std430, binding = 1) readonly buffer MeshNrm { vec4 mesh_nrm[]; };
 layout(std430, binding = 2) readonly buffer StrandCard { uint strand_card[]; };  // [S]
 layout(std430, binding = 3) readonly buffer Uvd { float uvd[]; };                // [S*P*3]
 layout(std430, binding = 4) readonly buffer Opacity { float opacity[]; };        // [G]
-layout(std430, binding = 5) writeonly buffer Means { vec4 means[]; };            // [G] xyz, opacity
-layout(std430, binding = 6) writeonly buffer Rotations { vec4 rotations[]; };    // [G] wxyz
-layout(std430, binding = 7) writeonly buffer Scales { vec4 scales[]; };          // [G] xyz
-layout(std430, binding = 8) writeonly buffer Points { vec4 points[]; };          // [S*P] xyz
+layout(std430, binding = 5) writeonly buffer Points { vec4 points[]; };          // [S*P] xyz
+// The Gaussians as data images, texel g (viewer/decode.py GpuScene): the preprocess fetches them.
+layout(rgba32f, binding = 0) uniform writeonly image2D u_means;      // xyz, opacity
+layout(rgba32f, binding = 1) uniform writeonly image2D u_rotations;  // wxyz
+layout(rgba32f, binding = 2) uniform writeonly image2D u_scales;     // xyz, 0
 
 uniform uint u_count;       // G
 uniform uint u_points;      // P
 uniform uint u_segments;    // card segments M
 uniform float u_thickness;  // d
+
+#include "tile_texel.glsl"
 
 vec3 strand_point(uint s, uint j) {
     uint o = 3u * (s * u_points + j);
@@ -52,7 +55,8 @@ void main() {
     vec3 d = len > 0.0 ? seg / max(len, 1e-30) : vec3(0.0, 0.0, 1.0);
     float w = 1.0 + d.z;
     vec4 q = w < 1e-12 ? vec4(0.0, 1.0, 0.0, 0.0) : vec4(w, -d.y, d.x, 0.0);
-    means[g] = vec4(0.5 * (p0 + p1), opacity[g]);
-    rotations[g] = q / length(q);
-    scales[g] = vec4(u_thickness, u_thickness, 0.5 * len, 0.0);
+    ivec2 at = texel(int(g));
+    imageStore(u_means, at, vec4(0.5 * (p0 + p1), opacity[g]));
+    imageStore(u_rotations, at, q / length(q));
+    imageStore(u_scales, at, vec4(u_thickness, u_thickness, 0.5 * len, 0.0));
 }

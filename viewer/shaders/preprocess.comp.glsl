@@ -1,7 +1,9 @@
 #version 430
 // Per frame, per Gaussian (rendering contract steps 1-4): camera-space depth, EWA 2D covariance
 // with 0.3 px^2 dilation, its inverse (conic), the 3-sigma support radius, colour from SH in the
-// direction camera -> mean, and the depth sort key (culled Gaussians get the largest key).
+// direction camera -> mean, and the depth sort key (culled Gaussians get the largest key). The
+// splat goes to the storage buffers the raster path gathers, or to the compute rasterizer's
+// record image, whichever the frame's rasterizer reads.
 // Dispatched once per SH chunk: Gaussians [u_base, u_base + u_count), each written to slot g; or,
 // with level of detail (viewer/lod.py), the first u_count Gaussians of the chunk's strands in
 // priority order (lod_strands[u_list_base...]), written to slots u_out_base + i, with opacity and
@@ -9,10 +11,6 @@
 layout(local_size_x = 256) in;
 #include "common.glsl"
 
-layout(std430, binding = 0) readonly buffer Means { vec4 means[]; };          // xyz, opacity
-layout(std430, binding = 1) readonly buffer Rotations { vec4 rotations[]; };  // wxyz
-layout(std430, binding = 2) readonly buffer Scales { vec4 scales[]; };
-layout(std430, binding = 3) readonly buffer Sh { float sh[]; };              // this chunk: [n*C*3]
 layout(std430, binding = 4) writeonly buffer Center { vec4 center[]; };      // mx, my, z, radius
 layout(std430, binding = 5) writeonly buffer Conic { vec4 conic[]; };        // a, b, c, opacity
 layout(std430, binding = 6) writeonly buffer Color { vec4 color[]; };        // rgb, 1
@@ -26,6 +24,13 @@ layout(std430, binding = 13) readonly buffer LodStrands { uint lod_strands[]; };
 // The compute rasterizer's splat records, 4 texels from texel 4 * slot (viewer/tiles.py): llvmpipe
 // fetches texels as vectors, but loads storage and shared memory one invocation at a time.
 layout(rgba32f, binding = 1) uniform writeonly image2D u_records;
+// The Gaussians, texel g (xyz and opacity; wxyz; scales), and this chunk's SH coefficients,
+// Gaussian i's 3 C floats from texel i * u_sh_texels (viewer/decode.py): data images, which
+// llvmpipe fetches as vectors, while it loads storage one invocation and component at a time.
+uniform sampler2D u_means;
+uniform sampler2D u_rotations;
+uniform sampler2D u_scales;
+uniform sampler2D u_sh;
 
 uniform uint u_base;
 uniform uint u_count;
@@ -34,7 +39,7 @@ uniform vec3 u_trans;        // world-to-camera translation
 uniform vec3 u_cam_center;   // camera centre in world space
 uniform vec4 u_intrinsics;   // fx, fy, cx, cy
 uniform vec2 u_viewport;     // width, height in pixels
-uniform uint u_coeffs;       // stored SH coefficients per Gaussian, (deg+1)^2
+uniform uint u_sh_texels;    // texels per Gaussian in u_sh
 uniform int u_degree;        // SH degree to evaluate, <= stored degree
 uniform float u_scale;       // splat scale multiplier (1 = as stored)
 uniform int u_color_mode;    // 0: SH colour, 1: colour by card group
@@ -44,7 +49,8 @@ uniform uint u_list_base;    // this chunk's first entry in lod_strands
 uniform uint u_out_base;     // this chunk's first output slot
 uniform float u_lod_opacity; // drawn strands' opacity o -> 1 - (1 - o)^u_lod_opacity (1: as stored)
 uniform float u_lod_width;   // drawn strands' thickness (scales x, y) multiplier (1: as stored)
-uniform bool u_write_records; // also write u_records (compute rasterizer)
+uniform bool u_write_records; // write u_records (compute rasterizer)
+uniform bool u_write_buffers; // write center, conic, axes, color (raster path)
 
 const float NEAR_PLANE = 0.01;
 const float DILATION = 0.3;
@@ -58,29 +64,44 @@ const float SH_C3[7] = float[](-0.5900435899266435, 2.890611442640554, -0.457045
                                0.3731763325901154, -0.4570457994644658, 1.445305721320277,
                                -0.5900435899266435);
 
-vec3 coeff(uint base, uint j) {
-    uint o = base + 3u * j;
-    return vec3(sh[o], sh[o + 1u], sh[o + 2u]);
+#include "tile_texel.glsl"
+
+// The coefficients' floats as texels: sh[k] holds floats 4k .. 4k + 3 of the Gaussian's 3 C.
+vec4 sh[12];
+
+vec3 coeff(uint j) {  // j is a constant once unrolled, so the selects below are resolved at compile time
+    uint o = 3u * j, r = o % 4u;
+    vec4 a = sh[o / 4u], b = sh[(o + 2u) / 4u];
+    return r == 0u ? a.xyz : r == 1u ? a.yzw : r == 2u ? vec3(a.zw, b.x) : vec3(a.w, b.xy);
 }
 
-vec3 eval_sh(uint base, vec3 dir) {
-    vec3 res = SH_C0 * coeff(base, 0u);
+// Fetches texels [lo, hi) of the Gaussian's coefficients: each degree only the texels it reads.
+void fetch_sh(int base, int lo, int hi) {
+    for (int k = lo; k < hi; ++k) sh[k] = texelFetch(u_sh, texel(base + k), 0);
+}
+
+vec3 eval_sh(int base, vec3 dir) {
+    fetch_sh(base, 0, 1);
+    vec3 res = SH_C0 * coeff(0u);
     if (u_degree > 0) {
+        fetch_sh(base, 1, 3);
         float x = dir.x, y = dir.y, z = dir.z;
-        res = res - SH_C1 * y * coeff(base, 1u) + SH_C1 * z * coeff(base, 2u) - SH_C1 * x * coeff(base, 3u);
+        res = res - SH_C1 * y * coeff(1u) + SH_C1 * z * coeff(2u) - SH_C1 * x * coeff(3u);
         if (u_degree > 1) {
+            fetch_sh(base, 3, 7);
             float xx = x * x, yy = y * y, zz = z * z, xy = x * y, yz = y * z, xz = x * z;
-            res = res + SH_C2[0] * xy * coeff(base, 4u) + SH_C2[1] * yz * coeff(base, 5u)
-                + SH_C2[2] * (2.0 * zz - xx - yy) * coeff(base, 6u) + SH_C2[3] * xz * coeff(base, 7u)
-                + SH_C2[4] * (xx - yy) * coeff(base, 8u);
+            res = res + SH_C2[0] * xy * coeff(4u) + SH_C2[1] * yz * coeff(5u)
+                + SH_C2[2] * (2.0 * zz - xx - yy) * coeff(6u) + SH_C2[3] * xz * coeff(7u)
+                + SH_C2[4] * (xx - yy) * coeff(8u);
             if (u_degree > 2) {
-                res = res + SH_C3[0] * y * (3.0 * xx - yy) * coeff(base, 9u)
-                    + SH_C3[1] * xy * z * coeff(base, 10u)
-                    + SH_C3[2] * y * (4.0 * zz - xx - yy) * coeff(base, 11u)
-                    + SH_C3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy) * coeff(base, 12u)
-                    + SH_C3[4] * x * (4.0 * zz - xx - yy) * coeff(base, 13u)
-                    + SH_C3[5] * z * (xx - yy) * coeff(base, 14u)
-                    + SH_C3[6] * x * (xx - 3.0 * yy) * coeff(base, 15u);
+                fetch_sh(base, 7, 12);
+                res = res + SH_C3[0] * y * (3.0 * xx - yy) * coeff(9u)
+                    + SH_C3[1] * xy * z * coeff(10u)
+                    + SH_C3[2] * y * (4.0 * zz - xx - yy) * coeff(11u)
+                    + SH_C3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy) * coeff(12u)
+                    + SH_C3[4] * x * (4.0 * zz - xx - yy) * coeff(13u)
+                    + SH_C3[5] * z * (xx - yy) * coeff(14u)
+                    + SH_C3[6] * x * (xx - 3.0 * yy) * coeff(15u);
             }
         }
     }
@@ -111,18 +132,19 @@ void main() {
         g = lod_strands[u_list_base + local / u_segments] * u_segments + local % u_segments;
         slot = u_out_base + local;
     }
-    vec4 mo = means[g];
+    ivec2 at = texel(int(g));
+    vec4 mo = texelFetch(u_means, at, 0);
     if (u_lod_opacity != 1.0) mo.w = 1.0 - pow(max(1.0 - mo.w, 0.0), u_lod_opacity);
     vec3 t = u_rot * mo.xyz + u_trans;
     values[slot] = slot;
     if (t.z <= NEAR_PLANE) {
         keys[slot] = 0xFFFFFFFFu;
-        center[slot] = vec4(0.0);
+        if (u_write_buffers) center[slot] = vec4(0.0);
         return;
     }
     float fx = u_intrinsics.x, fy = u_intrinsics.y;
-    vec3 sc = scales[g].xyz * u_scale * vec3(u_lod_width, u_lod_width, 1.0);
-    mat3 m = quat_to_mat(rotations[g]) * mat3(sc.x, 0.0, 0.0, 0.0, sc.y, 0.0, 0.0, 0.0, sc.z);
+    vec3 sc = texelFetch(u_scales, at, 0).xyz * u_scale * vec3(u_lod_width, u_lod_width, 1.0);
+    mat3 m = quat_to_mat(texelFetch(u_rotations, at, 0)) * mat3(sc.x, 0.0, 0.0, 0.0, sc.y, 0.0, 0.0, 0.0, sc.z);
     // J as a 3x2 (3 columns, 2 rows) matrix
     mat3x2 jac = mat3x2(fx / t.z, 0.0, 0.0, fy / t.z, -fx * t.x / (t.z * t.z), -fy * t.y / (t.z * t.z));
     mat3x2 a = jac * u_rot * m;
@@ -137,13 +159,11 @@ void main() {
         || m2.y + radius < 0.0 || m2.y - radius > u_viewport.y;
     if (offscreen || !(det > 0.0) || mo.w < ALPHA_MIN) {
         keys[slot] = 0xFFFFFFFFu;
-        center[slot] = vec4(0.0);
+        if (u_write_buffers) center[slot] = vec4(0.0);
         return;
     }
     keys[slot] = floatBitsToUint(t.z);  // positive floats order like their bit patterns
     atomicAdd(visible, 1u);
-    center[slot] = vec4(m2, t.z, radius);
-    conic[slot] = vec4(cc / det, -cb / det, ca / det, mo.w);
     // The primitive's half-axes (a triangle circumscribes the unit disc in these units; a quad
     // is the unit square): alpha >= 1/255 only inside the ellipse q <= 2 ln(255 o), whose
     // half-axes are sqrt(q lambda) along the eigenvectors; thin hair splats cover far fewer
@@ -158,20 +178,22 @@ void main() {
     float e1 = sqrt(q * lam1) * 1.0001 + 0.01, e2 = sqrt(q * lam2) * 1.0001 + 0.01;
     float disc = 1.41421357 * (radius + 0.5);
     vec4 ax = e1 * e2 < disc * disc ? vec4(v1 * e1, vec2(-v1.y, v1.x) * e2) : vec4(disc, 0.0, 0.0, disc);
-    axes[slot] = ax;
     vec3 rgb;
     if (u_color_mode == 1) rgb = group_color(card_group[strand_card[g / u_segments]]);
-    else rgb = eval_sh((g - u_base) * u_coeffs * 3u, normalize(mo.xyz - u_cam_center));
-    color[slot] = vec4(rgb, 1.0);
+    else rgb = eval_sh(int((g - u_base) * u_sh_texels), normalize(mo.xyz - u_cam_center));
+    if (u_write_buffers) {
+        center[slot] = vec4(m2, t.z, radius);
+        conic[slot] = vec4(cc / det, -cb / det, ca / det, mo.w);
+        axes[slot] = ax;
+        color[slot] = vec4(rgb, 1.0);
+    }
     if (u_write_records) {
         // (mx, my, radius, opacity), conic, the half-axes over their squared lengths (|dot(d, .)|
         // <= 1 inside the rectangle they span), colour
-        int k = int(4u * slot);
-        int w = imageSize(u_records).x;
-        imageStore(u_records, ivec2(k % w, k / w), vec4(m2, radius, mo.w));
-        imageStore(u_records, ivec2((k + 1) % w, (k + 1) / w), vec4(cc / det, -cb / det, ca / det, 0.0));
-        imageStore(u_records, ivec2((k + 2) % w, (k + 2) / w),
-                   vec4(ax.xy / dot(ax.xy, ax.xy), ax.zw / dot(ax.zw, ax.zw)));
-        imageStore(u_records, ivec2((k + 3) % w, (k + 3) / w), vec4(rgb, 0.0));
+        int k = int(4u * slot);  // a record's 4 texels share a row
+        imageStore(u_records, texel(k), vec4(m2, radius, mo.w));
+        imageStore(u_records, texel(k + 1), vec4(cc / det, -cb / det, ca / det, 0.0));
+        imageStore(u_records, texel(k + 2), vec4(ax.xy / dot(ax.xy, ax.xy), ax.zw / dot(ax.zw, ax.zw)));
+        imageStore(u_records, texel(k + 3), vec4(rgb, 0.0));
     }
 }

@@ -1,11 +1,13 @@
 #version 430
 // One work group of 16 invocations per 16 x 16 tile; each owns a column of it, so one fetch of a
 // splat serves 16 pixels (on llvmpipe quicker than 4 rows per invocation; docs/viewer.md).
-// The tile's splats, front to back, are blended with the
-// rendering contract's formula (alpha = min(0.99, o exp(-q/2)) at the pixel centre, zero below
-// 1/255, outside the 3-sigma square or outside the rectangle spanned by the half-axes, which
-// holds every alpha >= 1/255): C += T alpha c, T *= 1 - alpha. A pixel stops once T < 1e-4 (its
-// remaining splats could add at most 1e-4 x colour), an invocation once all its pixels have.
+// The tile's splats, front to back, are blended with the rendering contract's formula
+// (alpha = min(0.99, o exp(-q/2)) at the pixel centre, zero below 1/255, outside the 3-sigma
+// square or outside the rectangle spanned by the half-axes, which holds every alpha >= 1/255):
+// C += T alpha c, T *= 1 - alpha. Each invocation first finds the rows of its column inside both
+// (an interval), so the per-pixel test is two compares. A pixel stops once T < 1e-4 (its
+// remaining splats could add at most 1e-4 x colour), an invocation once all its pixels have
+// (T alone marks a pixel still blending: no separate flags, fewer registers to spill).
 // Splat data come as texels (u_entries: the tile-sorted slots; u_records: 4 texels per slot,
 // preprocess.comp.glsl): llvmpipe fetches texels as vectors but loads storage and shared memory
 // one invocation at a time, which made a shared-memory batch loop many times slower there.
@@ -27,24 +29,33 @@ const uint ROWS = 16u;  // pixels per invocation: the tile's column
 
 #include "tile_texel.glsl"
 
+// Narrows [lo, hi] to the dy with |u + dy v| <= 1 (one slab of the half-axes' rectangle).
+void slab(float u, float v, inout float lo, inout float hi) {
+    if (abs(v) > 1e-20) {
+        float a = (-1.0 - u) / v, b = (1.0 - u) / v;
+        lo = max(lo, min(a, b));
+        hi = min(hi, max(a, b));
+    } else if (abs(u) > 1.0) {
+        hi = -1e30;
+    }
+}
+
 void main() {
     uvec2 tile = gl_WorkGroupID.xy;
     uvec2 range = ranges[tile.y * u_tiles_x + tile.x];
     uint x = tile.x * 16u + gl_LocalInvocationID.x;
     uint y0 = tile.y * 16u;
     vec3 rgb[ROWS];
-    float T[ROWS];
-    bool live[ROWS];
-    bool any_live = false;
+    float T[ROWS];  // pixels outside the image start at 0: T >= T_MIN marks the pixels still blending
+    float t_max = 0.0;
     for (uint r = 0u; r < ROWS; ++r) {
         rgb[r] = vec3(0.0);
-        T[r] = 1.0;
-        live[r] = x < u_size.x && y0 + r < u_size.y;
-        any_live = any_live || live[r];
+        T[r] = x < u_size.x && y0 + r < u_size.y ? 1.0 : 0.0;
+        t_max = max(t_max, T[r]);
     }
     float px = float(x) + 0.5;
     float py0 = float(y0) + 0.5;
-    for (uint i = range.x; i < range.y && any_live; ++i) {
+    for (uint i = range.x; i < range.y && t_max >= T_MIN; ++i) {
         int slot = int(texelFetch(u_entries, texel(int(i)), 0).r);
         ivec2 at = texel(4 * slot);  // a record's 4 texels share a row
         vec4 c = texelFetch(u_records, at, 0);                   // mx, my, radius, opacity
@@ -52,18 +63,21 @@ void main() {
         vec4 ax = texelFetch(u_records, at + ivec2(2, 0), 0);
         vec3 col = texelFetch(u_records, at + ivec2(3, 0), 0).rgb;
         float dx = px - c.x;
-        any_live = false;
+        // dy = py0 + r - my of this column's pixels inside the square and the rectangle
+        float lo = -c.z, hi = abs(dx) <= c.z ? c.z : -1e30;
+        slab(dx * ax.x, ax.y, lo, hi);
+        slab(dx * ax.z, ax.w, lo, hi);
+        float r_lo = lo + c.y - py0, r_hi = hi + c.y - py0;
+        t_max = 0.0;
         for (uint r = 0u; r < ROWS; ++r) {
             float dy = py0 + float(r) - c.y;
-            bool hit = live[r] && abs(dx * ax.x + dy * ax.y) <= 1.0 && abs(dx * ax.z + dy * ax.w) <= 1.0
-                && max(abs(dx), abs(dy)) <= c.z;
+            bool hit = T[r] >= T_MIN && float(r) >= r_lo && float(r) <= r_hi;
             float power = -0.5 * (con.x * dx * dx + con.z * dy * dy) - con.y * dx * dy;
             float alpha = min(ALPHA_MAX, c.w * exp(power));
             alpha = hit && alpha >= ALPHA_MIN ? alpha : 0.0;  // selects, not branches: SIMD-friendly
             rgb[r] += T[r] * alpha * col;
             T[r] *= 1.0 - alpha;
-            live[r] = live[r] && T[r] >= T_MIN;
-            any_live = any_live || live[r];
+            t_max = max(t_max, T[r]);
         }
     }
     for (uint r = 0u; r < ROWS; ++r) {

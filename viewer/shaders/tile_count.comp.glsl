@@ -1,11 +1,14 @@
 #version 430
-// Tile binning, step 1: how many tiles each visible splat touches, in depth order (thread t of a
-// work group owns ITEMS consecutive sorted splats), each block's total, and the grand total.
+// Tile binning, step 1: how many tiles each visible splat touches, in depth order, and each run's
+// total (invocation t owns the ITEMS consecutive sorted splats of run t), plus the grand total.
+// No shared memory or barriers: on llvmpipe a barrier switches between all of a work group's
+// SIMD batches, and shared memory is loaded one invocation at a time.
 layout(local_size_x = 256) in;
+#include "common.glsl"
 
 layout(std430, binding = 0) readonly buffer Order { uint order[]; };  // depth-sorted slots
 layout(std430, binding = 1) writeonly buffer Counts { uint counts[]; };
-layout(std430, binding = 2) writeonly buffer BlockSums { uint block_sums[]; };
+layout(std430, binding = 2) writeonly buffer RunSums { uint run_sums[]; };
 layout(std430, binding = 3) buffer Total { uint total; };
 
 uniform uint u_count;      // visible splats
@@ -15,11 +18,10 @@ uniform sampler2D u_records;  // 4 texels a slot (preprocess.comp.glsl)
 
 #include "tile_common.glsl"
 
-shared uint partial[256];
-
 void main() {
-    uint t = gl_LocalInvocationID.x;
-    uint start = gl_WorkGroupID.x * BLOCK + t * ITEMS;
+    uint run = global_index();
+    uint start = run * ITEMS;
+    if (start >= u_count) return;
     uint s = 0u;
     for (uint i = 0u; i < ITEMS; ++i) {
         uint idx = start + i;
@@ -28,14 +30,6 @@ void main() {
         counts[idx] = n;
         s += n;
     }
-    partial[t] = s;
-    barrier();
-    for (uint off = 128u; off > 0u; off >>= 1) {
-        if (t < off) partial[t] += partial[t + off];
-        barrier();
-    }
-    if (t == 0u) {
-        block_sums[gl_WorkGroupID.x] = partial[0];
-        atomicAdd(total, partial[0]);
-    }
+    run_sums[run] = s;
+    if (s != 0u) atomicAdd(total, s);
 }

@@ -1,13 +1,14 @@
 #version 430
-// Tile binning, step 2 (after the block totals are scanned): each visible splat writes one
+// Tile binning, step 2 (after the run totals are scanned): each visible splat writes one
 // (tile, slot) entry per tile it touches, at its exclusive prefix position in depth order. A
 // stable sort by tile then leaves every tile's entries in depth order: (tile, depth) keys with
 // the depth rank implicit in the emission order.
 layout(local_size_x = 256) in;
+#include "common.glsl"
 
 layout(std430, binding = 0) readonly buffer Order { uint order[]; };
 layout(std430, binding = 1) readonly buffer Counts { uint counts[]; };
-layout(std430, binding = 2) readonly buffer BlockSums { uint block_sums[]; };  // scanned
+layout(std430, binding = 2) readonly buffer RunOffsets { uint run_offsets[]; };  // scanned run sums
 layout(std430, binding = 3) writeonly buffer TileKeys { uint tile_keys[]; };
 layout(std430, binding = 4) writeonly buffer TileValues { uint tile_values[]; };
 
@@ -18,31 +19,24 @@ uniform sampler2D u_records;  // 4 texels a slot (preprocess.comp.glsl)
 
 #include "tile_common.glsl"
 
-const uint SCAN_THREADS = 256u;
-shared uint sums[SCAN_THREADS];
-#include "workgroup_scan.glsl"
-
 void main() {
-    uint t = gl_LocalInvocationID.x;
-    uint start = gl_WorkGroupID.x * BLOCK + t * ITEMS;
-    uint s = 0u;
-    for (uint i = 0u; i < ITEMS; ++i) {
-        uint idx = start + i;
-        if (idx < u_count) s += counts[idx];
-    }
-    uint pos = block_sums[gl_WorkGroupID.x] + exclusive_prefix(t, s);
+    uint run = global_index();
+    uint start = run * ITEMS;
+    if (start >= u_count) return;
+    uint pos = run_offsets[run];
     for (uint i = 0u; i < ITEMS; ++i) {
         uint idx = start + i;
         if (idx >= u_count) break;
         if (counts[idx] == 0u) continue;
         uint slot = order[idx];
         Footprint f = footprint(slot);
-        for (int ty = f.lo.y; ty <= f.hi.y; ++ty)
-            for (int tx = f.lo.x; tx <= f.hi.x; ++tx)
-                if (touches(f, ivec2(tx, ty))) {
-                    tile_keys[pos] = uint(ty) * u_tiles_x + uint(tx);
-                    tile_values[pos] = slot;
-                    pos += 1u;
-                }
+        for (int ty = f.lo.y; ty <= f.hi.y; ++ty) {
+            ivec2 span = row_span(f, ty);
+            for (int tx = span.x; tx <= span.y; ++tx) {
+                tile_keys[pos] = uint(ty) * u_tiles_x + uint(tx);
+                tile_values[pos] = slot;
+                pos += 1u;
+            }
+        }
     }
 }
