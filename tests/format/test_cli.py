@@ -3,6 +3,7 @@
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -31,7 +32,7 @@ def test_info_text_and_json(asset_file, capsys):
 
 def test_info_names_the_writers_strand_coding_choices(capsys):
     """The vectors cover each choice a decoder follows; `cgh info` says which a file took."""
-    vectors = cgh.codec.Path(__file__).parents[2] / "spec" / "vectors"
+    vectors = Path(__file__).parents[2] / "spec" / "vectors"
     assert main(["info", str(vectors / "synth_cards_neighbour_classes.cgh")]) == 0
     out = capsys.readouterr().out
     assert "every 8 points, guided by the card neighbour's steps, scaled" in out
