@@ -139,45 +139,16 @@ def _decode_payloads(meta: dict, payloads: dict[str, bytes], sh_ahead: bool) -> 
 
 
 def _decode_chunks(meta: dict, payloads: dict[str, bytes], sh_ahead: bool) -> tuple[HairAsset, np.ndarray | None]:
-    s, p, c, m, nt, k, d = (meta[key] for key in ("strands", "points", "cards", "segments", "groups", "k",
-                                                    "latent_dim"))
-    q = meta["quant"]
+    s, p, c = meta["strands"], meta["points"], meta["cards"]
     rd = {name: StreamReader(payloads[name], name) for name in REQUIRED_CHUNKS[1:]}
     strand_card = np.cumsum(rd["STRD"].ints((s,), "strand_card"))
     if strand_card.min() < 0 or strand_card.max() >= c:
         raise InvalidContentError(f"strand_card refers to cards outside [0, {c})", chunk="STRD")
-    widths = [d] + [layer["out"] for layer in meta["mlp"]]
-    sh_out = None
-    if q["lossless"]:
-        f4 = ("<f4",)
-        cards = Cards(rd["CARD"].array((c, m + 1, 3), "spine", f4), rd["CARD"].array((c, m + 1, 3), "normal", f4),
-                      rd["CARD"].array((c, m + 1), "half_width", f4), _read_groups(rd["CARD"], c))
-        uvd = rd["STRD"].array((s, p, 3), "uvd", f4)
-        opacity = rd["OPAC"].array((s, p - 1), "opacity", f4)
-        appearance = _appearance(meta, rd["LOGT"].array((s, k), "logits", f4),
-                                 rd["CBKS"].array((nt, k, d), "codebooks", f4),
-                                 [MlpLayer(rd["MLPW"].array((o, i), f"mlp[{j}].weight", f4),
-                                           rd["MLPW"].array((o,), f"mlp[{j}].bias", f4), layer["activation"])
-                                  for j, (i, o, layer) in enumerate(zip(widths[:-1], widths[1:], meta["mlp"],
-                                                                        strict=True))])
+    if meta["quant"]["lossless"]:
+        (cards, uvd, opacity, appearance), sh_out = _decode_lossless(rd, meta), None
     else:
-        cards = decode_cards(rd["CARD"], c, m + 1, q)
-        cards.group = _read_groups(rd["CARD"], c)
-        # the strand points (whose rANS decoder runs on one core) while the appearance streams decode and,
-        # sh_ahead, the SH's memory faults in; a fault in STRD is raised first, as it comes first in the file
-        with ThreadPoolExecutor(max_workers=1) as background:
-            points = background.submit(_decode_strand_points, rd["STRD"], cards, strand_card, p, q,
-                                       payloads.get(FAMILY_CHUNK))
-            try:
-                opacity, *model = _decode_quantized_appearance(rd, meta, s, p, q)
-                appearance = _appearance(meta, *model)
-                if sh_ahead:  # filled once the strands are done, on every core
-                    appearance.validate(s, p - 1)
-                    sh_out = memory.empty((s, (p - 1) * appearance.sh_coeffs * 3), np.float32)
-            except Exception:
-                points.result()
-                raise
-            uvd = points.result()
+        cards, uvd, opacity, appearance, sh_out = _decode_quantized(rd, meta, strand_card, payloads.get(FAMILY_CHUNK),
+                                                                    sh_ahead)
     for reader in rd.values():
         reader.finish()
     asset = HairAsset(cards, strand_card.astype(np.int32), uvd, opacity.astype(np.float32), appearance,
@@ -185,6 +156,50 @@ def _decode_chunks(meta: dict, payloads: dict[str, bytes], sh_ahead: bool) -> tu
                       meta["attribution"])
     _decode_optional(asset, payloads, s, p)
     return asset, sh_out
+
+
+def _decode_lossless(rd: dict[str, StreamReader], meta: dict) -> tuple[Cards, np.ndarray, np.ndarray, Appearance]:
+    """Cards, card coordinates, opacities and appearance of a lossless file: float32 arrays as stored."""
+    s, p, c, m, nt, k, d = (meta[key] for key in ("strands", "points", "cards", "segments", "groups", "k",
+                                                    "latent_dim"))
+    widths = [d] + [layer["out"] for layer in meta["mlp"]]
+    f4 = ("<f4",)
+    cards = Cards(rd["CARD"].array((c, m + 1, 3), "spine", f4), rd["CARD"].array((c, m + 1, 3), "normal", f4),
+                  rd["CARD"].array((c, m + 1), "half_width", f4), _read_groups(rd["CARD"], c))
+    uvd = rd["STRD"].array((s, p, 3), "uvd", f4)
+    opacity = rd["OPAC"].array((s, p - 1), "opacity", f4)
+    appearance = _appearance(meta, rd["LOGT"].array((s, k), "logits", f4),
+                             rd["CBKS"].array((nt, k, d), "codebooks", f4),
+                             [MlpLayer(rd["MLPW"].array((o, i), f"mlp[{j}].weight", f4),
+                                       rd["MLPW"].array((o,), f"mlp[{j}].bias", f4), layer["activation"])
+                              for j, (i, o, layer) in enumerate(zip(widths[:-1], widths[1:], meta["mlp"],
+                                                                    strict=True))])
+    return cards, uvd, opacity, appearance
+
+
+def _decode_quantized(rd: dict[str, StreamReader], meta: dict, strand_card: np.ndarray, family_payload: bytes | None,
+                      sh_ahead: bool) -> tuple[Cards, np.ndarray, np.ndarray, Appearance, np.ndarray | None]:
+    """Cards, card coordinates, opacities and appearance of a quantized file, and with ``sh_ahead`` the
+    SH's memory (see :func:`_decode`)."""
+    s, p, c, q = meta["strands"], meta["points"], meta["cards"], meta["quant"]
+    cards = decode_cards(rd["CARD"], c, meta["segments"] + 1, q)
+    cards.group = _read_groups(rd["CARD"], c)
+    sh_out = None
+    # the strand points (whose rANS decoder runs on one core) while the appearance streams decode and,
+    # sh_ahead, the SH's memory faults in; a fault in STRD is raised first, as it comes first in the file
+    with ThreadPoolExecutor(max_workers=1) as background:
+        points = background.submit(_decode_strand_points, rd["STRD"], cards, strand_card, p, q, family_payload)
+        try:
+            opacity, *model = _decode_quantized_appearance(rd, meta, s, p, q)
+            appearance = _appearance(meta, *model)
+            if sh_ahead:  # filled once the strands are done, on every core
+                appearance.validate(s, p - 1)
+                sh_out = memory.empty((s, (p - 1) * appearance.sh_coeffs * 3), np.float32)
+        except Exception:
+            points.result()
+            raise
+        uvd = points.result()
+    return cards, uvd, opacity, appearance, sh_out
 
 
 def get_hier(r: StreamReader, rows: int, n: int, base_stride: int, name: str) -> np.ndarray:
