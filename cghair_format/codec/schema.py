@@ -24,8 +24,9 @@ MAX_META_BYTES = 1 << 20
 POSITIVE = math.ulp(0.0)  # the smallest float above 0: a lower bound of POSITIVE means "> 0"
 TINY = 1e-30
 
-INTEGER, NUMBER, BOOLEAN, STRING, LIST, OBJECT = "an integer", "a number", "true or false", "a string", "a list", \
-    "an object"
+# the JSON types, as the refusals name them
+INTEGER, NUMBER, BOOLEAN, STRING = "an integer", "a number", "true or false", "a string"
+LIST, OBJECT = "a list", "an object"
 
 Bound = float | int | Callable[[dict], float | int] | None
 
