@@ -161,13 +161,18 @@ def parse(raw: bytes) -> dict:
     return meta
 
 
-def dump(meta: dict) -> bytes:
-    """META's bytes as the writer stores them: the fields in :data:`FIELDS`' order, each checked as
-    :func:`parse` will; raises ``AssetError`` for a value the format cannot hold (and ``KeyError`` for a
-    field it does not define: a writer's mistake)."""
+def check_writable(meta: dict) -> None:
+    """Raise ``AssetError`` where META holds a value the format cannot (one :func:`parse` would refuse)."""
     problem = _check_object(meta, meta, FIELDS, "")
     if problem:
         raise AssetError(f"the asset cannot be written: {problem}")
+
+
+def dump(meta: dict) -> bytes:
+    """META's bytes as the writer stores them: the fields in :data:`FIELDS`' order, each checked as
+    :func:`parse` will (:func:`check_writable`; ``KeyError`` for a field the schema does not define: a
+    writer's mistake)."""
+    check_writable(meta)
     return json.dumps(_ordered(meta, FIELDS), separators=(",", ":"), allow_nan=False).encode("utf-8")
 
 

@@ -21,11 +21,12 @@ from ..children import WEIGHT_ONE, Children, best_weights, find_children, fit_we
 from ..errors import AssetError
 from ..geometry import CardMap, bounding_diagonal, card_scales, lengths, strand_points
 from ..parallel import map_blocks, map_threads
-from ..profiles import DEFAULT_PROFILE, Profile, get_profile
+from ..profiles import DEFAULT_PROFILE, PROFILES, Profile, get_profile
 from ..quantize import weight_steps
 from ..strand_coder import NEWTON_HALVINGS, STRETCH_MAX, Coded, DeadZone, canonical_order, coded_uvd, encode_uvd
 from ..streams import StreamWriter
 from . import choices as choosing
+from . import schema
 from .choices import Choices
 from .chunks import appearance_chunks, geometry_chunks, lossless_cards, quantized_cards
 from .layout import Family, prediction, uvd_scale
@@ -145,6 +146,7 @@ def _encode(asset: HairAsset, options: EncodeOptions) -> tuple[bytes, EncodeRepo
     asset.validate()
     points = strand_points(asset.cards, asset.strand_card, asset.uvd)
     diag = bounding_diagonal(points)
+    schema.check_writable(_meta(asset, PROFILES["lossless"], None, diag))  # counts and scalars, before the search
     points = points.astype(np.float64)
     passed = _search_step(asset, points, prof, diag, options.reorder)
     asset, geometry = passed.asset, passed.geometry

@@ -95,3 +95,13 @@ def test_unknown_fields_are_read_past():
     """A later minor version may add fields: a reader ignores those it does not know."""
     data = with_meta(small_file(), lambda text: json.dumps(json.loads(text) | {"colour": [1, 2]}))
     assert cgh.decode(data).n_strands == 24
+
+
+def test_the_writer_refuses_what_meta_cannot_hold_before_the_long_work(monkeypatch):
+    from cghair_format.codec import writer
+    from cghair_format.examples import example_asset
+
+    monkeypatch.setattr(writer, "_search_step", lambda *_: pytest.fail("the step search ran"))
+    asset = example_asset(11, strands=4, points=4097, cards=2, segments=5)  # META holds up to 4096 points
+    with pytest.raises(AssetError, match="META field 'points' is out of range: 4097"):
+        cgh.encode(asset, "compact")
