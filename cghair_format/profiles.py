@@ -6,6 +6,7 @@ decoded points and tightening the step until it holds.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 
@@ -26,6 +27,21 @@ class Profile:
     base_strides: tuple[int, ...] = (16, 8)
     zstd_level: int = 19
     description: str = ""
+
+    def __post_init__(self) -> None:
+        """A profile the writer can follow and whose files the reader accepts (META's ranges, spec 3)."""
+        problems = [what for what, ok in (
+            ("position_tolerance must be a positive number", 0 < self.position_tolerance < 1),
+            ("opacity_scale must be a positive number", 0 < self.opacity_scale < math.inf),
+            ("logit_levels must be in [1, 2^24]", 1 <= self.logit_levels <= 1 << 24),
+            ("logit_floor must be in [-1e6, 0]", -1e6 <= self.logit_floor <= 0),
+            ("weight_step must be a positive number", 0 < self.weight_step < math.inf),
+            ("normal_bits must be in [8, 24]", 8 <= self.normal_bits <= 24),
+            ("base_strides must list powers of two in [2, 256]",
+             len(self.base_strides) > 0 and all(2 <= b <= 256 and not b & (b - 1) for b in self.base_strides)),
+            ("zstd_level must be in [1, 22]", 1 <= self.zstd_level <= 22)) if not ok]
+        if problems:
+            raise ValueError(f"profile {self.name!r}: " + "; ".join(problems))
 
     @property
     def opacity_tolerance(self) -> float:

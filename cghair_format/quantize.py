@@ -68,7 +68,10 @@ def level_plan(n: int, base_stride: int, taps: tuple[int, ...] | None = None
             known[idx] = True
         h //= 2
     assert known.all()
-    return np.array(base), tuple(levels)
+    plan = np.array(base), tuple(levels)
+    for a in (plan[0], *(a for level in plan[1] for a in level)):
+        a.flags.writeable = False  # cached (every later call gets these arrays): an edit raises, not spreads
+    return plan
 
 
 def hier_encode(y: np.ndarray, base_stride: int) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:

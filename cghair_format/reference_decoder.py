@@ -459,7 +459,7 @@ def decode_points(data: bytes, cards: set[int] | None = None) -> Decoded:
     6.1 define them. A child is decoded where its card and its parents' cards are among ``cards``."""
     _, table = container.verify(data, set(codec.KNOWN_CHUNKS))
     infos = {i.type: i for i in table}
-    meta = codec._parse_meta(container.payload(data, infos["META"]))
+    meta = codec.schema.parse(container.payload(data, infos["META"]))
     q = meta["quant"]
     if q["lossless"]:
         raise InvalidContentError("a lossless file stores its card coordinates: there is nothing to predict",
@@ -500,7 +500,7 @@ def decode_points(data: bytes, cards: set[int] | None = None) -> Decoded:
         earlier.insert(0, (y, w, residuals[st_i]))
         coords[st_i] = [[y[i][ch] / g[ch] for ch in range(3)] for i in range(p)]
     if g_count < s:
-        fam = codec._read_family(container.payload(data, infos[codec.FAMILY_CHUNK]), g_count, s - g_count)
+        fam = codec.reader.read_family(container.payload(data, infos[codec.FAMILY_CHUNK]), g_count, s - g_count)
         for k in range(s - g_count):
             c, parents = strand_card[g_count + k], [int(x) for x in fam.parents[k]]
             if c not in wanted or any(x not in coords for x in parents):

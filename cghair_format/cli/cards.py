@@ -49,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
     from ..codec import read, write
     from ..exchange import load_strands
     from ..gaussians import decode_points
-    from ..profiles import PROFILES
+    from ..profiles import get_profile
 
     out = Path(args.output)
     if out.suffix.lower() != ".cgh":
@@ -69,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     print(build.timing_table(), end="")
     if build.resampling is not None:
         print(build.resampling.line())
-        bound = PROFILES[args.profile].position_tolerance
+        bound = get_profile(args.profile).position_tolerance
         if build.resampling.shape_error > bound:
             print(f"note: that is more than the {args.profile} profile's bound ({bound:.0e}); the errors below are "
                   "measured against the resampled points (the format stores one point count per file)")

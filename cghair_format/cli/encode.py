@@ -20,14 +20,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..codec import read, read_info, write
 
-    source_profile = read_info(args.input)["profile"]
+    source = read_info(args.input)
     report = write(read(args.input), args.output, args.profile, keep_order=args.keep_order)
     total = sum(report.chunk_sizes.values())
     print(f"wrote {args.output}: profile {report.profile}, {total:,} bytes of chunks, max point error "
           f"{report.max_point_error:.3g} ({report.max_point_error / max(report.bbox_diagonal, 1e-30):.2e} "
           "of the bbox diagonal)" + ("" if report.strand_order is None else "; strands stored card by card"))
-    if source_profile != "lossless":
-        tolerance = PROFILES[source_profile].position_tolerance
-        print(f"note: {args.input} is a {source_profile} file, so that error is measured against its decoded points, "
-              f"which already lie up to {tolerance:.0e} of the bbox diagonal from the strands it was made from")
+    if not source["quant"]["lossless"]:
+        known = PROFILES.get(source["profile"])  # (a profile of the caller's own, written through the API: None)
+        bound = (f"up to {known.position_tolerance:.0e} of the bbox diagonal" if known is not None
+                 else "a quantization step")
+        print(f"note: {args.input} is a {source['profile']} file, so that error is measured against its decoded "
+              f"points, which already lie {bound} from the strands it was made from")
     return 0

@@ -49,17 +49,17 @@ def _encode(asset, profile: str, guide: int, classes: int | None = None, level_g
     """``cgh.encode`` with the writer's choices of ``base_guide`` and ``level_guide`` (spec 4.3) and, if
     given, of ``neighbour_classes`` (4.3.2) forced: the small vectors then cover each way a decoder must
     go, whichever the writer would pick for them."""
-    codec = cgh.codec
-    choose, write, levels = codec._choose_base_samples, codec.write_residuals, codec._choose_level_guide
-    codec._choose_base_samples = lambda *args: (choose(*args)[0], guide)
-    codec._choose_level_guide = lambda *args: level_guide
-    if classes is not None:  # the file's STRD only, not the writer's trial codings (no strand_card)
-        codec.write_residuals = lambda w, arrays, card=None, tried=(1,): write(w, arrays, card,
-                                                                                tried if card is None else (classes,))
+    from cghair_format.codec import chunks, choices
+
+    choose, write, levels = choices.choose_base_samples, chunks.write_residuals, choices.choose_level_guide
+    choices.choose_base_samples = lambda *args: (choose(*args)[0], guide)
+    choices.choose_level_guide = lambda *args: level_guide
+    if classes is not None:  # the file's STRD only (the chunk writer's), not the writer's trial codings
+        chunks.write_residuals = lambda w, arrays, card=None, tried=(1,): write(w, arrays, card, (classes,))
     try:
         data = cgh.encode(asset, profile)[0]
     finally:
-        codec._choose_base_samples, codec.write_residuals, codec._choose_level_guide = choose, write, levels
+        choices.choose_base_samples, chunks.write_residuals, choices.choose_level_guide = choose, write, levels
     assert _quant(data)["base_guide"] == guide and _quant(data)["level_guide"] == level_guide
     assert classes is None or _quant(data)["neighbour_classes"] == classes
     return data
@@ -128,7 +128,7 @@ def main() -> None:
     # decoder that takes none, or resamples none, gets other points
     data = cgh.encode(with_interpolated_strands(built, seed=4), "compact")[0]
     assert _quant(data)["children"] > 0
-    family = cgh.codec._read_family(container.unpack(data, set(cgh.codec.KNOWN_CHUNKS))[2]["CHLD"],
+    family = cgh.codec.reader.read_family(container.unpack(data, set(cgh.codec.KNOWN_CHUNKS))[2]["CHLD"],
                                     96 - _quant(data)["children"], _quant(data)["children"])
     assert family.respaced.any() and not family.respaced.all()
     _differs(data, {"children": 0})
@@ -163,7 +163,7 @@ def main() -> None:
     bad("reject_nonzero_padding", bytes(padded), "CghFormatError", "padding")
     bad("reject_children_without_chld", _rechunk(children, lambda c: [x for x in c if x.type != "CHLD"]),
         "InvalidContentError", "CHLD")
-    past = container.Chunk("CHLD", cgh.codec._family_payload(family._replace(parents=family.parents + (1 << 20))))
+    past = container.Chunk("CHLD", cgh.codec.chunks.family_payload(family._replace(parents=family.parents + (1 << 20))))
     bad("reject_child_parent", _rechunk(children, lambda c: [past if x.type == "CHLD" else x for x in c]),
         "InvalidContentError", "parent")
     (HERE / "reject.json").write_text(json.dumps(reject, indent=2) + "\n")

@@ -8,6 +8,7 @@ from cghfile import quant_of
 
 import cghair_format as cgh
 from cghair_format import children, codec, container
+from cghair_format.codec import chunks, reader, writer
 from cghair_format.errors import InvalidContentError
 from cghair_format.examples import example_asset, with_interpolated_strands
 from cghair_format.geometry import strand_points
@@ -41,7 +42,7 @@ def test_children_come_last_and_take_their_parents_points(groom):
     asset, (data, report) = groom
     n = quant_of(data)["children"]
     payloads = container.unpack(data, set(codec.KNOWN_CHUNKS))[2]
-    family = codec._read_family(payloads["CHLD"], asset.n_strands - n, n)
+    family = reader.read_family(payloads["CHLD"], asset.n_strands - n, n)
     assert (family.weights.sum(1) == children.WEIGHT_ONE).all()
     assert family.respaced.any() and not family.respaced.all()  # the example has both kinds
     points = _points(cgh.decode(data))
@@ -76,13 +77,13 @@ def test_late_guides_decode_as_a_whole_coding_would(groom):
     prof, tol = cgh.PROFILES["compact"], 2e-4 * diag
     kids = children.find_children(points, tol)
     assert kids.child.sum() > 8
-    arranged, at, order, family = codec._arrange(asset, points, kids)
-    first = codec._quantize_geometry(arranged, prof, tol, diag, at, tol, None, family)
+    arranged, at, order, family = writer._arrange(asset, points, kids)
+    first = writer._quantize_geometry(arranged, prof, tol, diag, at, tol, None, family)
     late = np.zeros(len(points), bool)
     late[order[family.guides:][::3]] = True  # every third child, as if it had missed
-    arranged, at, later, family = codec._arrange(asset, points, kids, late)
-    step = codec._with_late_guides(first, order, later, family.guides, arranged, at)
-    whole = codec._quantize_geometry(arranged, prof, tol, diag, at, tol, first.choices, family)
+    arranged, at, later, family = writer._arrange(asset, points, kids, late)
+    step = writer._with_late_guides(first, order, later, family.guides, arranged, at)
+    whole = writer._quantize_geometry(arranged, prof, tol, diag, at, tol, first.choices, family)
     for a, b in zip(step.residuals, whole.residuals, strict=True):
         np.testing.assert_array_equal(a, b)
     np.testing.assert_array_equal(step.decoded_points, whole.decoded_points)
@@ -93,8 +94,8 @@ def _chld(data: bytes, edit) -> bytes:
     """``data`` with its CHLD family changed by ``edit`` (re-sealed)."""
     _, infos, payloads = container.unpack(data, set(codec.KNOWN_CHUNKS))
     n = quant_of(data)["children"]
-    family = codec._read_family(payloads["CHLD"], cgh.read_info(data)["strands"] - n, n)
-    payloads["CHLD"] = codec._family_payload(edit(family))
+    family = reader.read_family(payloads["CHLD"], cgh.read_info(data)["strands"] - n, n)
+    payloads["CHLD"] = chunks.family_payload(edit(family))
     return container.pack([container.Chunk(i.type, payloads[i.type], i.required) for i in infos])
 
 

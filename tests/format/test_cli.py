@@ -3,6 +3,7 @@
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -31,7 +32,7 @@ def test_info_text_and_json(asset_file, capsys):
 
 def test_info_names_the_writers_strand_coding_choices(capsys):
     """The vectors cover each choice a decoder follows; `cgh info` says which a file took."""
-    vectors = cgh.codec.Path(__file__).parents[2] / "spec" / "vectors"
+    vectors = Path(__file__).parents[2] / "spec" / "vectors"
     assert main(["info", str(vectors / "synth_cards_neighbour_classes.cgh")]) == 0
     out = capsys.readouterr().out
     assert "every 8 points, guided by the card neighbour's steps, scaled" in out
@@ -71,6 +72,27 @@ def test_encode_of_a_quantized_file_says_what_its_error_is_measured_against(asse
     cgh.write(example_asset(1), lossless, "lossless")
     assert main(["encode", str(lossless), "-o", str(tmp_path / "c.cgh")]) == 0
     assert "note:" not in capsys.readouterr().out
+
+
+def test_encode_of_a_file_written_with_a_profile_of_ones_own(tmp_path, capsys):
+    """A Profile the caller made (its name unknown to the CLI) is stored in META: re-encoding that file
+    says what its error is measured against without the profile's bound."""
+    from dataclasses import replace
+
+    mine = tmp_path / "mine.cgh"
+    cgh.write(example_asset(1), mine, replace(cgh.PROFILES["compact"], name="mine", position_tolerance=1e-4))
+    assert cgh.read_info(mine)["profile"] == "mine"
+    assert main(["encode", str(mine), "-o", str(tmp_path / "c.cgh")]) == 0
+    assert "is a mine file" in capsys.readouterr().out
+
+
+def test_a_profile_the_writer_cannot_follow_is_refused_when_made():
+    from dataclasses import replace
+
+    for change in ({"normal_bits": 30}, {"base_strides": (12,)}, {"position_tolerance": float("nan")},
+                   {"logit_levels": 0}):
+        with pytest.raises(ValueError, match="profile 'compact': "):
+            replace(cgh.PROFILES["compact"], **change)
 
 
 def test_encode_keeps_the_strand_order_when_asked(tmp_path, capsys):

@@ -13,7 +13,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import cghair_format as cgh
-from cghair_format import codec, memory
+from cghair_format import memory
+from cghair_format.codec import writer
 from cghair_format.errors import AssetError
 from cghair_format.examples import example_asset, with_interpolated_strands
 from cghair_format.gaussians import run_mlp, strand_latents, strand_weights
@@ -154,8 +155,8 @@ def test_encoding_turns_numpys_huge_pages_off_and_back_for_every_thread(monkeypa
 
     monkeypatch.setattr(memory, "_set_madvise_hugepage", switch)
     seen = []
-    encode = codec._encode
-    monkeypatch.setattr(codec, "_encode", lambda *a: (seen.append(state["on"]), encode(*a))[1])
+    encode = writer._encode
+    monkeypatch.setattr(writer, "_encode", lambda *a: (seen.append(state["on"]), encode(*a))[1])
     asset = example_asset(2)
     cgh.encode(asset, "compact")
     assert seen == [False] and state["on"] is True and calls == [False, True]
@@ -274,7 +275,7 @@ def test_cards_too_coarse_to_hold_every_point_get_a_finer_card_step(monkeypatch)
     """A card step so coarse that narrow cards lose their width leaves points with no coordinates
     near them: the writer halves the card step until every point has them, and meets the bound."""
     a = example_asset(7)
-    monkeypatch.setattr(cgh.codec, "CARD_STEP_FRACTION", 4096)
+    monkeypatch.setattr(writer, "CARD_STEP_FRACTION", 4096)
     data, report = cgh.encode(a, "compact")
     quant = quant_of(data)
     assert quant["card_step"] < 4096 * quant["step"]
@@ -303,7 +304,7 @@ def test_an_mlp_that_could_overflow_float32_is_refused():
 def test_an_isolated_miss_nudges_the_step_and_many_tighten_it(missing, nudged, monkeypatch):
     """A point or two beyond the bound is a matter of where the lattice falls: the writer first tries a
     step 1 % smaller. Many points beyond it mean the step is too coarse: it shrinks with the error."""
-    real, steps = cgh.codec._quantize_geometry, []
+    real, steps = writer._quantize_geometry, []
 
     def first_attempt_misses(asset, prof, step, diag, points, tol, choices, family):
         geometry = real(asset, prof, step, diag, points, tol, choices, family)
@@ -314,10 +315,10 @@ def test_an_isolated_miss_nudges_the_step_and_many_tighten_it(missing, nudged, m
             geometry = geometry._replace(decoded_points=decoded)
         return geometry
 
-    monkeypatch.setattr(cgh.codec, "_quantize_geometry", first_attempt_misses)
+    monkeypatch.setattr(writer, "_quantize_geometry", first_attempt_misses)
     data, report = cgh.encode(example_asset(0), "compact")
     assert len(steps) == 2 and report.step == steps[1]
     if nudged:
-        assert steps[1] == pytest.approx(cgh.codec.NUDGE * steps[0])
+        assert steps[1] == pytest.approx(writer.NUDGE * steps[0])
     else:
-        assert steps[1] == pytest.approx(cgh.codec.TIGHTEN_TARGET / 1.2 * steps[0])
+        assert steps[1] == pytest.approx(writer.TIGHTEN_TARGET / 1.2 * steps[0])

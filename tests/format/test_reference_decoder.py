@@ -132,7 +132,7 @@ def test_paper_scale_files_decode_alike_on_a_subset_of_cards(model, request, mon
     cards = reference_decoder.evenly_spaced_cards(asset.cards.count, 48)
     _, table = container.verify(data, set(codec.KNOWN_CHUNKS))
     chld = next(i for i in table if i.type == codec.FAMILY_CHUNK)
-    family = codec._read_family(container.payload(data, chld), guides, len(card) - guides)
+    family = codec.reader.read_family(container.payload(data, chld), guides, len(card) - guides)
     on_cards = [k for k in range(len(family.parents)) if card[guides + k] in cards][:8]
     cards |= {int(card[p]) for k in on_cards for p in family.parents[k]}
     ref = reference_decoder.decode_points(data, cards)
