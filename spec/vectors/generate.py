@@ -49,7 +49,7 @@ def _encode(asset, profile: str, guide: int, classes: int | None = None, level_g
     """``cgh.encode`` with the writer's choices of ``base_guide`` and ``level_guide`` (spec 4.3) and, if
     given, of ``neighbour_classes`` (4.3.2) forced: the small vectors then cover each way a decoder must
     go, whichever the writer would pick for them."""
-    from cghair_format.codec import chunks, choices
+    from cghair_format.codec import choices, chunks
 
     choose, write, levels = choices.choose_base_samples, chunks.write_residuals, choices.choose_level_guide
     choices.choose_base_samples = lambda *args: (choose(*args)[0], guide)

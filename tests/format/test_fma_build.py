@@ -35,7 +35,7 @@ seen = {}
 def keep_float64(*args):  # the guides' card coordinates before their rounding to float32
     seen["c"] = strand_coder.decode_coordinates(*args)
     return seen["c"].astype(np.float32)
-codec.decode_uvd = keep_float64
+codec.reader.decode_uvd = keep_float64
 out = {"native_file": np.array(_decoder.__file__)}
 for path in sys.argv[2:]:
     seen.clear()

@@ -27,7 +27,7 @@ def compiled(path: Path, monkeypatch) -> tuple[np.ndarray, np.ndarray, np.ndarra
         seen["coordinates"] = strand_coder.decode_coordinates(*args)
         return seen["coordinates"].astype(np.float32)
 
-    monkeypatch.setattr(codec, "decode_uvd", keep_float64)
+    monkeypatch.setattr(codec.reader, "decode_uvd", keep_float64)
     asset = cgh.read(path)
     return seen["coordinates"], asset.uvd, cgh.decode_points(asset)
 
