@@ -39,6 +39,10 @@ except ImportError:  # not built: render() says how to build it
     _raster = None
 
 TILE = 16  # tile side in pixels, as in _raster.pyx
+# Gaussians per pixel from which an SH function is asked for the contributing Gaussians only: the
+# extra opacity-only compositing pays where most Gaussians are hidden (docs/training.md, "Around
+# the rasterizer")
+SHOWN_ONLY_PER_PIXEL = 16
 FEATURES = 10  # per-Gaussian features the kernel keeps, as NF in _raster.pyx
 
 
@@ -210,8 +214,9 @@ def render(
     """Render one camera as :func:`training.splatter.render` does (spec/rendering.md), on the CPU.
 
     ``sh`` may also be a function that returns the SH ``[n, C, 3]`` of the Gaussians at indices
-    ``[n]`` (all of them for None): it is then asked only for those that contribute to the image,
-    which in dense hair are a small part (the image is the same).
+    ``[n]`` (all of them for None): with at least :data:`SHOWN_ONLY_PER_PIXEL` Gaussians a pixel it
+    is asked only for those that contribute to the image, which in dense hair are a small part
+    (the image is the same), else for all.
 
     Computes in float32 (other float dtypes are converted, and so are their gradients). Gradients
     flow from rgb and alpha to every tensor argument; depth and the background get none.
@@ -223,6 +228,8 @@ def render(
     bg = np.ascontiguousarray(torch.as_tensor(background).detach().reshape(3).to(torch.float32).numpy())
     frame = _Frame([_f32(t) for t in (means, quats, scales, opacities)], camera, bg)
     rows = None
+    if not isinstance(sh, Tensor) and len(means) < SHOWN_ONLY_PER_PIXEL * frame.width * frame.height:
+        sh = sh(None)
     if not isinstance(sh, Tensor):
         index = frame.contributors()
         rows = np.full(len(means), -1, np.int32)

@@ -86,12 +86,14 @@ def setup():
 @pytest.mark.bench
 @pytest.mark.slow
 @pytest.mark.parametrize("geometry", ["frozen", "trained"])
-def test_training_step(benchmark, setup, geometry):
+@pytest.mark.parametrize("backend", ["reference", "native"])
+def test_training_step(benchmark, setup, geometry, backend):
     import torch
 
     from training import losses
-    from training.splatter import render
+    from training.backends import renderer
 
+    render = renderer(backend)
     model, cams, opt, target = setup
     model.set_geometry_trainable(geometry == "trained")
     frozen = None
@@ -103,13 +105,15 @@ def test_training_step(benchmark, setup, geometry):
     def step():
         cam = cams[state["i"] % len(cams)]
         state["i"] += 1
-        out = render(*model("gumbel", 0.5, frozen), cam)
+        means, quats, scales = frozen if frozen is not None else model.gaussian_geometry()
+        out = render(means, quats, scales, model.opacities().reshape(-1), model.sh_source("gumbel", 0.5), cam)
         loss = losses.image_loss(out.rgb, target, 0.2) + 0.1 * losses.l1(out.alpha, target[..., 0])
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
 
     benchmark.pedantic(step, rounds=10, iterations=1, warmup_rounds=2)
-    benchmark.extra_info["rows"] = [{"scene": "Ratboy_mohawk.tfx, 32 points, 128 x 128", "geometry": geometry,
+    benchmark.extra_info["rows"] = [{"scene": "Ratboy_mohawk.tfx, 32 points, 128 x 128", "backend": backend,
+                                     "geometry": geometry,
                                      "gaussians": model.n_strands * (model.n_points - 1),
                                      "torch threads": torch.get_num_threads()}]

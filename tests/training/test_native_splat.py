@@ -223,10 +223,12 @@ def test_bad_shapes_are_rejected():
         native_splat.render(*scene, camera())
 
 
-def test_sh_asked_only_for_contributing_gaussians_gives_the_same_render_and_gradients():
-    """render() with a function of Gaussian indices for the SH: asked once, for the contributing
-    Gaussians only (fewer than all in a dense pile), and the image and every gradient are those of
-    the full SH tensor, bit for bit (the same arithmetic per Gaussian)."""
+def test_sh_asked_only_for_contributing_gaussians_gives_the_same_render_and_gradients(monkeypatch):
+    """render() with a function of Gaussian indices for the SH, with as few Gaussians a pixel as
+    allowed: asked once, for the contributing Gaussians only (fewer than all in a dense pile), and
+    the image and every gradient are those of the full SH tensor, bit for bit (the same arithmetic
+    per Gaussian)."""
+    monkeypatch.setattr(native_splat, "SHOWN_ONLY_PER_PIXEL", 0)
     scene, cam = dense_pile(), camera(32, 24)
     gen = torch.Generator().manual_seed(6)  # and 100 small Gaussians behind the pile's opaque middle
     behind = -0.3 * torch.as_tensor(cam.center, dtype=torch.float32) / float(np.linalg.norm(cam.center))
@@ -252,7 +254,15 @@ def test_sh_asked_only_for_contributing_gaussians_gives_the_same_render_and_grad
         assert torch.equal(a.grad, b.grad)
 
 
-def test_a_bad_sh_function_is_refused():
+def test_sh_function_is_asked_for_all_where_few_gaussians_cover_a_pixel():
+    scene, cam = dense_pile(), camera(32, 24)  # 400 Gaussians on 768 pixels
+    asked = []
+    native_splat.render(*scene[:4], lambda index: asked.append(index) or scene[4], cam, BACKGROUND)
+    assert asked == [None]
+
+
+def test_a_bad_sh_function_is_refused(monkeypatch):
+    monkeypatch.setattr(native_splat, "SHOWN_ONLY_PER_PIXEL", 0)
     scene, cam = dense_pile(), camera(32, 24)
     with pytest.raises(ValueError, match="SH function"):
         native_splat.render(*scene[:4], lambda index: scene[4][:3], cam, BACKGROUND)
