@@ -192,6 +192,30 @@ cdef void colour_of(const float* mean, const float* sh, int nc, const double* ca
         colour[ch] = dmax(col + 0.5, 0.0)
 
 
+cdef void ewa_rows(const float* quat, const float* scale, const double* cam, double x, double y, double iz,
+                   double* q, double* inv_n, double* r, double* jw0, double* jw1, double* a0, double* a1,
+                   double* ca, double* cb, double* cc) noexcept nogil:
+    """The EWA projection of a Gaussian at camera-space (x, y, 1 / iz): the rows ``jw0``, ``jw1`` of
+    J W, of A = J W R_q S (``a0``, ``a1``) and the dilated 2D covariance (ca, cb; cb, cc); also the
+    unit quaternion ``q``, its inverse norm and rotation matrix ``r``, which the backward pass needs."""
+    cdef double fx = cam[15], fy = cam[16], m
+    cdef int k, j
+    quat_rotmat(quat, q, inv_n, r)
+    for k in range(3):
+        jw0[k] = fx * iz * cam[k] - fx * x * iz * iz * cam[6 + k]
+        jw1[k] = fy * iz * cam[3 + k] - fy * y * iz * iz * cam[6 + k]
+    for j in range(3):  # A = J W R_q S, by rows
+        a0[j] = 0.0
+        a1[j] = 0.0
+        for k in range(3):
+            m = r[3 * k + j] * scale[j]
+            a0[j] += jw0[k] * m
+            a1[j] += jw1[k] * m
+    ca[0] = a0[0] * a0[0] + a0[1] * a0[1] + a0[2] * a0[2] + DILATION
+    cb[0] = a0[0] * a1[0] + a0[1] * a1[1] + a0[2] * a1[2]
+    cc[0] = a1[0] * a1[0] + a1[1] * a1[1] + a1[2] * a1[2] + DILATION
+
+
 cdef void project_one(const float* mean, const float* quat, const float* scale, float opacity,
                       const double* cam, int width, int height, float* f, int32_t* rect,
                       int64_t* ntiles) noexcept nogil:
@@ -203,8 +227,8 @@ cdef void project_one(const float* mean, const float* quat, const float* scale, 
     cdef double jw1[3]
     cdef double a0[3]
     cdef double a1[3]
-    cdef double inv_n, x, y, z, iz, m, ca, cb, cc, det, idet, mid, lam, rad, qmax, hx, hy, mx, my
-    cdef int k, j, x0, x1, y0, y1
+    cdef double inv_n, x, y, z, iz, ca, cb, cc, det, idet, mid, lam, rad, qmax, hx, hy, mx, my
+    cdef int k, x0, x1, y0, y1
     for k in range(3):
         t[k] = cam[3 * k] * mean[0] + cam[3 * k + 1] * mean[1] + cam[3 * k + 2] * mean[2] + cam[9 + k]
     f[6] = <float>t[2]
@@ -217,20 +241,7 @@ cdef void project_one(const float* mean, const float* quat, const float* scale, 
     y = t[1]
     z = t[2]
     iz = 1.0 / z
-    quat_rotmat(quat, q, &inv_n, r)
-    for k in range(3):
-        jw0[k] = fx * iz * cam[k] - fx * x * iz * iz * cam[6 + k]
-        jw1[k] = fy * iz * cam[3 + k] - fy * y * iz * iz * cam[6 + k]
-    for j in range(3):  # A = J W R_q S, by rows
-        a0[j] = 0.0
-        a1[j] = 0.0
-        for k in range(3):
-            m = r[3 * k + j] * scale[j]
-            a0[j] += jw0[k] * m
-            a1[j] += jw1[k] * m
-    ca = a0[0] * a0[0] + a0[1] * a0[1] + a0[2] * a0[2] + DILATION
-    cb = a0[0] * a1[0] + a0[1] * a1[1] + a0[2] * a1[2]
-    cc = a1[0] * a1[0] + a1[1] * a1[1] + a1[2] * a1[2] + DILATION
+    ewa_rows(quat, scale, cam, x, y, iz, q, &inv_n, r, jw0, jw1, a0, a1, &ca, &cb, &cc)
     det = ca * cc - cb * cb
     idet = 1.0 / det
     f[2] = <float>(cc * idet)
@@ -711,20 +722,7 @@ cdef void project_backward_one(const float* mean, const float* quat, const float
     y = t[1]
     z = t[2]
     iz = 1.0 / z
-    quat_rotmat(quat, q, &inv_n, r)
-    for k in range(3):
-        jw0[k] = fx * iz * cam[k] - fx * x * iz * iz * cam[6 + k]
-        jw1[k] = fy * iz * cam[3 + k] - fy * y * iz * iz * cam[6 + k]
-    for j in range(3):
-        a0[j] = 0.0
-        a1[j] = 0.0
-        for k in range(3):
-            m = r[3 * k + j] * scale[j]
-            a0[j] += jw0[k] * m
-            a1[j] += jw1[k] * m
-    ca = a0[0] * a0[0] + a0[1] * a0[1] + a0[2] * a0[2] + DILATION
-    cb = a0[0] * a1[0] + a0[1] * a1[1] + a0[2] * a1[2]
-    cc = a1[0] * a1[0] + a1[1] * a1[1] + a1[2] * a1[2] + DILATION
+    ewa_rows(quat, scale, cam, x, y, iz, q, &inv_n, r, jw0, jw1, a0, a1, &ca, &cb, &cc)
     idet = 1.0 / (ca * cc - cb * cb)
     idet2 = idet * idet
     # conic (cc, -cb, ca) / det back to the 2D covariance
