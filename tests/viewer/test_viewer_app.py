@@ -42,13 +42,8 @@ def _fake_glfw(width, height):
     return glfw
 
 
-def test_budget_key_and_title(gl_ctx, monkeypatch, capsys):
-    from viewer import app
-
-    glfw = _fake_glfw(64, 48)
-    monkeypatch.setitem(sys.modules, "glfw", glfw)
-    monkeypatch.setattr(app, "create_window", lambda w, h, t: ("window", _Context(gl_ctx, w, h)))
-    asset = example_asset(seed=9, strands=40, points=6, sh_degree=1)
+def _record_drawn_budgets(app, monkeypatch) -> list:
+    """The budget of every frame the viewer draws (presenting the last frame again is not drawing)."""
     draws = []
     real_create = app.create_renderer
 
@@ -59,6 +54,17 @@ def test_budget_key_and_title(gl_ctx, monkeypatch, capsys):
         return renderer
 
     monkeypatch.setattr(app, "create_renderer", counting_renderer)
+    return draws
+
+
+def test_budget_key_and_title(gl_ctx, monkeypatch, capsys):
+    from viewer import app
+
+    glfw = _fake_glfw(64, 48)
+    monkeypatch.setitem(sys.modules, "glfw", glfw)
+    monkeypatch.setattr(app, "create_window", lambda w, h, t: ("window", _Context(gl_ctx, w, h)))
+    asset = example_asset(seed=9, strands=40, points=6, sh_degree=1)
+    draws = _record_drawn_budgets(app, monkeypatch)
     frames = app.run_viewer(asset, title="cgh view t.cgh", file_size=1234, width=64, height=48,
                             rasterizer="compute", max_frames=4, press=("B", "B"))
     assert frames == 4
@@ -112,16 +118,7 @@ def test_adaptive_budget_while_dragging_full_quality_at_rest(gl_ctx, monkeypatch
     # every frame is far too slow for this target: while moving the budget drops to its floor
     monkeypatch.setattr(camera_control, "TARGET_FRAME_S", 1e-9)
     asset = example_asset(seed=9, strands=64, points=6, sh_degree=1)  # 320 Gaussians, 5 a strand
-    draws = []
-    real_create = app.create_renderer
-
-    def counting_renderer(*args, **kwargs):
-        renderer = real_create(*args, **kwargs)
-        original = renderer.preprocess
-        renderer.preprocess = lambda *a, **k: (draws.append(renderer.budget), original(*a, **k))
-        return renderer
-
-    monkeypatch.setattr(app, "create_renderer", counting_renderer)
+    draws = _record_drawn_budgets(app, monkeypatch)
     frames = app.run_viewer(asset, title="v", file_size=0, width=64, height=48, rasterizer="compute",
                             max_frames=10)
     assert frames == 10
