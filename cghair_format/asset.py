@@ -10,6 +10,9 @@ A :class:`HairAsset` holds what the paper stores, as plain numpy arrays:
   (0 on the left rail, 1 on the right), ``delta`` the displacement along the interpolated normal
   in scene units. The card triangle and barycentric coordinates follow from ``(u, v)``;
 - one opacity per segment (one Gaussian per segment), the Gaussian thickness ``d``;
+- optionally each strand's own point count ``n_s`` (2..P, spec 3, PCNT): the arrays keep ``P`` points
+  per strand, and a strand with fewer has ``P - n_s`` trailing *placeholder* points (and segments) that
+  are coded like any other and then dropped;
 - appearance: per strand ``K`` logits, per card group a codebook of ``K`` latents of size ``D``, and
   one MLP from a latent to the SH coefficients of all ``P - 1`` Gaussians of a strand.
 """
@@ -161,6 +164,7 @@ class HairAsset:
     root_uv: np.ndarray | None = None  # [S, 2] float32, optional scalp coordinates of each root
     source_color: np.ndarray | None = None  # [S, P, 3] float32 in [0, 1], optional
     metadata: dict = field(default_factory=dict)  # optional free-form JSON-able data
+    point_counts: np.ndarray | None = None  # [S] int32 in 2..P, each strand's own points (None: all P)
 
     @property
     def n_strands(self) -> int:
@@ -168,11 +172,48 @@ class HairAsset:
 
     @property
     def points_per_strand(self) -> int:
+        """``P``: the points every per-point array holds per strand (the largest count, placeholders after
+        a shorter strand's own points)."""
         return int(self.uvd.shape[1])
 
     @property
+    def variable(self) -> bool:
+        """Whether some strand has fewer than ``P`` points (a file stores PCNT, spec 3)."""
+        return self.point_counts is not None and bool((self.point_counts < self.points_per_strand).any())
+
+    @property
+    def counts(self) -> np.ndarray:
+        """Each strand's own point count ``[S]`` (int64), ``P`` for all where none are given."""
+        if self.point_counts is None:
+            return np.full(self.n_strands, self.points_per_strand, np.int64)
+        return self.point_counts.astype(np.int64)
+
+    @property
     def n_gaussians(self) -> int:
-        return self.n_strands * (self.points_per_strand - 1)
+        """One Gaussian per real segment: ``sum(n_s - 1)``."""
+        if self.point_counts is None:
+            return self.n_strands * (self.points_per_strand - 1)
+        return int((self.counts - 1).sum())
+
+    def real_points(self) -> np.ndarray:
+        """``[S, P]`` bool: the strands' own points, not placeholders."""
+        return np.arange(self.points_per_strand)[None, :] < self.counts[:, None]
+
+    def real_segments(self) -> np.ndarray:
+        """``[S, P-1]`` bool: the strands' own segments (Gaussians), not placeholders."""
+        return np.arange(self.points_per_strand - 1)[None, :] < self.counts[:, None] - 1
+
+    def with_placeholders(self) -> HairAsset:
+        """The same asset with every placeholder the cheapest to code: a copy of its strand's last own
+        point's coordinates, opacity and colour (a decoder drops them; constant runs predict exactly)."""
+        if not self.variable:
+            return self
+        last = self.counts - 1
+        rows = np.arange(self.n_strands)[:, None]
+        point = np.minimum(np.arange(self.points_per_strand)[None, :], last[:, None])
+        segment = np.minimum(np.arange(self.points_per_strand - 1)[None, :], last[:, None] - 1)
+        color = None if self.source_color is None else self.source_color[rows, point]
+        return replace(self, uvd=self.uvd[rows, point], opacity=self.opacity[rows, segment], source_color=color)
 
     def take_strands(self, order: np.ndarray) -> HairAsset:
         """The same asset with its strands in ``order`` (indices into the strands): every per-strand
@@ -185,7 +226,8 @@ class HairAsset:
         app = self.appearance
         return replace(self, strand_card=self.strand_card[order], uvd=self.uvd[order], opacity=self.opacity[order],
                        appearance=replace(app, logits=app.logits[order]), strand_ids=pick(self.strand_ids),
-                       root_uv=pick(self.root_uv), source_color=pick(self.source_color))
+                       root_uv=pick(self.root_uv), source_color=pick(self.source_color),
+                       point_counts=pick(self.point_counts))
 
     def validate(self) -> HairAsset:
         """Check shapes, dtypes, ranges and cross-references; raise :class:`AssetError` if wrong."""
@@ -215,6 +257,10 @@ class HairAsset:
             _check_array("root_uv", self.root_uv, (s, 2), "f")
         if self.source_color is not None:
             _check_array("source_color", self.source_color, (s, p, 3), "f")
+        if self.point_counts is not None:
+            _check_array("point_counts", self.point_counts, (s,), "iu")
+            _check(bool(((self.point_counts >= 2) & (self.point_counts <= p)).all()),
+                   f"point_counts must lie in [2, {p}] (the points per strand)")
         _check(_finite_json(self.metadata), "metadata must be JSON of finite numbers")
         return self
 

@@ -26,7 +26,8 @@ from .parallel import map_threads
 
 MAGIC = b"\x89CGH\r\n\x1a\n"
 VERSION_MAJOR = 2
-VERSION_MINOR = 0
+CHUNK_MINORS = {"PCNT": 1}  # the minor version that added a chunk; a file states the lowest that describes
+# it, so that a file without these is byte for byte what 2.0 wrote (spec 1.1)
 # 1.x files hold the same chunks; only the arithmetic of quantized files' decoding changed (spec 4,
 # "Arithmetic"), so a 1.x lossless file is read as before and a 1.x quantized one refused by the codec
 READ_MAJORS = (1, 2)
@@ -91,7 +92,8 @@ def assemble(bodies: list[Stored]) -> bytes:
         offset = _align(offset + len(stored))
     total = offset
     out = bytearray(total)
-    out[:HEADER_SIZE] = _header(VERSION_MAJOR, VERSION_MINOR, 0, total, len(bodies), table)
+    minor = max((CHUNK_MINORS.get(c.type, 0) for c, _, _ in bodies), default=0)
+    out[:HEADER_SIZE] = _header(VERSION_MAJOR, minor, 0, total, len(bodies), table)
     out[HEADER_SIZE:HEADER_SIZE + len(table)] = table
     for off, stored in layout:
         out[off:off + len(stored)] = stored

@@ -64,3 +64,16 @@ def with_interpolated_strands(asset: HairAsset, seed: int = 0) -> HairAsset:
     grown.uvd[s:] = children.place_children(CardMap(asset.cards), 1e-6 * diag, world, parents, weights,
                                             np.arange(s) % 2 == 0, asset.strand_card[first])
     return grown.validate()
+
+
+def with_point_counts(asset: HairAsset, seed: int = 0) -> HairAsset:
+    """``asset`` with each strand cut to its own point count (2..P, random, one strand keeping all ``P``):
+    a variable-count asset (spec 3, PCNT). The points past a strand's count stay as they were: the writer
+    makes them placeholders."""
+    from dataclasses import replace
+
+    rng = np.random.default_rng(seed)
+    p = asset.points_per_strand
+    counts = rng.integers(2, p + 1, asset.n_strands).astype(np.int32)
+    counts[0] = p
+    return replace(asset, point_counts=counts).validate()

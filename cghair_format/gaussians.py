@@ -13,8 +13,10 @@ import numpy as np
 
 from . import _decoder, memory
 from .asset import Appearance, HairAsset
+from .errors import CghError
 from .geometry import strand_points
 from .parallel import map_blocks
+from .strands import Strands
 
 SH_C0 = 0.28209479177387814
 SH_C1 = 0.4886025119029199
@@ -117,16 +119,40 @@ def strand_sh(asset: HairAsset, out: np.ndarray | None = None) -> np.ndarray:
 
 
 def decode_points(asset: HairAsset) -> np.ndarray:
-    """World positions ``[S, P, 3]`` of all strand points."""
+    """World positions ``[S, P, 3]`` of all strand points, for an asset whose strands all have ``P``
+    points; a variable-count asset is refused (its padded array would hand out placeholders as points):
+    :func:`decode_strands` gives any asset's strands."""
+    if asset.variable:
+        raise CghError(f"the asset's strands have {asset.counts.min()} to {asset.points_per_strand} points: "
+                       "decode_points returns equal-length strands only, use decode_strands(asset)")
     return strand_points(asset.cards, asset.strand_card, asset.uvd)
 
 
+def decode_strands(asset: HairAsset) -> Strands:
+    """Every strand's own points (placeholders dropped), flat with offsets, with the source colours and
+    root UVs where the asset has them."""
+    real = asset.real_points().ravel()
+    points = strand_points(asset.cards, asset.strand_card, asset.uvd).reshape(-1, 3)[real]
+    offsets = np.zeros(asset.n_strands + 1, np.int64)
+    np.cumsum(asset.counts, out=offsets[1:])
+    colors = None if asset.source_color is None else asset.source_color.reshape(-1, 3)[real]
+    return Strands(np.ascontiguousarray(points, np.float32), offsets, colors, None, asset.meters_per_unit,
+                   asset.up_axis, asset.root_uv)
+
+
 def decode_gaussians(asset: HairAsset, sh_out: np.ndarray | None = None) -> Gaussians:
-    """All Gaussians of the asset, strand-major then segment order, with SH from the MLP (written into
-    ``sh_out`` where given: see :func:`strand_sh`)."""
-    sh = strand_sh(asset, sh_out).reshape(asset.n_gaussians, asset.appearance.sh_coeffs, 3)
-    means, rotations, scales = segment_frames(decode_points(asset), asset.thickness)
-    return Gaussians(means, rotations, scales, asset.opacity.reshape(-1).astype(np.float32), sh)
+    """The Gaussians of every strand's own segments (``asset.n_gaussians``), strand-major then segment
+    order, with SH from the MLP (written into ``sh_out`` where given: see :func:`strand_sh`; a strand
+    of ``n`` points takes the first ``n - 1`` SH sets of its MLP output, spec 6.3)."""
+    padded = asset.n_strands * (asset.points_per_strand - 1)
+    sh = strand_sh(asset, sh_out).reshape(padded, asset.appearance.sh_coeffs, 3)
+    points = strand_points(asset.cards, asset.strand_card, asset.uvd)
+    means, rotations, scales = segment_frames(points, asset.thickness)
+    opacities = asset.opacity.reshape(-1).astype(np.float32)
+    if asset.variable:
+        real = asset.real_segments().ravel()
+        means, rotations, scales, opacities, sh = (a[real] for a in (means, rotations, scales, opacities, sh))
+    return Gaussians(means, rotations, scales, opacities, sh)
 
 
 def sh_polynomial(sh, dirs):

@@ -68,7 +68,7 @@ def min_payloads(meta: dict) -> dict[str, int]:
                                                   "latent_dim"))
     widths = [d] + [layer["out"] for layer in meta["mlp"]]
     weights = sum(i * o + o for i, o in zip(widths[:-1], widths[1:], strict=True))
-    optional = {"SIDS": s, "ROOT": FLOAT * 2 * s, "SCOL": 3 * s * p}
+    optional = {"SIDS": s, "ROOT": FLOAT * 2 * s, "SCOL": 3 * s * p, "PCNT": s}
     if meta["quant"]["lossless"]:
         return optional | {"CARD": FLOAT * c * (m + 1) * 7 + 2 * c, "STRD": s + FLOAT * s * p * 3,
                            "OPAC": FLOAT * s * (p - 1), "LOGT": FLOAT * s * k, "CBKS": FLOAT * nt * k * d,
@@ -84,7 +84,8 @@ OPTIONAL_DECODED = {"SIDS": 4, "ROOT": 2 * FLOAT, "SCOL": 3 * FLOAT}
 
 def check(meta: dict, chunks: list, limits: ReadLimits, gaussians: bool) -> None:
     """Refuse, before decompressing anything but META, a file beyond ``limits`` or whose chunks (their
-    ``type``, ``offset``, ``raw``) are too small for META's counts."""
+    ``type``, ``offset``, ``raw``) are too small for META's counts. The Gaussians counted are ``S (P-1)``,
+    the decoder's arrays with a variable-count file's placeholders (spec 1.4)."""
     count = meta["strands"] * (meta["points"] - 1)
     if count > limits.max_gaussians:
         raise LimitError(f"the file holds {count:,} Gaussians, more than this reader's limit of "

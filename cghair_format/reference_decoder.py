@@ -446,12 +446,15 @@ def place_child(st: Strip, goal, step: float):
 class Decoded:
     """What :func:`decode_points` decodes: the strands ``index [n]`` (their indices in the file), their
     card coordinates in float64 (``coordinates [n, P, 3]``: a guide's ``y / g``, a child's search results),
-    and as a reader gets them, rounded to float32: ``uvd [n, P, 3]`` and world ``points [n, P, 3]``."""
+    and as a reader gets them, rounded to float32: ``uvd [n, P, 3]`` and world ``points [n, P, 3]``, and
+    each strand's own point count ``counts [n]`` (PCNT's, else ``P``: the points past it are placeholders,
+    decoded alike and then dropped)."""
 
     index: np.ndarray
     coordinates: np.ndarray
     uvd: np.ndarray
     points: np.ndarray
+    counts: np.ndarray
 
 
 def decode_points(data: bytes, cards: set[int] | None = None) -> Decoded:
@@ -510,12 +513,19 @@ def decode_points(data: bytes, cards: set[int] | None = None) -> Decoded:
                     world[x] = [card_map(strips[strand_card[x]], [f32(e) for e in pt]) for pt in coords[x]]
             goal = child_points(world, parents, [int(x) for x in fam.weights[k]], bool(fam.respaced[k]))
             coords[g_count + k] = place_child(strips[c], goal, q["step"])
+    counts = [p] * s
+    if "PCNT" in infos:  # spec 3: ints[S], each in 2..P
+        pcnt = StreamReader(container.payload(data, infos["PCNT"]), "PCNT")
+        counts = [int(n) for n in pcnt.ints((s,), "point counts")]
+        pcnt.finish()
+        if min(counts) < 2 or max(counts) > p or min(counts) == p:
+            raise InvalidContentError(f"point counts must lie in [2, {p}], some below {p}", chunk="PCNT")
     index = np.array(sorted(coords), np.int64)
     coordinates = np.array([coords[i] for i in index], np.float64).reshape(len(index), p, 3)
     uvd = coordinates.astype(np.float32)
     points = np.array([[[f32(e) for e in card_map(strips[strand_card[i]], [float(x) for x in pt])] for pt in row]
                        for i, row in zip(index, uvd, strict=True)], np.float32).reshape(len(index), p, 3)
-    return Decoded(index, coordinates, uvd, points)
+    return Decoded(index, coordinates, uvd, points, np.array([counts[i] for i in index], np.int64))
 
 
 def evenly_spaced_cards(count: int, wanted: int | None) -> set[int] | None:
@@ -527,13 +537,16 @@ def evenly_spaced_cards(count: int, wanted: int | None) -> set[int] | None:
 
 def compare(data: bytes, cards: set[int] | None = None) -> tuple[int, int]:
     """Decode a quantized file with the compiled decoder and with :func:`decode_points`; return how many
-    strands were compared and on how many the card coordinates or points differ in any bit."""
+    strands were compared and on how many the point counts, card coordinates or points (placeholders
+    included) differ in any bit."""
     from .codec import decode
-    from .gaussians import decode_points as compiled_points
+    from .geometry import strand_points
 
     asset = decode(data)
     ref = decode_points(data, cards)
-    uvd, points = asset.uvd[ref.index], compiled_points(asset)[ref.index]
+    uvd = asset.uvd[ref.index]
+    points = strand_points(asset.cards, asset.strand_card, asset.uvd)[ref.index]
     differ = ((uvd.view(np.uint32) != ref.uvd.view(np.uint32))
               | (points.view(np.uint32) != ref.points.view(np.uint32))).any(axis=(1, 2))
+    differ |= asset.counts[ref.index] != ref.counts
     return len(ref.index), int(differ.sum())

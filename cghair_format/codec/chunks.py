@@ -20,15 +20,16 @@ from ..residual_coder import NEIGHBOUR_CLASSES, write_residuals
 from ..strand_coder import neighbour_encode, neighbour_order
 from ..streams import StreamReader, StreamWriter
 from . import schema
-from .layout import FAMILY_CHUNK, Family
+from .layout import COUNTS_CHUNK, FAMILY_CHUNK, Family
 from .reader import decode_cards
 
 
 def geometry_chunks(asset: HairAsset, meta: dict, cards_w: StreamWriter, residuals: list[np.ndarray] | None,
                     family: Family | None) -> list[container.Chunk]:
-    """META, CARD and STRD (and CHLD with a ``family``) once the step is settled: the ``residuals``
-    (None: lossless, the card coordinates as float32) go through neighbour prediction and the entropy
-    coder, which fill META's ``quant.neighbour`` and ``quant.neighbour_classes``."""
+    """META, CARD and STRD (and CHLD with a ``family``, PCNT where some strand has fewer points) once the
+    step is settled: the ``residuals`` (None: lossless, the card coordinates as float32) go through
+    neighbour prediction and the entropy coder, which fill META's ``quant.neighbour`` and
+    ``quant.neighbour_classes``."""
     strd_w = StreamWriter()
     strd_w.ints(np.diff(asset.strand_card.astype(np.int64), prepend=0))
     if residuals is None:
@@ -44,6 +45,10 @@ def geometry_chunks(asset: HairAsset, meta: dict, cards_w: StreamWriter, residua
               container.Chunk("STRD", strd_w.getvalue())]
     if family is not None and len(family.parents):
         chunks.append(container.Chunk(FAMILY_CHUNK, family_payload(family)))
+    if asset.variable:
+        counts_w = StreamWriter()
+        counts_w.ints(asset.point_counts)
+        chunks.append(container.Chunk(COUNTS_CHUNK, counts_w.getvalue()))
     return chunks
 
 

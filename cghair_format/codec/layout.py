@@ -12,7 +12,8 @@ from ..strand_coder import Prediction
 REQUIRED_CHUNKS = ("META", "CARD", "STRD", "OPAC", "LOGT", "CBKS", "MLPW")
 OPTIONAL_CHUNKS = ("SIDS", "ROOT", "SCOL", "XMET")
 FAMILY_CHUNK = "CHLD"  # required where META quant.children > 0 (spec 4.5), absent otherwise
-KNOWN_CHUNKS = frozenset(REQUIRED_CHUNKS + OPTIONAL_CHUNKS + (FAMILY_CHUNK,))
+COUNTS_CHUNK = "PCNT"  # required where some strand has fewer than META points (spec 3), absent otherwise
+KNOWN_CHUNKS = frozenset(REQUIRED_CHUNKS + OPTIONAL_CHUNKS + (FAMILY_CHUNK, COUNTS_CHUNK))
 
 
 class Family(NamedTuple):

@@ -27,7 +27,7 @@ from ..residual_coder import read_residuals
 from ..strand_coder import decode_uvd, level_widths, neighbour_decode, neighbour_order
 from ..streams import StreamReader
 from . import schema
-from .layout import FAMILY_CHUNK, KNOWN_CHUNKS, REQUIRED_CHUNKS, Family, prediction, uvd_scale
+from .layout import COUNTS_CHUNK, FAMILY_CHUNK, KNOWN_CHUNKS, REQUIRED_CHUNKS, Family, prediction, uvd_scale
 
 Source = str | os.PathLike | bytes | bytearray | memoryview | BinaryIO
 
@@ -62,10 +62,14 @@ def read_info(source: Source) -> dict:
         meta = schema.parse(_meta_payload(data, meta_info))
     except CghFormatError as exc:
         raise exc.at(meta_info.offset) if exc.offset is None else exc from None
-    gaussians = meta["strands"] * (meta["points"] - 1)
+    counts_info = next((i for i in infos if i.type == COUNTS_CHUNK), None)
+    counts = (np.full(meta["strands"], meta["points"]) if counts_info is None else
+              read_point_counts(container.payload(data, counts_info), meta["strands"], meta["points"]))
+    gaussians = int((counts - 1).sum())
     return {
         "version": f"{version[0]}.{version[1]}", "file_bytes": len(data), "profile": meta["profile"],
         "strands": meta["strands"], "points_per_strand": meta["points"], "gaussians": gaussians,
+        "point_counts": [int(counts.min()), int(counts.max())],
         "cards": meta["cards"], "card_segments": meta["segments"], "groups": meta["groups"],
         "codebook_size": meta["k"], "latent_dim": meta["latent_dim"], "sh_degree": meta["sh_degree"],
         "weight_mode": meta["weight_mode"], "mlp": [layer["out"] for layer in meta["mlp"]],
@@ -126,7 +130,7 @@ def _meta_payload(data: bytes, info: container.ChunkInfo) -> bytes:
 _ASSET_FIELD_CHUNKS = (("cards.", "CARD"), ("uvd", "STRD"), ("strand_card", "STRD"), ("opacity", "OPAC"),
                        ("appearance.logits", "LOGT"), ("appearance.codebooks", "CBKS"), ("codebooks", "CBKS"),
                        ("mlp[", "MLPW"), ("the MLP", "MLPW"), ("strand_ids", "SIDS"), ("root_uv", "ROOT"),
-                       ("source_color", "SCOL"))
+                       ("source_color", "SCOL"), ("point_counts", COUNTS_CHUNK))
 
 
 def _decode_payloads(meta: dict, payloads: dict[str, bytes], sh_ahead: bool) -> tuple[HairAsset, np.ndarray | None]:
@@ -156,9 +160,10 @@ def _decode_chunks(meta: dict, payloads: dict[str, bytes], sh_ahead: bool) -> tu
                                                                     sh_ahead)
     for reader in rd.values():
         reader.finish()
+    counts = None if COUNTS_CHUNK not in payloads else read_point_counts(payloads[COUNTS_CHUNK], s, p)
     asset = HairAsset(cards, strand_card.astype(np.int32), uvd, opacity.astype(np.float32), appearance,
                       float(meta["thickness"]), float(meta["meters_per_unit"]), meta["up_axis"], meta["generator"],
-                      meta["attribution"])
+                      meta["attribution"], point_counts=counts)
     _decode_optional(asset, payloads, s, p)
     return asset, sh_out
 
@@ -268,6 +273,18 @@ def _decode_strand_points(r: StreamReader, cards: Cards, strand_card: np.ndarray
     except ValueError as exc:
         raise InvalidContentError(f"{exc} (a corrupt step or weights)", chunk=FAMILY_CHUNK) from None
     return np.concatenate([uvd, children])
+
+
+def read_point_counts(payload: bytes, s: int, p: int) -> np.ndarray:
+    """PCNT (spec 3): each strand's own point count ``[S]`` (int32), each in 2..P and some below P."""
+    r = StreamReader(payload, COUNTS_CHUNK)
+    counts = r.ints((s,), "point counts")
+    r.finish()
+    if counts.min() < 2 or counts.max() > p:
+        raise InvalidContentError(f"a strand's point count lies outside [2, {p}] (META points)", chunk=COUNTS_CHUNK)
+    if counts.min() == p:
+        raise InvalidContentError(f"every strand has all {p} points: the file must store no PCNT", chunk=COUNTS_CHUNK)
+    return counts.astype(np.int32)
 
 
 def undo_neighbour_prediction(strand_card: np.ndarray, values: np.ndarray, widths: list[int],

@@ -143,7 +143,7 @@ class _Passed(NamedTuple):
 
 def _encode(asset: HairAsset, options: EncodeOptions) -> tuple[bytes, EncodeReport]:
     prof = options.profile
-    asset.validate()
+    asset = asset.validate().with_placeholders()
     points = strand_points(asset.cards, asset.strand_card, asset.uvd)
     diag = bounding_diagonal(points)
     schema.check_writable(_meta(asset, PROFILES["lossless"], None, diag))  # counts and scalars, before the search
@@ -168,7 +168,8 @@ def _search_step(input_asset: HairAsset, input_points: np.ndarray, prof: Profile
     ``input_points`` (``[S, P, 3]``, float64), with the file order (``reorder``: card by card, and the
     interpolated strands as children where there are enough of them)."""
     tol = prof.position_tolerance * max(diag, 1e-12)
-    kids = find_children(input_points, tol) if reorder else None
+    # (a variable-count file stores no children: a blend of padded strands seldom fits a strand's own points)
+    kids = find_children(input_points, tol) if reorder and not input_asset.variable else None
     if kids is not None and np.count_nonzero(kids.child) < MIN_CHILD_SHARE * len(input_points):
         kids = None  # a few children cost their guides more than they save
     arranged = _arrange(input_asset, input_points, kids) if reorder else (input_asset, input_points, None, None)
@@ -181,7 +182,7 @@ def _search_step(input_asset: HairAsset, input_points: np.ndarray, prof: Profile
         asset, points, order, family = arranged
         geometry = _quantize_geometry(asset, prof, step, diag, points, tol, chosen, family)
         chosen = geometry.choices
-        dist = _distances(geometry, points)
+        dist = _distances(geometry, points, asset)
         if family is not None and (dist[family.guides:] > tol).any():
             # children that the decoded guides place too far become guides, last on their cards (the
             # guides before them decode as they did, so the other children stay where they were)
@@ -190,7 +191,7 @@ def _search_step(input_asset: HairAsset, input_points: np.ndarray, prof: Profile
             before = order
             asset, points, order, family = _arrange(input_asset, input_points, kids, late, order[:family.guides])
             geometry = _with_late_guides(geometry, before, order, family.guides, asset, points)
-            dist = _distances(geometry, points)
+            dist = _distances(geometry, points, asset)
         err = float(dist.max())
         if step is None:
             return _Passed(step, err, geometry, asset, order)
@@ -209,14 +210,17 @@ def _search_step(input_asset: HairAsset, input_points: np.ndarray, prof: Profile
     return passed
 
 
-def _distances(geometry: _Geometry, points: np.ndarray) -> np.ndarray:
+def _distances(geometry: _Geometry, points: np.ndarray, asset: HairAsset) -> np.ndarray:
     """How far each point a decoder gets lies from the input's ``points`` (``[S, P]``; lossless: 0), by
-    blocks of strands on every core (the differences of a block stay in cache)."""
+    blocks of strands on every core (the differences of a block stay in cache); 0 at the placeholders of
+    a variable-count ``asset`` (a decoder drops them)."""
     decoded = geometry.decoded_points
     if decoded is None:
         return np.zeros((1, 1))
     out = np.empty(points.shape[:2])
     map_blocks(lambda b: np.copyto(out[b], lengths(decoded[b] - points[b])), len(points))
+    if asset.variable:
+        out[~asset.real_points()] = 0.0
     return out
 
 

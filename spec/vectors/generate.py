@@ -1,6 +1,7 @@
 """Regenerate the conformance vectors in this folder: ``python spec/vectors/generate.py``.
 
-Valid files come with ``NAME.expected.npz`` (decoded points and Gaussians, float32). Must-reject
+Valid files come with ``NAME.expected.npz`` (decoded points and Gaussians, float32; a file with PCNT
+adds ``point_counts``, its ``points`` keep the placeholders: spec 9). Must-reject
 files are listed in ``reject.json`` with the error class and a fragment of its message.
 """
 
@@ -13,7 +14,9 @@ import numpy as np
 
 import cghair_format as cgh
 from cghair_format import container
-from cghair_format.examples import example_asset, with_interpolated_strands
+from cghair_format.examples import example_asset, with_interpolated_strands, with_point_counts
+from cghair_format.geometry import strand_points
+from cghair_format.streams import StreamWriter
 
 HERE = Path(__file__).resolve().parent
 
@@ -22,8 +25,9 @@ def _expected(name: str, data: bytes) -> None:
     (HERE / f"{name}.cgh").write_bytes(data)
     asset = cgh.decode(data)
     g = cgh.decode_gaussians(asset)
-    np.savez_compressed(HERE / f"{name}.expected.npz", points=cgh.decode_points(asset), means=g.means,
-                        rotations=g.rotations, scales=g.scales, opacities=g.opacities, sh=g.sh)
+    counts = {"point_counts": asset.point_counts} if asset.variable else {}
+    np.savez_compressed(HERE / f"{name}.expected.npz", points=strand_points(asset.cards, asset.strand_card, asset.uvd),
+                        means=g.means, rotations=g.rotations, scales=g.scales, opacities=g.opacities, sh=g.sh, **counts)
 
 
 def _rechunk(data: bytes, edit) -> bytes:
@@ -134,6 +138,14 @@ def main() -> None:
     _differs(data, {"children": 0})
     _expected("synth_children_compact", data)
     children = data
+    # strands of their own point counts (spec 3, PCNT), with source colours: placeholders decode as any point
+    # (section 4) and are then dropped with their Gaussians, SH sets and colours
+    varied = with_point_counts(built, seed=5)
+    varied.source_color = np.linspace(0, 1, varied.uvd.size, dtype=np.float32).reshape(varied.uvd.shape)
+    data = cgh.encode(varied, "compact")[0]
+    assert cgh.read_info(data)["version"] == "2.1" and cgh.decode(data).variable
+    _expected("variable_counts_compact", data)
+    counts_file = data
 
     reject = {}
 
@@ -166,6 +178,11 @@ def main() -> None:
     past = container.Chunk("CHLD", cgh.codec.chunks.family_payload(family._replace(parents=family.parents + (1 << 20))))
     bad("reject_child_parent", _rechunk(children, lambda c: [past if x.type == "CHLD" else x for x in c]),
         "InvalidContentError", "parent")
+    long = StreamWriter()
+    long.ints(np.full(96, 25))  # one point more than META points
+    bad("reject_point_count", _rechunk(counts_file, lambda c: [container.Chunk("PCNT", long.getvalue())
+                                                                 if x.type == "PCNT" else x for x in c]),
+        "InvalidContentError", "point count")
     (HERE / "reject.json").write_text(json.dumps(reject, indent=2) + "\n")
 
 

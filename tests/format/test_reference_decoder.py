@@ -11,7 +11,7 @@ import cghair_format as cgh
 from cghair_format import codec, reference_decoder, strand_coder
 from cghair_format.cli import main
 from cghair_format.errors import UnsupportedVersionError
-from cghair_format.geometry import turn_cos_sin
+from cghair_format.geometry import strand_points, turn_cos_sin
 
 VECTORS = Path(__file__).resolve().parents[2] / "spec" / "vectors"
 QUANTIZED = sorted(p for p in VECTORS.glob("*.cgh")
@@ -20,7 +20,7 @@ QUANTIZED = sorted(p for p in VECTORS.glob("*.cgh")
 
 def compiled(path: Path, monkeypatch) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The compiled decoder's guides' card coordinates in float64 (before spec 4.3's rounding to
-    float32), and every strand's float32 ``uvd`` and points."""
+    float32), and every strand's float32 ``uvd`` and points (a variable-count file's placeholders too)."""
     seen = {}
 
     def keep_float64(*args):
@@ -29,7 +29,7 @@ def compiled(path: Path, monkeypatch) -> tuple[np.ndarray, np.ndarray, np.ndarra
 
     monkeypatch.setattr(codec.reader, "decode_uvd", keep_float64)
     asset = cgh.read(path)
-    return seen["coordinates"], asset.uvd, cgh.decode_points(asset)
+    return seen["coordinates"], asset.uvd, strand_points(asset.cards, asset.strand_card, asset.uvd)
 
 
 def same(a: np.ndarray, b: np.ndarray) -> bool:
@@ -40,6 +40,7 @@ def test_every_quantized_vector_is_covered():
     assert len(QUANTIZED) >= 8
     assert any(cgh.read_info(p)["quant"].get("children") for p in QUANTIZED)
     assert {cgh.read_info(p)["quant"]["base_guide"] for p in QUANTIZED} >= {0, 3}
+    assert any(cgh.read_info(p)["version"] == "2.1" for p in QUANTIZED)  # strands of their own point counts
 
 
 @pytest.mark.parametrize("path", QUANTIZED, ids=lambda p: p.stem)
@@ -50,6 +51,7 @@ def test_both_decoders_give_every_vector_the_same_points_bit_for_bit(path, monke
     guides = len(coordinates)
     assert same(ref.coordinates[:guides], coordinates)
     assert same(ref.uvd, uvd) and same(ref.points, points)
+    assert ref.counts.tolist() == cgh.read(path).counts.tolist()
 
 
 def test_one_rounding_changed_in_the_reference_shows(monkeypatch):
