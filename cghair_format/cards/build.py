@@ -10,7 +10,7 @@ import numpy as np
 
 from ..asset import Cards, HairAsset
 from ..errors import CghError, require
-from ..gaussians import decode_points
+from ..gaussians import decode_strands
 from ..strands import Strands
 from ..strands import resample as resample_strands
 from . import appearance as app
@@ -35,7 +35,7 @@ class CardBuildError(CghError, ValueError):
 
 @dataclass
 class ReconstructionError:
-    """Point error of decoded strands against the (resampled) input."""
+    """Point error of decoded strands against the input's points (or their resampling)."""
 
     mean_abs: float
     max_abs: float
@@ -51,6 +51,7 @@ class ReconstructionError:
 
     @classmethod
     def measure(cls, reference: np.ndarray, decoded: np.ndarray) -> ReconstructionError:
+        """The error of ``decoded`` points against ``reference`` (the same points, any shape ``[..., 3]``)."""
         ref = reference.reshape(-1, 3).astype(np.float64)
         err = np.linalg.norm(decoded.reshape(-1, 3).astype(np.float64) - ref, axis=-1)
         diag = float(np.linalg.norm(ref.max(0) - ref.min(0)))
@@ -81,12 +82,14 @@ class Resampling:
 class CardBuild:
     """The result of :func:`build_cards`."""
 
-    asset: HairAsset  # validated, with the default appearance
+    asset: HairAsset  # validated, with the default appearance (point_counts: the input's, where they vary)
     timings: dict[str, float]  # seconds per stage, in STAGES order
-    error: ReconstructionError  # decoded (float, before quantization) vs resampled input
-    points: np.ndarray  # [S, P, 3] float32, the input (or its resampling) the error refers to
+    error: ReconstructionError  # decoded (float, before quantization) vs the points below
+    # [S, P, 3] float32, the input's points (or their resampling) the error refers to; a strand with fewer
+    # than P (asset.point_counts) repeats its last point after its own
+    points: np.ndarray
     textures: np.ndarray  # [C, T, T] float32 strand coverage images, rows along u
-    colors: np.ndarray | None = None  # [S, P, 3] float32 resampled input colours, if the input has them
+    colors: np.ndarray | None = None  # [S, P, 3] float32 input colours (as the points), if the input has them
     strip_rounds: int = 0  # widen / extend rounds used by the inverse UV mapping
     unsolved_points: int = 0  # points without an exact card solution (kept at nearest-spine coords)
     outside_strip: int = 0  # points with v outside [0, 1] (beyond the tolerance)
@@ -98,8 +101,14 @@ class CardBuild:
         from ..codec import decode, encode
 
         data, report = encode(self.asset, profile)
-        error = ReconstructionError.measure(report.strands_in_file_order(self.points), decode_points(decode(data)))
-        return error, len(data)
+        return self.error_of(decode(data), report), len(data)
+
+    def error_of(self, decoded: HairAsset, report) -> ReconstructionError:
+        """The point error of ``decoded``, the asset written with ``report`` (an ``EncodeReport``: its
+        strand order) and read back, against the points the build kept."""
+        reference = own_points(report.strands_in_file_order(self.points),
+                               report.strands_in_file_order(self.asset.counts))
+        return ReconstructionError.measure(reference, decode_strands(decoded).points)
 
     def timing_table(self) -> str:
         out = io.StringIO()
@@ -128,6 +137,18 @@ def _check_options(strands: Strands, n_cards: int, n_groups: int, segments: int,
         raise CardBuildError(f"segments ({segments}) or points ({points}) is unreasonably large")
     if sh_degree not in (0, 1, 2, 3):
         raise CardBuildError(f"sh_degree must be 0..3, got {sh_degree}")
+
+
+def own_points(points: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """Each strand's first ``counts`` entries of ``points [S, P, ...]``, flat ``[sum(counts), ...]``."""
+    return points[np.arange(points.shape[1])[None, :] < counts[:, None]]
+
+
+def _padded(flat: np.ndarray, offsets: np.ndarray, p: int) -> np.ndarray:
+    """Flat per-point values ``[N, ...]`` of strands (``offsets``) as ``[S, p, ...]``, a strand with fewer
+    than ``p`` points repeating its last (the writer's placeholders, spec 3)."""
+    counts = np.diff(offsets)
+    return flat[offsets[:-1, None] + np.minimum(np.arange(p)[None, :], counts[:, None] - 1)]
 
 
 def resample(strands: Strands, points: int) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
@@ -159,21 +180,27 @@ def shape_error(strands: Strands, resampled: np.ndarray) -> float:
     return worst
 
 
-def _carry_by_arc_length(s_even: np.ndarray, pts: np.ndarray) -> np.ndarray:
-    """Spine parameters ``[S, P]`` of points ``pts [S, P, 3]`` from those ``s_even`` of the same strands'
+def _carry_by_arc_length(s_even: np.ndarray, flat: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """Spine parameters ``[N]`` of the strands' points ``flat [N, 3]`` (strand ``i`` is
+    ``flat[offsets[i]:offsets[i+1]]``, any count) from those ``s_even [S, P]`` of the same strands' ``P``
     evenly spaced points, interpolated at each point's fraction of its strand's arc length."""
-    seg = np.sqrt((np.diff(pts, axis=1) ** 2).sum(-1))
-    arc = np.concatenate([np.zeros((len(pts), 1)), np.cumsum(seg, 1)], 1)
-    pos = arc / np.maximum(arc[:, -1:], 1e-300) * (pts.shape[1] - 1)  # in units of the even spacing
-    lo = np.clip(np.floor(pos).astype(np.int64), 0, pts.shape[1] - 2)
+    counts = np.diff(offsets)
+    owner = np.repeat(np.arange(len(counts)), counts)
+    seg = np.sqrt((np.diff(flat, axis=0) ** 2).sum(-1))
+    seg[offsets[1:-1] - 1] = 0.0  # no step from one strand's last point to the next one's root
+    arc = np.concatenate([[0.0], np.cumsum(seg)])
+    arc -= arc[offsets[:-1]][owner]
+    length = arc[offsets[1:] - 1][owner]
+    p = s_even.shape[1]
+    pos = arc / np.maximum(length, 1e-300) * (p - 1)  # in units of the even spacing
+    lo = np.clip(np.floor(pos).astype(np.int64), 0, p - 2)
     w = pos - lo
-    rows = np.arange(len(pts))[:, None]
-    return s_even[rows, lo] * (1 - w) + s_even[rows, lo + 1] * w
+    return s_even[owner, lo] * (1 - w) + s_even[owner, lo + 1] * w
 
 
 def default_points(strands: Strands) -> int:
-    """The point count the builder keeps: the input's own when every strand has the same count
-    (no resampling), else the largest count (the format stores one count per file)."""
+    """``P``, the points per strand the builder stores: the largest count. Every strand keeps its own
+    points (a strand with fewer is stored with its own count, spec 3) unless one has a single point."""
     return int(strands.point_counts.max())
 
 
@@ -182,22 +209,25 @@ def build_cards(strands: Strands, n_cards: int = 800, n_groups: int = 64, segmen
                 log=None) -> CardBuild:
     """Build the cards of ``strands`` and return a :class:`CardBuild` (asset, timings, error).
 
-    ``points`` (default: :func:`default_points`) is the point count every strand is stored with: the
-    input's own points are kept when they already have it, else strands are resampled along their
-    arc length and ``CardBuild.resampling`` says how far that moved them. ``n_cards`` and
+    ``points`` (default None: every strand keeps its own points, ``P`` :func:`default_points`, and a
+    strand with fewer is stored with its own count) resamples every strand to ``points`` points along
+    its arc length, unless all have that many already; ``CardBuild.resampling`` then says how far that
+    moved them (a strand of one point is resampled to ``P`` too). ``n_cards`` and
     ``n_groups`` are capped at the strand and card counts. The result depends only on the inputs and
     ``seed``. ``log`` (a text stream, default stderr when ``progress``) receives one line per
     finished stage.
     """
+    keep = points is None
     if isinstance(strands, Strands) and points is None and strands.count:
         points = default_points(strands)
     _check_options(strands, n_cards, n_groups, segments, 4 if points is None else points, sh_degree)
+    keep = (keep and bool((strands.point_counts >= 2).all())) or bool((strands.point_counts == points).all())
     threadpoolctl = require("threadpoolctl", "cards", "the card builder")
     with threadpoolctl.threadpool_limits(limits=BUILD_THREADS):
-        return _build(strands, n_cards, n_groups, segments, points, seed, progress, sh_degree, log)
+        return _build(strands, n_cards, n_groups, segments, points, keep, seed, progress, sh_degree, log)
 
 
-def _build(strands: Strands, n_cards: int, n_groups: int, segments: int, points: int, seed: int,
+def _build(strands: Strands, n_cards: int, n_groups: int, segments: int, points: int, keep: bool, seed: int,
            progress: bool, sh_degree: int, log) -> CardBuild:
     log = log if log is not None else (sys.stderr if progress else None)
     timings: dict[str, float] = {}
@@ -207,22 +237,35 @@ def _build(strands: Strands, n_cards: int, n_groups: int, segments: int, points:
             print(f"cards: {stage:<11}{timings[stage]:8.2f} s", file=log, flush=True)
 
     with timed(timings, "resample"):
-        pts, colors, widths = resample(strands, points)  # the points stored: the input's own where they fit
-        s_count = len(pts)
-        flat = pts.reshape(-1, 3)
+        s_count = strands.count
+        resampling = None
+        if keep:
+            # k-means and the guides compare strands point by point, so they see evenly spaced points;
+            # the normals, widths and stored points are the user's own, of each strand's own count
+            offsets = strands.offsets
+            flat = strands.points.astype(np.float64)
+            even = resample_strands(strands, points)
+            shape = even.to_array().astype(np.float64)
+            pts = _padded(flat, offsets, points)
+            colors = None if strands.colors is None else _padded(strands.colors.astype(np.float64).clip(0, 1),
+                                                                  offsets, points)
+            variable = bool((strands.point_counts < points).any())
+            # a shorter strand's repeated last point would skew the root / tip colours and the mid points
+            looks = (resample(even, points) if variable else
+                     (pts, colors, None if strands.widths is None else _padded(strands.widths, offsets, points)))
+        else:
+            pts, colors, widths = resample(strands, points)
+            offsets = np.arange(s_count + 1, dtype=np.int64) * points
+            flat, shape = pts.reshape(-1, 3), pts
+            looks = (pts, colors, widths)
         diag = float(np.linalg.norm(flat.max(0) - flat.min(0)))
         if not diag > 0:
             raise CardBuildError("all strand points coincide: nothing to build cards from")
-        resampling = None
-        if (strands.point_counts == points).all():
-            # k-means and the guides compare strands point by point, so they see evenly spaced points;
-            # the normals, widths and stored points are the user's own
-            shape = resample_strands(strands, points).to_array().astype(np.float64)
-        else:
-            shape = pts
+        if not keep:
             counts = strands.point_counts
             resampling = Resampling(int(counts.min()), int(counts.max()), int(points),
                                     shape_error(strands, pts) / diag)
+        counts = np.diff(offsets)
     done("resample")
 
     with timed(timings, "cluster"):
@@ -232,13 +275,14 @@ def _build(strands: Strands, n_cards: int, n_groups: int, segments: int, points:
 
     with timed(timings, "guide"):
         spine, s = guide_spines(shape, labels, c, segments, show_progress=progress)
-        if shape is not pts:
-            s = _carry_by_arc_length(s.reshape(s_count, points), pts).ravel()
+        if keep:
+            s = _carry_by_arc_length(s.reshape(s_count, points), flat, offsets)
     done("guide")
 
-    point_card = np.repeat(labels, points)
+    point_card = np.repeat(labels, counts)
     with timed(timings, "normals"):
-        normal = card_normals(spine, flat, point_card, s, hair_centre=pts[:, 0].mean(0), show_progress=progress)
+        normal = card_normals(spine, flat, point_card, s, hair_centre=flat[offsets[:-1]].mean(0),
+                              show_progress=progress)
         half = card_half_widths(spine, normal, flat, point_card, s, diag)
         cards = Cards(spine.astype(np.float32), normal.astype(np.float32), half.astype(np.float32),
                       np.zeros(c, np.int32))
@@ -246,7 +290,7 @@ def _build(strands: Strands, n_cards: int, n_groups: int, segments: int, points:
 
     with timed(timings, "uv"):
         cards, uvd, solved, rounds = fit_strip(cards, flat, point_card, s, show_progress=progress)
-        uvd = uvd.reshape(s_count, points, 3).astype(np.float32)
+        uvd = _padded(uvd, offsets, points).astype(np.float32)
     done("uv")
 
     with timed(timings, "textures"):
@@ -257,20 +301,22 @@ def _build(strands: Strands, n_cards: int, n_groups: int, segments: int, points:
     done("textures")
 
     with timed(timings, "appearance"):
-        profiles = app.colour_profiles(colors, s_count, seed)
+        look_points, look_colors, look_widths = looks
+        profiles = app.colour_profiles(look_colors, s_count, seed)
         appearance = app.default_appearance(profiles, groups[labels], n_t, points, sh_degree, seed)
         asset = HairAsset(
             cards=cards, strand_card=labels.astype(np.int32), uvd=uvd,
             opacity=app.default_opacity(s_count, points), appearance=appearance,
-            thickness=app.default_thickness(pts, widths), meters_per_unit=float(strands.meters_per_unit),
+            thickness=app.default_thickness(look_points, look_widths), meters_per_unit=float(strands.meters_per_unit),
             up_axis=strands.up_axis, generator="cghair cards",
             metadata={"cards": {"seed": int(seed), "segments": int(segments), "points": int(points),
                                 "requested_cards": int(n_cards), "requested_groups": int(n_groups)}},
+            point_counts=counts.astype(np.int32) if (counts < points).any() else None,
         ).validate()
     done("appearance")
 
     with timed(timings, "verify"):
-        error = ReconstructionError.measure(pts, decode_points(asset))
+        error = ReconstructionError.measure(flat, decode_strands(asset).points)
         v = uvd[..., 1]
         outside = int(((v < -STRIP_TOLERANCE) | (v > 1 + STRIP_TOLERANCE)).sum())
     done("verify")

@@ -22,10 +22,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--groups", type=int_at_least(1), default=64,
                    help="number of card groups N_T sharing a codebook (default: 64; capped at the card count)")
     p.add_argument("--segments", type=int_at_least(1), default=32, help="segments M per card (default: 32)")
-    p.add_argument("--points", type=int_at_least(4), default=None,
-                   help="points P per strand (default: the input's own points when every strand has the same "
-                        "count, else the largest count); strands with another count are resampled, and the shape "
-                        "error that costs is printed")
+    p.add_argument("--points", type=int_at_least(4), default=None, metavar="N",
+                   help="resample every strand to N points (default: keep every strand's own points, of "
+                        "varying counts if they vary); the shape error that costs is printed")
     p.add_argument("--sh-degree", type=int, choices=(0, 1, 2, 3), default=3, help="SH degree (default: 3)")
     p.add_argument("--seed", type=int, default=0, help="random seed of the k-means stages (default: 0)")
     p.add_argument("--profile", choices=PROFILE_NAMES, default="compact",
@@ -45,10 +44,8 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from ..cards import build_cards
-    from ..cards.build import ReconstructionError
     from ..codec import read, write
     from ..exchange import load_strands
-    from ..gaussians import decode_points
     from ..profiles import get_profile
 
     out = Path(args.output)
@@ -62,9 +59,11 @@ def run(args: argparse.Namespace) -> int:
     if args.attribution is not None:
         build.asset.attribution = args.attribution
     report = write(build.asset, out, profile=args.profile, keep_order=args.keep_order)
-    after = ReconstructionError.measure(report.strands_in_file_order(build.points), decode_points(read(out)))
+    after = build.error_of(read(out), report)
     info = build.info
-    print(f"{out}: {info['strands']:,} strands x {info['points']} points on {info['cards']:,} cards of "
+    counts = build.asset.counts
+    given = f"{info['points']}" if counts.min() == info["points"] else f"{counts.min()}-{info['points']}"
+    print(f"{out}: {info['strands']:,} strands x {given} points on {info['cards']:,} cards of "
           f"{args.segments} segments, {info['groups']} groups; {out.stat().st_size:,} bytes ({args.profile})")
     print(build.timing_table(), end="")
     if build.resampling is not None:
@@ -72,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
         bound = get_profile(args.profile).position_tolerance
         if build.resampling.shape_error > bound:
             print(f"note: that is more than the {args.profile} profile's bound ({bound:.0e}); the errors below are "
-                  "measured against the resampled points (the format stores one point count per file)")
+                  "measured against the resampled points (leave out --points to keep the input's own)")
     print(build.error.line("point error before quantization"))
     print(after.line(f"point error after quantization ({args.profile})"))
     if build.unsolved_points or build.outside_strip:

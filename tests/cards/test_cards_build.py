@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from cards_helpers import MAX_TARGET, MEAN_TARGET, STRIP_TOLERANCE, synth
 
+import cghair_format as cgh
 from cghair_format.asset import HairAsset
 from cghair_format.cards import CardBuildError, build_cards
 from cghair_format.cards.build import STAGES
@@ -147,6 +148,44 @@ def test_the_users_points_are_kept_when_their_count_fits():
     assert b.error.max_rel <= MAX_TARGET
 
 
+def _cut(strands: Strands, seed: int = 0) -> Strands:
+    """The strands cut to random point counts (6 up to all of them; the first keeps all)."""
+    rng = np.random.default_rng(seed)
+    full = strands.to_array()
+    counts = rng.integers(6, full.shape[1] + 1, len(full))
+    counts[0] = full.shape[1]
+    offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    return Strands(np.concatenate([x[:n] for x, n in zip(full, counts, strict=True)]), offsets)
+
+
+def test_strands_of_their_own_counts_are_kept_without_resampling():
+    strands = _cut(_unevenly_spaced(synth("wavy", 120, 24, seed=3)))
+    b = build_cards(strands, n_cards=12, n_groups=3, segments=8, progress=False)
+    assert b.resampling is None and b.info["points"] == 24 and b.asset.variable
+    assert np.array_equal(b.asset.counts, strands.point_counts)
+    decoded = cgh.decode_strands(b.asset)
+    assert np.array_equal(decoded.offsets, strands.offsets)
+    err = np.linalg.norm(decoded.points.astype(np.float64) - strands.points, axis=-1).max()
+    assert err <= 1e-6 * b.error.bbox_diagonal  # the user's own points, each strand of its own count
+    assert b.error.max_rel <= MAX_TARGET
+    for profile in ("compact", "high"):  # the bound holds against the user's points
+        data, report = cgh.encode(b.asset, profile)
+        after = b.error_of(cgh.decode(data), report)
+        assert after.max_abs <= cgh.PROFILES[profile].position_tolerance * report.bbox_diagonal
+    resampled = build_cards(strands, n_cards=12, n_groups=3, segments=8, points=24, progress=False)
+    assert resampled.resampling.points == 24 and not resampled.asset.variable
+
+
+def test_carrying_spine_parameters_by_arc_length_is_per_strand():
+    from cghair_format.cards.build import _carry_by_arc_length
+
+    flat = np.array([[0, 0, 0], [1, 0, 0], [3, 0, 0], [0, 5, 0], [0, 6, 0]], np.float64)
+    s_even = np.array([[0.0, 1.0, 2.0], [10.0, 10.5, 11.0]])
+    carried = _carry_by_arc_length(s_even, flat, np.array([0, 3, 5]))
+    # strand 0: arc fractions 0, 1/3, 1 -> positions 0, 2/3, 2; strand 1: 0 and 1
+    np.testing.assert_allclose(carried, [0.0, 2 / 3, 2.0, 10.0, 11.0])
+
+
 def test_resampling_is_reported_with_its_shape_error():
     corner = Strands.from_array(np.array([[[0, 0, 0], [1, 0, 0], [1, 1, 0]]] * 4, np.float32)
                                 + np.arange(4, dtype=np.float32)[:, None, None] * [0, 0, 0.1])
@@ -171,3 +210,8 @@ def test_the_cli_reports_resampling_beyond_the_profiles_bound(tmp_path, capsys):
                  "--points", "12", "--no-progress"]) == 0
     out = capsys.readouterr().out
     assert "strands resampled from 24 to 12 points" in out and "more than the compact profile's bound" in out
+    save_strands(_cut(_unevenly_spaced(synth("wavy", 120, 24, seed=3))), src)
+    assert main(["cards", str(src), "-o", str(tmp_path / "own.cgh"), "--cards", "12", "--groups", "3",
+                 "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "resampled" not in out and "120 strands x 6-24 points" in out

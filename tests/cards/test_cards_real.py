@@ -50,6 +50,22 @@ def test_small_real_models(name):
     _check_quantized(build.asset)
 
 
+@pytest.mark.parametrize("name", SMALL_REAL)
+def test_small_real_models_at_their_own_point_counts(name):
+    """Bangs (5..21 points a strand) and Curly (10..47) keep every strand's own points; both quantized
+    profiles meet their bound against those points."""
+    strands = load_real(name)
+    build = build_cards(strands, n_cards=10, n_groups=3, segments=16, progress=False)
+    assert build.resampling is None and np.array_equal(build.asset.counts, strands.point_counts)
+    assert build.asset.variable and build.error.max_rel <= MAX_TARGET
+    for profile in ("compact", "high"):
+        data, report = cgh.encode(build.asset, profile)
+        after = build.error_of(cgh.decode(data), report)
+        bound = cgh.PROFILES[profile].position_tolerance
+        assert after.max_abs <= bound * report.bbox_diagonal, (profile, after.max_rel / bound)
+        assert report.bbox_diagonal == pytest.approx(after.bbox_diagonal, rel=1e-6)  # the user's own points'
+
+
 def test_real_colours_are_used():
     strands = load_real("Bangs_100_binary.ply")
     assert strands.colors is not None
