@@ -130,11 +130,11 @@ def _buffer(ctx: Any, data: np.ndarray | None = None, nbytes: int = 0) -> Any:
 def upload_asset(ctx: Any, programs: Programs, asset: HairAsset) -> GpuScene:
     """Upload an asset's compact data and decode it on the GPU."""
     asset.validate()
-    check_capacity(ctx, asset.n_gaussians)
     cards, app = asset.cards, asset.appearance
     c, m1 = cards.spine.shape[:2]
     s, p = asset.n_strands, asset.points_per_strand
-    g = asset.n_gaussians
+    g = s * (p - 1)  # the shaders index Gaussians s (P-1) + i: a variable-count asset's placeholders too
+    check_capacity(ctx, g)
     spine = _buffer(ctx, _vec4(cards.spine.reshape(-1, 3), 1.0))
     normal = _buffer(ctx, _vec4(cards.normal.reshape(-1, 3)))
     half_width = _buffer(ctx, cards.half_width.astype(np.float32).reshape(-1))
@@ -148,7 +148,8 @@ def upload_asset(ctx: Any, programs: Programs, asset: HairAsset) -> GpuScene:
 
     strand_card = _buffer(ctx, asset.strand_card.astype(np.uint32))
     uvd = _buffer(ctx, asset.uvd.astype(np.float32).reshape(-1))
-    opacity = _buffer(ctx, asset.opacity.astype(np.float32).reshape(-1))
+    # placeholder segments (spec 3) get opacity 0: they are decoded with the others, and never seen
+    opacity = _buffer(ctx, (asset.opacity * asset.real_segments()).astype(np.float32).reshape(-1))
     means, rotations, scales = (data_image(ctx, g, 4, "f4") for _ in range(3))
     points = _buffer(ctx, nbytes=s * p * 16)
     prog = programs.compute("decode_geometry")

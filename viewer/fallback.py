@@ -134,7 +134,7 @@ class FallbackRenderer(Renderer):
 
     @classmethod
     def from_asset(cls, ctx: Any, asset: HairAsset, sort: str = "cpu", primitive: str = "triangles"):
-        groups = np.repeat(asset.cards.group[asset.strand_card], asset.points_per_strand - 1)
+        groups = np.repeat(asset.cards.group[asset.strand_card], asset.counts - 1)  # per real segment
         return cls(ctx, decode_gaussians(asset), groups)
 
     @classmethod

@@ -24,9 +24,11 @@ def run(args: argparse.Namespace) -> int:
 
 
 def format_info(name: str, info: dict) -> str:
+    fewest, most = info["point_counts"]
+    points = f"{most}" if fewest == most else f"{fewest}-{most}"
     lines = [
         f"{name}: .cgh {info['version']}, profile {info['profile']}, {info['file_bytes']:,} bytes",
-        f"  strands     {info['strands']:,} x {info['points_per_strand']} points, "
+        f"  strands     {info['strands']:,} x {points} points, "
         f"{info['gaussians']:,} Gaussians ({info['bits_per_gaussian']:.2f} bits per Gaussian)",
         f"  cards       {info['cards']:,} cards of {info['card_segments']} segments, {info['groups']} groups",
         f"  appearance  K={info['codebook_size']} latents of D={info['latent_dim']} per group, "

@@ -24,7 +24,10 @@ def run(args: argparse.Namespace) -> int:
     from ..reference_decoder import compare, evenly_spaced_cards
 
     asset = read(args.file)
-    print(f"{args.file}: valid .cgh ({asset.n_strands:,} strands, {asset.n_gaussians:,} Gaussians)")
+    counts = asset.counts
+    points = f"{counts.max()}" if counts.min() == counts.max() else f"{counts.min()}-{counts.max()}"
+    print(f"{args.file}: valid .cgh ({asset.n_strands:,} strands of {points} points, {asset.n_gaussians:,} "
+          "Gaussians)")
     if not args.reference:
         return 0
     if read_info(args.file)["quant"]["lossless"]:

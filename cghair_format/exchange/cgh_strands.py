@@ -1,4 +1,5 @@
-"""A .cgh asset as strands: its decoded points, with the view-independent colour (SH band 0)."""
+"""A .cgh asset as strands: its decoded points (each strand's own, placeholders dropped), with the
+view-independent colour (SH band 0)."""
 
 from __future__ import annotations
 
@@ -10,32 +11,33 @@ from ..asset import HairAsset
 from ..strands import Strands
 
 
-def strand_colors(asset: HairAsset) -> np.ndarray:
-    """Per-point RGB ``[S, P, 3]``: band-0 colour of the adjacent segments' Gaussians, averaged.
+def point_average(seg: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """Per-segment values ``[S, P-1, D]`` to per-point ``[S, P, D]``: an inner point takes the mean of its
+    two segments, a strand's end points (its last: point ``counts - 1``) their single segment."""
+    out = np.empty((seg.shape[0], seg.shape[1] + 1, seg.shape[2]), np.float32)
+    out[:, 0], out[:, -1] = seg[:, 0], seg[:, -1]
+    out[:, 1:-1] = (seg[:, 1:] + seg[:, :-1]) / 2
+    rows = np.arange(len(seg))
+    out[rows, counts - 1] = seg[rows, counts - 2]
+    return out
 
-    Gaussian ``i`` of a strand sits between points ``i`` and ``i+1``; an inner point takes the
-    mean of its two segments, the end points their single segment.
-    """
+
+def strand_colors(asset: HairAsset) -> np.ndarray:
+    """Per-point RGB ``[S, P, 3]`` (placeholders as they come): band-0 colour of the adjacent segments'
+    Gaussians, averaged (:func:`point_average`; Gaussian ``i`` sits between points ``i`` and ``i+1``)."""
     from ..gaussians import SH_C0, strand_sh
 
     seg = np.maximum(0.0, SH_C0 * strand_sh(asset)[:, :, 0, :] + 0.5)  # [S, P-1, 3]
-    pts = np.empty((seg.shape[0], seg.shape[1] + 1, 3), np.float32)
-    pts[:, 0] = seg[:, 0]
-    pts[:, -1] = seg[:, -1]
-    pts[:, 1:-1] = (seg[:, 1:] + seg[:, :-1]) / 2
-    return np.clip(pts, 0.0, 1.0)
+    return np.clip(point_average(seg, asset.counts), 0.0, 1.0)
 
 
 def strands_from_asset(asset: HairAsset, colors: bool = True) -> Strands:
-    """The asset's strands (decoded points), widths ``2 d`` and band-0 colours."""
-    from ..gaussians import decode_points
+    """The asset's strands (each strand's own decoded points), widths ``2 d`` and band-0 colours."""
+    from ..gaussians import decode_strands
 
-    pts = decode_points(asset)
-    s = Strands.from_array(pts, meters_per_unit=asset.meters_per_unit, up_axis=asset.up_axis,
-                           root_uv=asset.root_uv)
+    s = decode_strands(asset)
+    s.colors = strand_colors(asset)[asset.real_points()] if colors else None
     s.widths = np.full(len(s.points), 2 * asset.thickness, np.float32)
-    if colors:
-        s.colors = strand_colors(asset).reshape(-1, 3)
     return s
 
 

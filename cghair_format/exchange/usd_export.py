@@ -74,10 +74,11 @@ def export_usd(path: str | Path, *, asset: HairAsset | None = None, strands: Str
                 root.SetCustomDataByKey("cghair:attribution", str(attribution))
         if curves:
             if asset is not None:
-                from .cgh_strands import strands_from_asset
+                from .cgh_strands import point_average, strands_from_asset
 
                 s = strands_from_asset(asset)
-                opacity = _point_average(asset.opacity.astype(np.float32)[..., None])[..., 0].reshape(-1)
+                opacity = point_average(asset.opacity.astype(np.float32)[..., None], asset.counts)[..., 0]
+                opacity = opacity[asset.real_points()]
                 group = asset.cards.group.astype(np.int32)[asset.strand_card]
                 root_uv, ids = asset.root_uv, asset.strand_ids
             else:
@@ -143,14 +144,6 @@ def write_stage(path: Path, build: Callable, meters_per_unit: float, up_axis: st
             Usd.ColorSpaceAPI.Apply(root).CreateColorSpaceNameAttr(LINEAR)
         build(stage, root, path)  # the final path: files written beside it are named after it
         stage.GetRootLayer().Save()
-
-
-def _point_average(seg: np.ndarray) -> np.ndarray:
-    """Per-segment values ``[S, P-1, D]`` to per-point ``[S, P, D]`` (mean of adjacent segments)."""
-    out = np.empty((seg.shape[0], seg.shape[1] + 1, seg.shape[2]), np.float32)
-    out[:, 0], out[:, -1] = seg[:, 0], seg[:, -1]
-    out[:, 1:-1] = (seg[:, 1:] + seg[:, :-1]) / 2
-    return out
 
 
 def write_curves(stage, prim_path: str, strands: Strands, *, opacity: np.ndarray | None = None,

@@ -30,7 +30,8 @@ def card_atlas(asset: HairAsset, size: int | None = None) -> tuple[np.ndarray, n
     size = size or TEXTURE_SIZE
     c, m1 = asset.cards.count, asset.cards.spine.shape[1]
     coverage = strand_textures(asset.uvd[..., :2], asset.strand_card, c, size)  # [C, size, size]: rows along u
-    strand_rgb = srgb_to_linear(strand_colors(asset)).mean(axis=1)  # [S, 3], averaged in linear light
+    real = asset.real_points()[..., None]
+    strand_rgb = (srgb_to_linear(strand_colors(asset)) * real).sum(1) / real.sum(1)  # [S, 3], in linear light
     n = np.bincount(asset.strand_card, minlength=c).astype(np.float64)
     card_rgb = np.stack([np.bincount(asset.strand_card, strand_rgb[:, i], c) for i in range(3)], 1)
     card_rgb = linear_to_srgb(np.where(n[:, None] > 0, card_rgb / np.maximum(n, 1)[:, None], 0.2))

@@ -138,3 +138,31 @@ def test_output_into_a_closed_pipe_is_quiet(asset_file):
     proc.stdout.close()  # closed long before the interpreter has started and read the file
     err = proc.stderr.read()
     assert proc.wait() == 141 and "Traceback" not in err, err
+
+
+def test_every_verb_takes_a_variable_count_file(tmp_path, capsys):
+    """info, validate (with the reference decoder), encode, convert and export on strands of their own
+    point counts; .tfx, one count per file, says to resample."""
+    from cghair_format.examples import with_point_counts
+    from cghair_format.exchange import load_strands
+
+    asset = with_point_counts(example_asset(0, strands=24, points=12), seed=3)
+    src = tmp_path / "v.cgh"
+    cgh.write(asset, src)
+    capsys.readouterr()
+    assert main(["info", str(src)]) == 0
+    out = capsys.readouterr().out
+    assert ".cgh 2.1" in out and f"24 x 2-12 points, {asset.n_gaussians:,} Gaussians" in out
+    assert main(["validate", str(src), "--reference"]) == 0
+    out = capsys.readouterr().out
+    assert "of 2-12 points" in out and "same points on all 24 strands" in out
+    assert main(["encode", str(src), "-o", str(tmp_path / "high.cgh"), "--profile", "high"]) == 0
+    assert np.array_equal(np.sort(cgh.read(tmp_path / "high.cgh").counts), np.sort(asset.counts))
+    assert main(["convert", str(src), str(tmp_path / "v.npz")]) == 0
+    assert "2..12 points" in capsys.readouterr().out
+    assert np.array_equal(np.sort(load_strands(tmp_path / "v.npz").point_counts), np.sort(asset.counts))
+    assert main(["export", str(src), "-o", str(tmp_path / "g.ply")]) == 0
+    assert f"{asset.n_gaussians:,} Gaussians" in capsys.readouterr().out
+    assert main(["convert", str(src), str(tmp_path / "v.tfx")]) != 0
+    err = capsys.readouterr().err
+    assert "--points" in err and len(err.strip().splitlines()) == 1

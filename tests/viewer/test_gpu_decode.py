@@ -81,3 +81,22 @@ def test_too_many_gaussians_is_a_clear_error(gl_ctx, monkeypatch):
         upload_asset(gl_ctx, Programs(gl_ctx), asset)
     with pytest.raises(decode.SceneTooLargeError):
         upload_gaussians(gl_ctx, decode_gaussians(asset))
+
+
+def test_placeholders_of_a_variable_count_asset_decode_invisible(gl_ctx):
+    """The shaders decode all ``S (P-1)`` segments (spec 3's padded arrays); placeholders get opacity 0,
+    which preprocessing culls, and the real ones match decode_gaussians."""
+    from cghair_format.examples import with_point_counts
+
+    asset = with_point_counts(example_asset(seed=4, strands=30, points=10), seed=1)
+    scene = upload_asset(gl_ctx, Programs(gl_ctx), asset)
+    try:
+        got, want = read_gaussians(scene), decode_gaussians(asset)
+        real = asset.real_segments().ravel()
+        assert scene.count == len(real) and want.count == int(real.sum()) < len(real)
+        assert (got.opacities[~real] == 0).all()
+        np.testing.assert_array_equal(got.opacities[real], want.opacities)
+        np.testing.assert_allclose(got.means[real], want.means, atol=POS_TOL)
+        np.testing.assert_allclose(got.sh[real], want.sh, atol=SH_TOL)
+    finally:
+        scene.release()

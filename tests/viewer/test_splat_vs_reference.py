@@ -123,13 +123,16 @@ def test_record_chunks_and_culling(gl_ctx, monkeypatch):
     split.release()
 
 
-@pytest.mark.parametrize("scene", ["asset", "random"])
+@pytest.mark.parametrize("scene", ["asset", "variable", "random"])
 def test_fallback_without_compute_matches_reference(gl_ctx, scene):
-    """The OpenGL 3.3 path (numpy projection and sort, instanced attributes) gives the same image."""
+    """The OpenGL 3.3 path (numpy projection and sort, instanced attributes) gives the same image; with
+    strands of their own point counts, of their real segments."""
+    from cghair_format.examples import with_point_counts
     from viewer.fallback import FallbackRenderer
 
-    if scene == "asset":
+    if scene != "random":
         asset = example_asset(seed=1, strands=96, points=12, sh_degree=3)
+        asset = with_point_counts(asset, seed=3) if scene == "variable" else asset
         g = decode_gaussians(asset)
         renderer = FallbackRenderer.from_asset(gl_ctx, asset)
         lo, hi = renderer.scene.bounds
