@@ -51,9 +51,14 @@ def psnr(a: Tensor, b: Tensor) -> float:
     return float("inf") if mse == 0 else -10.0 * math.log10(mse)
 
 
-def opacity_smoothness(opacity: Tensor) -> Tensor:
-    """Mean absolute change of opacity between neighbouring segments of a strand ``[S, P-1]``."""
-    return (opacity[:, 1:] - opacity[:, :-1]).abs().mean()
+def opacity_smoothness(opacity: Tensor, real: Tensor | None = None) -> Tensor:
+    """Mean absolute change of opacity between neighbouring segments of a strand ``[S, P-1]``; with
+    ``real`` (``[S, P-1]`` bool, the strands' own segments), between real neighbours only."""
+    change = (opacity[:, 1:] - opacity[:, :-1]).abs()
+    if real is None:
+        return change.mean()
+    both = real[:, 1:]  # (a segment is real where the next one is)
+    return (change * both).sum() / both.sum().clamp_min(1)
 
 
 def image_loss(rgb: Tensor, target: Tensor, lambda_dssim: float) -> Tensor:

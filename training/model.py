@@ -11,6 +11,10 @@ Gaussians follow :func:`cghair_format.gaussians.segment_frames`. Appearance by v
   per-strand SH sets (no latent, no MLP), mixed by the same Gumbel-softmax weights;
 - ``single-sh``: one free SH set per strand, shared by all its Gaussians;
 - ``unique``: a free SH set per Gaussian (3DGS-style; the upper bound).
+
+Strands of their own point counts (``asset.point_counts``, spec 3) train on the padded ``[S, P]``
+coordinates; the Gaussians handed to a renderer are the real segments only (``real_gaussians``, their
+indices among the ``S (P-1)``), so placeholders are never drawn and get no gradient.
 """
 
 from __future__ import annotations
@@ -115,6 +119,11 @@ class HairModel(nn.Module):
         gen = torch.Generator().manual_seed(config.seed)
 
         self.geometry = CardGeometry(asset)
+        # the real segments among the S (P-1) (None: all): what the renderer gets, strand-major
+        real = torch.as_tensor(np.flatnonzero(asset.real_segments().ravel())) if asset.variable else None
+        self.register_buffer("real_gaussians", real, persistent=False)
+        mask = torch.as_tensor(asset.real_segments()) if asset.variable else None
+        self.register_buffer("real_segments", mask, persistent=False)  # [S, P-1] bool, or None
         self.uv = nn.Parameter(torch.as_tensor(asset.uvd[..., :2].astype(np.float32)))
         self.delta = nn.Parameter(torch.as_tensor(asset.uvd[..., 2].astype(np.float32)))
         opac = np.clip(asset.opacity.astype(np.float64), *INIT_OPACITY)
@@ -198,14 +207,14 @@ class HairModel(nn.Module):
         return F.embedding_bag(self.book_rows, books, per_sample_weights=weights, mode="sum")
 
     def strand_sh(self, mode: str = "gumbel", tau: float = 1.0) -> Tensor:
-        """SH ``[S*(P-1), C, 3]`` of every Gaussian, strand-major."""
+        """SH ``[G, C, 3]`` of every (real) Gaussian, strand-major."""
         return self.sh_source(mode, tau)(None)
 
     def sh_source(self, mode: str = "gumbel", tau: float = 1.0) -> Callable[[Tensor | None], Tensor]:
-        """A function from Gaussian indices ``[n]`` (strand-major; None: all) to their SH ``[n, C, 3]``,
-        with the codebook weights drawn once, now. For the MLP variants it runs the last layer only
-        for the Gaussians asked for: a renderer that asks only for those it shows (the native
-        splatter) skips most of the model's work and memory in dense hair."""
+        """A function from Gaussian indices ``[n]`` (strand-major, among the real ones; None: all) to
+        their SH ``[n, C, 3]``, with the codebook weights drawn once, now. For the MLP variants it runs
+        the last layer only for the Gaussians asked for: a renderer that asks only for those it shows
+        (the native splatter) skips most of the model's work and memory in dense hair."""
         per_gaussian = self.sh_coeffs * 3
         if self.variant in ("latents", "no-card-clustering"):
             hidden = self.mix(self.weights(mode, tau))
@@ -231,26 +240,42 @@ class HairModel(nn.Module):
             def rows(index: Tensor | None) -> Tensor:
                 every = self.sh_per_gaussian.reshape(-1, per_gaussian)
                 return every if index is None else every[index]
-        return lambda index: rows(index).reshape(-1, self.sh_coeffs, 3)
+        real = self.real_gaussians
+        if real is None:
+            return lambda index: rows(index).reshape(-1, self.sh_coeffs, 3)
+        # real-Gaussian indices to their (strand, segment) rows s (P-1) + i
+        return lambda index: rows(real if index is None else real[index]).reshape(-1, self.sh_coeffs, 3)
 
     def points(self) -> Tensor:
         return self.geometry.points(self.uv, self.delta)
 
     def gaussian_geometry(self) -> tuple[Tensor, Tensor, Tensor]:
-        """Means, quaternions and scales of all Gaussians (by the compiled kernel where it can run)."""
+        """Means, quaternions and scales of all (real) Gaussians (by the compiled kernel where it can run)."""
         if native_geometry.usable(self.uv, self.delta, self.geometry.vertex_data):
-            return native_geometry.segment_gaussians(self.geometry, self.uv, self.delta, self.thickness)
-        return segment_gaussians(self.points(), self.thickness)
+            padded = native_geometry.segment_gaussians(self.geometry, self.uv, self.delta, self.thickness)
+        else:
+            padded = segment_gaussians(self.points(), self.thickness)
+        return padded if self.real_gaussians is None else tuple(x.index_select(0, self.real_gaussians)
+                                                                for x in padded)
 
     def forward(self, mode: str = "gumbel", tau: float = 1.0,
                 geometry: tuple[Tensor, Tensor, Tensor] | None = None) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor]:
-        """``(means, quats, scales, opacities, sh)`` of all Gaussians, ready for the splatter.
+        """``(means, quats, scales, opacities, sh)`` of all (real) Gaussians, ready for the splatter.
         ``geometry`` reuses a :meth:`gaussian_geometry` computed earlier (while it is frozen)."""
         means, quats, scales = geometry if geometry is not None else self.gaussian_geometry()
-        return means, quats, scales, self.opacities().reshape(-1), self.strand_sh(mode, tau)
+        return means, quats, scales, self.gaussian_opacities(), self.strand_sh(mode, tau)
 
     def opacities(self) -> Tensor:
-        return torch.sigmoid(self.opacity_logit)  # [S, P-1]
+        return torch.sigmoid(self.opacity_logit)  # [S, P-1], placeholders included
+
+    def gaussian_opacities(self) -> Tensor:
+        """The opacities ``[G]`` of the (real) Gaussians, as :meth:`gaussian_geometry` orders them."""
+        flat = self.opacities().reshape(-1)
+        return flat if self.real_gaussians is None else flat.index_select(0, self.real_gaussians)
+
+    @property
+    def n_gaussians(self) -> int:
+        return self.n_strands * (self.n_points - 1) if self.real_gaussians is None else len(self.real_gaussians)
 
     # --- sizes and export ---------------------------------------------------------------------------
 
@@ -297,7 +322,7 @@ class HairModel(nn.Module):
                          appearance=appearance, thickness=base.thickness, meters_per_unit=base.meters_per_unit,
                          up_axis=base.up_axis, generator="cghair train", attribution=base.attribution,
                          strand_ids=base.strand_ids, root_uv=base.root_uv, source_color=base.source_color,
-                         metadata=dict(base.metadata)).validate()
+                         metadata=dict(base.metadata), point_counts=base.point_counts).validate()
 
 
 class _SegmentRows(torch.autograd.Function):

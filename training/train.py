@@ -231,11 +231,12 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
     else:
         config = (config or TrainConfig()).validate()
         base = base_asset(config, strands, cards, progress)
-    from cghair_format.gaussians import decode_points
+    from cghair_format.gaussians import decode_strands
 
     from .capture import check_strands_in_views
 
-    check_strands_in_views(decode_points(base), ds.train)  # strands in another frame: refuse now, not after hours
+    # strands in another frame: refuse now, not after hours
+    check_strands_in_views(decode_strands(base).points, ds.train)
     torch.manual_seed(config.seed)
     model = HairModel(base, config, mean_hair_colour(ds.train)).to(device)
     # fused: one kernel per parameter for the whole update, several times faster than the loop on the
@@ -293,12 +294,13 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
             means, quats, scales = frozen if frozen is not None else model.gaussian_geometry()
             sh = model.sh_source("gumbel", tau)  # the native backend runs it for the Gaussians it shows only
             t1 = clock()
-            out_img = render(means, quats, scales, model.opacities().reshape(-1), sh, ds.train[v].camera,
+            out_img = render(means, quats, scales, model.gaussian_opacities(), sh, ds.train[v].camera,
                              tuple(config.background))
             t2 = clock()
             loss = (losses.image_loss(out_img.rgb, targets[v], config.lambda_dssim)
                     + config.lambda_alpha * losses.l1(out_img.alpha, masks[v])
-                    + config.lambda_opacity_smooth * losses.opacity_smoothness(model.opacities()))
+                    + config.lambda_opacity_smooth * losses.opacity_smoothness(model.opacities(),
+                                                                                    model.real_segments))
             t3 = clock()
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
@@ -341,7 +343,7 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
         "config": config.to_dict(), "dataset": dataset_name, "backend": backend, "iterations_run": iterations_run,
         "seconds": round(seconds, 3), "stage_seconds": {k: round(v, 3) for k, v in stage.items()},
         "final": history[-1] if history else None, "weight_mode": mode, "export_psnr": scores,
-        "appearance_parameters": model.appearance_parameters(), "gaussians": model.n_strands * (model.n_points - 1),
+        "appearance_parameters": model.appearance_parameters(), "gaussians": model.n_gaussians,
     }
     if asset is not None:
         asset.metadata["training"] = summary

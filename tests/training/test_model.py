@@ -8,7 +8,7 @@ import torch
 import torch.nn.functional as F
 
 from cghair_format import decode, decode_gaussians, encode
-from cghair_format.examples import example_asset
+from cghair_format.examples import example_asset, with_point_counts
 from cghair_format.gaussians import segment_frames
 from cghair_format.geometry import strand_points
 from training.config import ConfigError, TrainConfig
@@ -53,16 +53,21 @@ def test_segment_gaussians_match_numpy():
     assert np.allclose(tq, q, atol=1e-6)
 
 
-@pytest.mark.parametrize("variant,mode", [("latents", "soft"), ("latents", "hard"),
-                                          ("no-card-clustering", "soft"), ("multi-sh", "hard")])
-def test_export_decodes_to_the_model_gaussians(variant, mode):
+@pytest.mark.parametrize("variant,mode,varied", [("latents", "soft", False), ("latents", "hard", False),
+                                                 ("no-card-clustering", "soft", False), ("multi-sh", "hard", False),
+                                                 ("latents", "soft", True), ("multi-sh", "hard", True)])
+def test_export_decodes_to_the_model_gaussians(variant, mode, varied):
+    """Also with strands of their own point counts: the model hands out their real segments only."""
     asset = example_asset(seed=2, sh_degree=1)
+    asset = with_point_counts(asset, seed=4) if varied else asset
     model = HairModel(asset, _config(variant))
     _perturbed(model)
     tau = 0.5
     exported = model.to_asset(asset, mode, tau)
+    assert np.array_equal(exported.counts, asset.counts) and model.n_gaussians == asset.n_gaussians
     for a in (exported, decode(encode(exported, "lossless")[0])):
         g = decode_gaussians(a)
+        assert g.count == asset.n_gaussians
         with torch.no_grad():
             means, quats, scales, opac, sh = (x.numpy() for x in model(mode, tau))
         assert np.abs(g.means - means).max() <= POINT_TOL
@@ -131,14 +136,19 @@ def test_config_round_trip_and_errors(tmp_path):
 
 
 @pytest.mark.parametrize("variant", ["latents", "no-card-clustering", "multi-sh", "single-sh", "unique"])
-def test_sh_source_of_some_gaussians_is_those_rows_of_all(variant):
+@pytest.mark.parametrize("varied", [False, True])
+def test_sh_source_of_some_gaussians_is_those_rows_of_all(variant, varied):
     """What the native splatter asks for (a few Gaussians, any order) is what the full SH hold there,
-    and gradients reach the same parameters."""
-    model = HairModel(example_asset(seed=1, sh_degree=1), _config(variant))
+    and gradients reach the same parameters; with strands of their own point counts the indices are
+    among the real Gaussians."""
+    asset = example_asset(seed=1, sh_degree=1)
+    asset = with_point_counts(asset, seed=2) if varied else asset
+    model = HairModel(asset, _config(variant))
     _perturbed(model)
     torch.manual_seed(0)
     source = model.sh_source("soft", 0.5)
     every = source(None)
+    assert len(every) == asset.n_gaussians
     index = torch.randperm(len(every))[: len(every) // 3]
     some = source(index)
     assert some.shape == (len(index), *every.shape[1:])

@@ -66,6 +66,36 @@ def test_training_lowers_the_loss_and_writes_a_cgh(tiny, tmp_path):
     assert 0 < moved < 0.05
 
 
+def test_a_variable_count_file_trains_on_its_real_segments(tiny, tmp_path):
+    """Cards built on strands of their own point counts (spec 3): training renders the real Gaussians
+    only (placeholder coordinates get no gradient) and writes a file of the same counts."""
+    from cghair_format import decode_gaussians, write
+    from cghair_format.cards import build_cards
+    from cghair_format.strands import Strands
+
+    root, strands = tiny
+    full = strands.to_array()
+    counts = np.random.default_rng(0).integers(4, full.shape[1] + 1, len(full))
+    counts[0] = full.shape[1]
+    cut = Strands(np.concatenate([x[:n] for x, n in zip(full, counts, strict=True)]),
+                  np.concatenate([[0], np.cumsum(counts)]).astype(np.int64))
+    cfg = _tiny_config(iterations=30, geometry_frozen_iters=10)
+    base = build_cards(cut, n_cards=12, n_groups=3, segments=6, sh_degree=1, progress=False).asset
+    src = tmp_path / "varied.cgh"
+    write(base, src)
+    out = tmp_path / "trained.cgh"
+    result = train(read_dataset(root / "ds"), cards=src, out=out, config=cfg, progress=False, threads=1)
+    model, base = result.model, result.base
+    assert base.variable and model.n_gaussians == base.n_gaussians < base.n_strands * (base.points_per_strand - 1)
+    assert all(np.isfinite(h["loss"]) for h in result.history)
+    placeholders = torch.as_tensor(~base.real_points())
+    assert torch.equal(model.uv.detach()[placeholders], torch.as_tensor(base.uvd[..., :2])[placeholders])
+    assert not torch.equal(model.uv.detach(), torch.as_tensor(base.uvd[..., :2]))  # the real points moved
+    trained = read(out)
+    assert np.array_equal(np.sort(trained.counts), np.sort(counts))
+    assert decode_gaussians(trained).count == base.n_gaussians
+
+
 def test_resume_is_exact(tiny, tmp_path):
     root, _ = tiny
     cfg = _tiny_config(iterations=12, geometry_frozen_iters=4, log_every=4)
