@@ -92,7 +92,7 @@ def encode_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, 
                    double stretch_max, int base_guide, double[:, :, ::1] rec, double[:, :, ::1] world,
                    i64[:, :, ::1] res, const double[:, :, ::1] y, const double[:, :, ::1] dz_points=None,
                    double dz_dist=-1.0, bint neighbour_zone=False, const i64[::1] row_seg=None,
-                   i64[:, ::1] level_ref=None, Py_ssize_t first=0):
+                   i64[:, ::1] level_ref=None, Py_ssize_t first=0, const uint8_t[:, ::1] dz_free=None):
     """The writer's side of spec 4.3 for the strands ``strands_to_code`` (as :func:`._decoder.decode_strands`
     takes them, with the same plan): the residuals ``res [S, len(base) + R, 3]`` of the scaled card
     coordinates ``y [S, n, 3]``, and the reconstruction a decoder will get, scaled (``rec [S, n, 3]``)
@@ -101,6 +101,8 @@ def encode_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, 
     within ``dz_dist`` of ``dz_points``), the nearest of its 26 neighbours where it maps farther, a
     refinement residual zero where the prediction alone will do and, with ``neighbour_zone``, first
     the card neighbour's residual (or the level reference's; its stored difference is then zero).
+    Where ``dz_free [S, n]`` is set (placeholders a decoder drops and no kept sample is predicted from,
+    spec 3) any residual will do: the card neighbour's with ``neighbour_zone``, else zero.
 
     With ``row_seg`` (``level_guide``) each base segment of a strand with a card neighbour has a
     reference strand (:func:`segment_references`), written to ``level_ref [S, len(base) - 1]`` (-1:
@@ -121,6 +123,7 @@ def encode_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, 
     cdef const double* WN
     cdef const double* Y
     cdef const double* Z = NULL
+    cdef const uint8_t* FREE = NULL
     cdef i64* BR
     cdef i64* LR
     cdef i64* NB = NULL
@@ -136,6 +139,7 @@ def encode_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, 
                stretch_max, res, row_seg, strand_card.shape[0], rec.shape[1], rec, world)
     shape = (strand_card.shape[0], rec.shape[1], 3)
     if (tuple(y.shape)[:3] != shape or (dz_points is not None and tuple(dz_points.shape)[:3] != shape)
+            or (dz_free is not None and (dz_free.shape[0] != shape[0] or dz_free.shape[1] != shape[1]))
             or (level_guide and level_ref is not None and (level_ref.shape[0] != shape[0]
                                                            or level_ref.shape[1] != max(nbase - 1, 0)))):
         raise ValueError("encode_strands: mismatched shapes")
@@ -162,6 +166,7 @@ def encode_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, 
                 Z = &dz_points[s, 0, 0]
                 if neighbour_zone and WN != NULL:
                     NB = &res[strands_to_code[t - 1], 0, 0]
+            FREE = &dz_free[s, 0] if dead_zone and dz_free is not None else NULL
             for j in range(nbase):
                 c = base[j]
                 predict_base(t, j, strands_to_code, strand_card, rec, world, False, fr, segments, card, sc, base,
@@ -174,6 +179,9 @@ def encode_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, 
                 if NB != NULL and fits(fr, segments, card, pred, NB + 3 * j, f, sc, Z + 3 * c, dist2):
                     for ch in range(3):  # the neighbour's residual will do: its difference is zero
                         BR[3 * j + ch] = NB[3 * j + ch]
+                if FREE != NULL and FREE[c]:
+                    for ch in range(3):
+                        BR[3 * j + ch] = NB[3 * j + ch] if NB != NULL else 0
                 for ch in range(3):
                     R[3 * c + ch] = pred[ch] + BR[3 * j + ch] * f[ch]
                 to_world(fr, segments, card, R + 3 * c, sc, W + 3 * c)
@@ -202,6 +210,9 @@ def encode_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, 
                         LR[3 * row] = 0
                         LR[3 * row + 1] = 0
                         LR[3 * row + 2] = 0
+                    if FREE != NULL and FREE[i]:
+                        for ch in range(3):
+                            LR[3 * row + ch] = NB[3 * (nbase + row) + ch] if NB != NULL else 0
                     for ch in range(3):
                         R[3 * i + ch] = pred[ch] + LR[3 * row + ch] * f[ch]
                     to_world(fr, segments, card, R + 3 * i, sc, W + 3 * i)

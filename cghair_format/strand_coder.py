@@ -47,11 +47,44 @@ class DeadZone(NamedTuple):
     """Encoding only (spec 4.3, a writer's MAY): a sample takes a cheaper residual where its
     reconstruction still lies within ``distance`` of the input point (``points [S, n, 3]``, world):
     zero for a refinement sample, and with ``neighbour`` first the residual of its card neighbour
-    (the strand coded before it on its card), whose stored difference is then zero."""
+    (the strand coded before it on its card), whose stored difference is then zero. With ``counts``
+    (each strand's own point count, spec 3) a placeholder that no kept sample is predicted from takes
+    any residual (:func:`free_samples`)."""
 
     points: np.ndarray
     distance: float
     neighbour: bool = False
+    counts: np.ndarray | None = None  # [S] int, or None: every strand keeps all its points
+
+    def take(self, strands: np.ndarray) -> DeadZone:
+        """The dead zone of the strands ``strands`` (indices)."""
+        return self._replace(points=self.points[strands],
+                             counts=None if self.counts is None else self.counts[strands])
+
+
+def free_samples(counts: np.ndarray, n: int, plan: Prediction) -> np.ndarray:
+    """``[S, n]`` uint8: the samples of strands of ``counts`` points (placeholders after them, spec 3) that
+    no sample below a strand's count is predicted from, directly or through others, on ``plan``'s
+    coding order: a decoder drops them, so any residual will do. A refinement sample's prediction takes
+    its interpolation neighbours (and, ``level_guide``, the most alike strand found on the base samples
+    of its base segment and the ones either side); a base sample's the three base samples before it
+    (the steps and the most alike strand of ``base_guide`` 2 and 3)."""
+    base, levels = level_plan(n, plan.base_stride, plan.level_taps)
+    taps = plan.level_taps or (4,) * len(levels)
+    out = np.zeros((len(counts), n), np.uint8)
+    for count in np.unique(counts):
+        needed = np.arange(n) < count
+        for (idx, nb, _), t in zip(reversed(levels), reversed(taps), strict=True):  # finest first
+            for row in np.flatnonzero(needed[idx]):
+                needed[nb[row, :t]] = True  # coarser samples (an unused slot names sample 0, needed anyway)
+                if plan.level_guide:
+                    k = np.searchsorted(base, idx[row]) - 1
+                    needed[base[max(k - 1, 0):k + 3]] = True
+        for t in range(len(base) - 1, 0, -1):
+            if needed[base[t]]:
+                needed[base[max(t - 3, 0):t]] = True
+        out[counts == count] = ~needed
+    return out
 
 
 @dataclass(frozen=True)
@@ -182,6 +215,8 @@ def encode_uvd(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.
     zone = {} if dead_zone is None else {
         "dz_points": np.ascontiguousarray(dead_zone.points, np.float64), "dz_dist": float(dead_zone.distance),
         "neighbour_zone": dead_zone.neighbour}
+    if dead_zone is not None and dead_zone.counts is not None:
+        zone["dz_free"] = free_samples(dead_zone.counts, n, plan)
     if ref is not None:
         zone["level_ref"] = ref[:s]
     _run_strands(cmap, strand_card, scale, raw[:s], n, plan, after, rec=rec[:s], world=world[:s],

@@ -189,5 +189,5 @@ def sample_residuals(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scal
     picked = ids[np.linspace(0, len(ids) - 1, min(cards, len(ids))).astype(np.int64)]
     pick = np.flatnonzero(np.isin(strand_card, picked))
     base, levels, *_ = encode_uvd(cmap, strand_card[pick], y[pick], scale[pick], plan,
-                                  dead_zone=zone._replace(points=zone.points[pick]))
+                                  dead_zone=zone.take(pick))
     return with_neighbour_prediction(strand_card[pick], [base] + levels, plan.level_guide)[0]

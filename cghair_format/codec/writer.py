@@ -283,7 +283,8 @@ def _quantize_geometry(asset: HairAsset, prof: Profile, step: float | None, diag
     if q["lossless"]:
         return _Geometry(meta, lossless_cards(asset.cards), None, None, None)
     coded = asset if family is None else asset.take_strands(np.arange(family.guides))
-    zone = DeadZone(points[:coded.n_strands], DEAD_ZONE * prof.position_tolerance * diag)
+    zone = DeadZone(points[:coded.n_strands], DEAD_ZONE * prof.position_tolerance * diag,
+                    counts=coded.counts if coded.variable else None)  # placeholders: any residual (spec 3)
     stride, guide = ((chosen.base_stride, chosen.base_guide) if chosen is not None
                      else choosing.choose_base_samples(coded, q, zone, prof.base_strides))
     q["base_stride"] = stride  # before the cards, whose coding takes it too

@@ -128,3 +128,39 @@ def test_a_2_0_reader_refuses_pcnt_as_an_unknown_required_chunk(varied, monkeypa
     known = set(cgh.codec.KNOWN_CHUNKS) - {"PCNT"}
     with pytest.raises(cgh.errors.UnknownRequiredChunkError, match="PCNT"):
         container.verify(data, known)
+
+
+def test_free_placeholders_are_those_no_kept_sample_is_predicted_from():
+    from cghair_format.strand_coder import Prediction, free_samples
+
+    plan = Prediction(8, (2, 2, 2), 0, (4, 4, 4))
+    free = free_samples(np.array([33, 5, 12, 2]), 33, plan).astype(bool)
+    assert not free[0].any() and not free[:, :2].any()  # a strand of all its points; every kept sample
+    assert not free[1, :5].any() and not free[2, :12].any()
+    # 5 points: sample 3 interpolates 2, 4 and 6 (4 taps: 2 known samples either side), 6 takes 12, 12 takes
+    # the base samples 8, 16 and 24 (and those their base predictions take); no kept sample reads the rest
+    needed = {0, 1, 2, 3, 4, 6, 8, 12, 16, 24}
+    assert set(np.flatnonzero(~free[1])) == needed
+    assert free[3, 17:].all() and free[2, 25:32].all()
+
+
+def test_free_placeholders_take_zero_residuals_and_cost_less():
+    """The writer's dead zone lets free placeholders take zero (or the card neighbour's) residual: the
+    file is smaller than with every placeholder coded to the strand's last point (strands of 24 points:
+    12 leave few placeholders free), and the points keep the bound."""
+    from cghair_format.codec import writer
+
+    varied = with_point_counts(example_asset(0, strands=48, points=24), seed=1)
+
+    with_free, report = cgh.encode(varied, "compact")
+    zone = writer.DeadZone
+    try:
+        writer.DeadZone = lambda points, distance, counts=None: zone(points, distance)
+        without, _ = cgh.encode(varied, "compact")
+    finally:
+        writer.DeadZone = zone
+    assert len(with_free) < len(without)
+    back = cgh.decode(with_free)
+    mine = report.in_file_order(varied)
+    errors = [np.linalg.norm(a - b, axis=-1).max() for a, b in zip(own_points(mine), own_points(back), strict=True)]
+    assert max(errors) <= cgh.PROFILES["compact"].position_tolerance * report.bbox_diagonal
