@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 import cghair_format as cgh
 from cghair_format import _decoder, codec, strand_coder
+from cghair_format.geometry import strand_points
 
 seen = {}
 def keep_float64(*args):  # the guides' card coordinates before their rounding to float32
@@ -41,7 +42,8 @@ for path in sys.argv[2:]:
     seen.clear()
     asset = cgh.read(path)
     name = Path(path).stem
-    out[name + ".uvd"], out[name + ".points"] = asset.uvd, cgh.decode_points(asset)
+    # every point, a variable-count file's placeholders too (spec 3: decoded like the others)
+    out[name + ".uvd"], out[name + ".points"] = asset.uvd, strand_points(asset.cards, asset.strand_card, asset.uvd)
     if "c" in seen:
         out[name + ".coordinates"] = seen["c"]
 np.savez(sys.argv[1], **out)
