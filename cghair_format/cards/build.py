@@ -185,17 +185,16 @@ def _carry_by_arc_length(s_even: np.ndarray, flat: np.ndarray, offsets: np.ndarr
     ``flat[offsets[i]:offsets[i+1]]``, any count) from those ``s_even [S, P]`` of the same strands' ``P``
     evenly spaced points, interpolated at each point's fraction of its strand's arc length."""
     counts = np.diff(offsets)
-    owner = np.repeat(np.arange(len(counts)), counts)
-    seg = np.sqrt((np.diff(flat, axis=0) ** 2).sum(-1))
-    seg[offsets[1:-1] - 1] = 0.0  # no step from one strand's last point to the next one's root
-    arc = np.concatenate([[0.0], np.cumsum(seg)])
-    arc -= arc[offsets[:-1]][owner]
-    length = arc[offsets[1:] - 1][owner]
+    pts = _padded(flat, offsets, int(counts.max()))  # a shorter strand's repeated last point adds no length
+    seg = np.sqrt((np.diff(pts, axis=1) ** 2).sum(-1))
+    arc = np.concatenate([np.zeros((len(pts), 1)), np.cumsum(seg, 1)], 1)
     p = s_even.shape[1]
-    pos = arc / np.maximum(length, 1e-300) * (p - 1)  # in units of the even spacing
+    pos = arc / np.maximum(arc[:, -1:], 1e-300) * (p - 1)  # in units of the even spacing
     lo = np.clip(np.floor(pos).astype(np.int64), 0, p - 2)
     w = pos - lo
-    return s_even[owner, lo] * (1 - w) + s_even[owner, lo + 1] * w
+    rows = np.arange(len(pts))[:, None]
+    carried = s_even[rows, lo] * (1 - w) + s_even[rows, lo + 1] * w
+    return carried[np.arange(pts.shape[1])[None, :] < counts[:, None]]
 
 
 def default_points(strands: Strands) -> int:

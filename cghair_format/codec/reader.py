@@ -63,6 +63,9 @@ def read_info(source: Source) -> dict:
     except CghFormatError as exc:
         raise exc.at(meta_info.offset) if exc.offset is None else exc from None
     counts_info = next((i for i in infos if i.type == COUNTS_CHUNK), None)
+    if counts_info is not None and not meta["strands"] <= counts_info.raw <= 8 * meta["strands"] + 64:
+        raise LimitError(f"PCNT's {counts_info.raw:,} bytes do not hold {meta['strands']:,} point counts",
+                         chunk=COUNTS_CHUNK, offset=counts_info.offset)
     counts = (np.full(meta["strands"], meta["points"]) if counts_info is None else
               read_point_counts(container.payload(data, counts_info), meta["strands"], meta["points"]))
     gaussians = int((counts - 1).sum())

@@ -164,3 +164,13 @@ def test_free_placeholders_take_zero_residuals_and_cost_less():
     mine = report.in_file_order(varied)
     errors = [np.linalg.norm(a - b, axis=-1).max() for a, b in zip(own_points(mine), own_points(back), strict=True)]
     assert max(errors) <= cgh.PROFILES["compact"].position_tolerance * report.bbox_diagonal
+
+
+def test_info_refuses_a_pcnt_of_another_size_before_decompressing_it(varied):
+    data, _ = cgh.encode(varied, "compact")
+    _, infos, payloads = container.unpack(data, set(cgh.codec.KNOWN_CHUNKS))
+    chunks = [container.Chunk(i.type, payloads[i.type] + (bytes(1 << 20) if i.type == "PCNT" else b""), i.required)
+              for i in infos]
+    with pytest.raises(LimitError, match="PCNT") as caught:
+        cgh.read_info(container.pack(chunks))
+    assert caught.value.chunk == "PCNT"
