@@ -56,9 +56,9 @@ def instrument() -> int:
 
 
 def seeds() -> list[bytes]:
-    """Small valid files, every chunk raw: compact, high (hard weights), lossless, and one with every
-    optional chunk and an unknown one."""
-    from cghair_format.examples import example_asset
+    """Small valid files, every chunk raw: compact, high (hard weights), lossless, one with every
+    optional chunk and an unknown one, and one of strands of their own point counts (PCNT)."""
+    from cghair_format.examples import example_asset, with_point_counts
 
     plain = example_asset(11, strands=24, points=12, cards=4, segments=5)
     full = example_asset(5, strands=16, points=9, cards=3, segments=4)
@@ -67,7 +67,8 @@ def seeds() -> list[bytes]:
     full.source_color = np.full((16, 9, 3), 0.5, np.float32)
     full.metadata = {"source": "fuzz seed"}
     out = []
-    for asset, profile in ((plain, "compact"), (plain, "high"), (plain, "lossless"), (full, "compact")):
+    for asset, profile in ((plain, "compact"), (plain, "high"), (plain, "lossless"), (full, "compact"),
+                           (with_point_counts(plain, seed=1), "compact")):
         data = cgh.encode(asset, profile)[0]
         _, infos, payloads = container.unpack(data, set(KNOWN_CHUNKS))
         chunks = [container.Stored(container.Chunk(i.type, payloads[i.type], i.required), container.CODEC_RAW,
