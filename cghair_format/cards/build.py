@@ -293,7 +293,7 @@ def _build(strands: Strands, n_cards: int, n_groups: int, segments: int, points:
     done("uv")
 
     with timed(timings, "textures"):
-        textures = strand_textures(uvd[..., :2], labels, c)
+        textures = strand_textures(uvd[..., :2], labels, c, counts=np.diff(offsets))
         groups = card_groups(textures, n_groups, seed)
         cards.group = groups
         n_t = int(groups.max()) + 1

@@ -33,13 +33,20 @@ def uv_splines(uv: np.ndarray, samples: int) -> np.ndarray:
 
 
 def strand_textures(uv: np.ndarray, strand_card: np.ndarray, n_cards: int,
-                    size: int = TEXTURE_SIZE) -> np.ndarray:
-    """Coverage images ``[C, size, size]`` in [0, 1] of each card's strands (``uv [S, P, 2]``).
+                    size: int = TEXTURE_SIZE, counts: np.ndarray | None = None) -> np.ndarray:
+    """Coverage images ``[C, size, size]`` in [0, 1] of each card's strands (``uv [S, P, 2]``; a strand
+    of ``counts[s] < P`` points is its first ``counts[s]``, the rest placeholders).
 
     A strand crossing a texel row adds ~1 to the row's texels, split bilinearly between neighbours.
     """
-    samples = max(SAMPLES_PER_POINT * uv.shape[1], SAMPLES_PER_ROW * size)
-    curves = np.clip(uv_splines(uv.astype(np.float64), samples), 0.0, 1.0)  # [S, Q, 2]
+    p = uv.shape[1]
+    counts = np.full(len(uv), p) if counts is None else np.asarray(counts)
+    samples = max(SAMPLES_PER_POINT * p, SAMPLES_PER_ROW * size)
+    curves = np.empty((len(uv), samples, 2))  # [S, Q, 2]
+    for n in np.unique(counts):  # strands of one count share a spline fit over their own points
+        rows = counts == n
+        curves[rows] = uv_splines(uv[rows, :n].astype(np.float64), samples)
+    np.clip(curves, 0.0, 1.0, out=curves)
     y = curves[..., 0] * (size - 1)
     x = curves[..., 1] * (size - 1)
     y0 = np.minimum(np.floor(y), size - 2).astype(np.int64)

@@ -29,7 +29,7 @@ def card_atlas(asset: HairAsset, size: int | None = None) -> tuple[np.ndarray, n
 
     size = size or TEXTURE_SIZE
     c, m1 = asset.cards.count, asset.cards.spine.shape[1]
-    coverage = strand_textures(asset.uvd[..., :2], asset.strand_card, c, size)  # [C, size, size]: rows along u
+    coverage = strand_textures(asset.uvd[..., :2], asset.strand_card, c, size, asset.counts)  # rows along u
     real = asset.real_points()[..., None]
     strand_rgb = (srgb_to_linear(strand_colors(asset)) * real).sum(1) / real.sum(1)  # [S, 3], in linear light
     n = np.bincount(asset.strand_card, minlength=c).astype(np.float64)

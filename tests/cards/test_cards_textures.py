@@ -22,6 +22,20 @@ def test_a_straight_strand_covers_one_column():
     assert 0 < tex[5, 15] < 1  # split between neighbours, not aliased into one
 
 
+def test_placeholders_add_no_coverage():
+    """A strand of 20 points padded to 40 with its last point covers what the strand alone covers."""
+    u = np.linspace(0, 0.5, 20)
+    own = np.stack([u, 0.3 + 0.2 * u], -1)
+    padded = np.concatenate([own, np.repeat(own[-1:], 20, 0)])
+    full = np.stack([np.linspace(0, 1, 40), np.full(40, 0.8)], -1)  # another strand, of all 40 points
+    tex = strand_textures(np.stack([padded, full]), np.array([0, 1]), 2, 32, counts=np.array([20, 40]))
+    np.testing.assert_allclose(tex[0], strand_textures(own[None], np.array([0]), 1, 32)[0], atol=1e-6)
+    np.testing.assert_array_equal(tex[1], strand_textures(full[None], np.array([0]), 1, 32)[0])
+    # without the counts, the repeated tip point piles its samples into the tip's texels
+    blind = strand_textures(padded[None], np.array([0]), 1, 32)[0]
+    assert blind[14:18].sum() > tex[0][14:18].sum() + 1
+
+
 def test_groups_follow_texture_content():
     p = 30
     u = np.linspace(0, 1, p)
