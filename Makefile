@@ -5,7 +5,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 TORCH  ?= torch==2.13.0
 
-.PHONY: demo test check bench bench-tables lint clean venv blender splat-transform fuzz
+.PHONY: demo test check bench bench-tables paper-trained lint clean venv blender splat-transform fuzz
 
 venv: $(VENV)/.installed
 
@@ -55,11 +55,30 @@ check: venv
 BENCH_PAGES := README.md docs/format.md docs/viewer.md training/ABLATION.md
 
 bench: venv
-	$(PY) -m pytest -q -s -m bench --benchmark-enable --benchmark-only --benchmark-json=docs/benchmarks.json tests/bench
+	CGH_PAPER_DATA=$(PAPER_DATA) $(PY) -m pytest -q -s -m bench --benchmark-enable --benchmark-only --benchmark-json=docs/benchmarks.json tests/bench
 	$(MAKE) bench-tables
 
 bench-tables:
 	$(PYTHON) tools/bench_tables.py docs/benchmarks.json -o docs/benchmarks.md --fill $(BENCH_PAGES)
+
+# The paper-scale trained file `make bench` measures when present (training/ABLATION.md): harolongo
+# resampled to 100 points and densified to 25,000 strands, its cards, a Cycles dataset (64 views at
+# 256 x 256, 64 samples, denoised) and PAPER_ITERS iterations of the latents variant, then the held-out
+# scores. About 2 hours on 2 cores; everything goes to PAPER_DATA, outside the repository.
+PAPER_DATA  ?= $(HOME)/.cache/cghair/paper
+PAPER_ITERS ?= 3000
+HAIR        ?= ../shared/data/hair
+CGH         := $(VENV)/bin/cgh
+
+paper-trained: venv blender
+	mkdir -p $(PAPER_DATA)
+	$(CGH) convert $(HAIR)/harolongo.data $(PAPER_DATA)/strands.npz --points 100 --method bspline --densify 25000
+	$(CGH) cards $(PAPER_DATA)/strands.npz -o $(PAPER_DATA)/cards.cgh --profile lossless --no-progress
+	$(CGH) render-dataset $(PAPER_DATA)/strands.npz -o $(PAPER_DATA)/cycles --engine cycles --views 64 --res 256 \
+		--samples 64 --denoise
+	$(CGH) train $(PAPER_DATA)/cycles --cards $(PAPER_DATA)/cards.cgh -o $(PAPER_DATA)/latents.cgh \
+		--iters $(PAPER_ITERS) --checkpoint-every 250 --profile compact --no-progress
+	$(CGH) eval $(PAPER_DATA)/latents.cgh $(PAPER_DATA)/cycles
 
 # The .cgh reader's fuzz target (atheris, from the dev extra) for FUZZ_SECONDS; a failing input is saved
 # as fuzz/crash-*, the corpus grows in fuzz/corpus

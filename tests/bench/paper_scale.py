@@ -2,18 +2,24 @@
 points, densified to 25,000 strands, and built into 800 cards and 64 groups by the card builder.
 
 The card builder gives a default appearance (one-hot logits, a linear MLP that is mostly zeros),
-which would flatter the file size. Until trained files at this scale exist, the benchmark swaps in
-a stand-in with the statistics of a trained model: K = 10 latents of D = 64 per group, peaked soft
-logits, a 64 -> 64 -> 99 x 16 x 3 MLP with Gaussian weights, SH degree 3, and opacities that vary
-smoothly along each strand and fade at the tips. Built assets are cached (lossless .cgh) in the
-pytest cache, keyed by the source file and the parameters.
+which would flatter the file size. The benchmark swaps in a stand-in with the statistics of a trained
+model: K = 10 latents of D = 64 per group, peaked soft logits, a 64 -> 64 -> 99 x 16 x 3 MLP with
+Gaussian weights, SH degree 3, and opacities that vary smoothly along each strand and fade at the
+tips. Built assets are cached (lossless .cgh) in the pytest cache, keyed by the source file and the
+parameters.
+
+Beside it, :func:`trained_paper_scale_asset` reads the trained file `make paper-trained` writes
+(harolongo, a Cycles dataset, the latents variant; training/ABLATION.md) from ``CGH_PAPER_DATA``
+(default ``~/.cache/cghair/paper``), outside the repository like every file derived from ../shared.
 """
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
+import pytest
 from hairdata import hair_path
 
 import cghair_format as cgh
@@ -21,6 +27,8 @@ from cghair_format.asset import Appearance, HairAsset, MlpLayer
 from cghair_format.strands import Strands
 
 STRANDS, POINTS, CARDS, GROUPS, K, D, HIDDEN, SH_DEGREE = 25_000, 100, 800, 64, 10, 64, 64, 3
+PAPER_DATA = Path(os.environ.get("CGH_PAPER_DATA", Path.home() / ".cache" / "cghair" / "paper"))
+TRAINED = PAPER_DATA / "latents.cgh"  # the Makefile's paper-trained target writes it
 
 
 def paper_scale_asset(name: str, cache_dir: Path) -> tuple[HairAsset, dict]:
@@ -35,6 +43,16 @@ def paper_scale_asset(name: str, cache_dir: Path) -> tuple[HairAsset, dict]:
     asset = with_trained_like_appearance(build.asset)
     cgh.write(asset, cached, "lossless")
     return asset, dict(build.timings)
+
+
+def trained_paper_scale_asset() -> tuple[HairAsset, str]:
+    """The trained paper-scale asset and how it was trained; skips, saying how to make it, when absent."""
+    if not TRAINED.exists():
+        pytest.skip(f"no trained paper-scale file at {TRAINED}: `make paper-trained` makes it (a Cycles dataset "
+                    "and 3,000 training iterations, about 2 hours on 2 cores; CGH_PAPER_DATA moves it)")
+    asset = cgh.read(TRAINED)
+    iterations = asset.metadata.get("training", {}).get("config", {}).get("iterations", "?")
+    return asset, f"trained, {iterations} iterations ({TRAINED})"
 
 
 def paper_scale_strands(path: Path) -> Strands:

@@ -16,9 +16,10 @@ import cghair_format as cgh
 from cghair_format.exchange import write_3dgs_ply
 from cghair_format.gaussians import strand_weights
 
-from .paper_scale import paper_scale_asset
+from .paper_scale import paper_scale_asset, trained_paper_scale_asset
 
-MODELS = ["straight.hair", "harolongo.data"]
+# (model, appearance): the stand-in appearance on two models, and the trained file where present
+CASES = [("straight.hair", "stand-in"), ("harolongo.data", "stand-in"), ("harolongo.data", "trained")]
 pytestmark = pytest.mark.bench
 
 
@@ -31,9 +32,14 @@ def _timed(fn, repeat=1):
     return out, best
 
 
-@pytest.mark.parametrize("model", MODELS)
-def test_format_table(model, request, tmp_path, benchmark):
-    asset, build_timings = paper_scale_asset(model, request.config.cache.mkdir("cghair_paper_scale"))
+@pytest.mark.parametrize(("model", "appearance"), CASES,
+                         ids=[m if a == "stand-in" else f"{m}-{a}" for m, a in CASES])
+def test_format_table(model, appearance, request, tmp_path, benchmark):
+    if appearance == "trained":
+        (asset, appearance), build_timings = trained_paper_scale_asset(), {}
+    else:
+        asset, build_timings = paper_scale_asset(model, request.config.cache.mkdir("cghair_paper_scale"))
+        appearance = "stand-in with trained-like statistics (tests/bench/paper_scale.py)"
     gaussians = cgh.decode_gaussians(asset)
     ply = tmp_path / "same_gaussians.ply"
     write_3dgs_ply(gaussians, ply)
@@ -63,7 +69,7 @@ def test_format_table(model, request, tmp_path, benchmark):
     lines = [f"\n.cgh at the paper's scale from {model}: {asset.n_strands:,} strands x {asset.points_per_strand} "
              f"points, {asset.n_gaussians:,} Gaussians, {asset.cards.count} cards, {asset.appearance.n_groups} "
              f"groups, K={asset.appearance.k}, D={asset.appearance.latent_dim}, SH degree "
-             f"{asset.appearance.sh_degree} (stand-in appearance: see tests/bench/paper_scale.py)",
+             f"{asset.appearance.sh_degree}; appearance: {appearance}",
              f"3DGS PLY of the same Gaussians (SH 3, INRIA layout): {ply_bytes:,} bytes",
              "profile   bytes        bits/G  encode s  decode s  Gaussians s  max pt err/diag  max opac err"
              "  max weight err  PLY ratio"]
@@ -75,11 +81,13 @@ def test_format_table(model, request, tmp_path, benchmark):
     if build_timings:
         lines.append("card build (s): " + ", ".join(f"{k} {v:.1f}" for k, v in build_timings.items()))
     print("\n".join(lines))
+    kind = appearance.split(" ")[0].rstrip(",")  # "stand-in" or "trained"
     benchmark.extra_info.update({
-        "table": lines, "model": model, "strands": asset.n_strands, "gaussians": asset.n_gaussians,
-        "ply_bytes": ply_bytes,
-        "rows": [{"model": model, "profile": r[0], "bytes": r[1], "bits/Gaussian": round(r[2], 2), "encode s": r[3],
+        "table": lines, "model": model, "appearance": appearance, "strands": asset.n_strands,
+        "gaussians": asset.n_gaussians, "ply_bytes": ply_bytes,
+        "rows": [{"model": model, "appearance": kind, "profile": r[0], "bytes": r[1],
+                  "bits/Gaussian": round(r[2], 2), "encode s": r[3],
                   "decode s": r[4], "to Gaussians s": r[5], "max point err / diag": r[6], "max opacity err": r[7],
                   "max weight err": r[10], "PLY / .cgh": round(r[8])} for r in rows],
-        "chunks": [{"model": model, "profile": r[0], **r[9]} for r in rows],
+        "chunks": [{"model": model, "appearance": kind, "profile": r[0], **r[9]} for r in rows],
         "card_build": [{"model": model, **{f"{k} s": v for k, v in build_timings.items()}}] if build_timings else []})
