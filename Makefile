@@ -64,7 +64,7 @@ bench-tables:
 # The paper-scale trained file `make bench` measures when present (training/ABLATION.md): harolongo
 # resampled to 100 points and densified to 25,000 strands, its cards, a Cycles dataset (64 views at
 # 256 x 256, 64 samples, denoised) and PAPER_ITERS iterations of the latents variant, then the held-out
-# scores. About 2 hours on 2 cores; everything goes to PAPER_DATA, outside the repository.
+# scores. About 85 minutes on 2 cores; everything goes to PAPER_DATA, outside the repository.
 PAPER_DATA  ?= $(HOME)/.cache/cghair/paper
 PAPER_ITERS ?= 3000
 HAIR        ?= ../shared/data/hair

@@ -49,7 +49,7 @@ def trained_paper_scale_asset() -> tuple[HairAsset, str]:
     """The trained paper-scale asset and how it was trained; skips, saying how to make it, when absent."""
     if not TRAINED.exists():
         pytest.skip(f"no trained paper-scale file at {TRAINED}: `make paper-trained` makes it (a Cycles dataset "
-                    "and 3,000 training iterations, about 2 hours on 2 cores; CGH_PAPER_DATA moves it)")
+                    "and 3,000 training iterations, about 85 minutes on 2 cores; CGH_PAPER_DATA moves it)")
     asset = cgh.read(TRAINED)
     iterations = asset.metadata.get("training", {}).get("config", {}).get("iterations", "?")
     return asset, f"trained, {iterations} iterations ({TRAINED})"
