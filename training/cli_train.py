@@ -98,7 +98,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"iteration {final['iteration']}: loss {final['loss']:.4f}, train PSNR {final['psnr']:.2f} dB "
               f"({result.seconds:.1f} s, {result.iterations_run} iterations this run, backend {result.backend})")
     if result.asset is None:
-        print(f"variant {cfg.variant!r} has no .cgh encoding (free SH); wrote {result.out_path.with_suffix('.ckpt.pt')}"
+        why = result.model.export_refusal() or f"variant {cfg.variant!r} has no .cgh encoding"
+        print(f"no .cgh written: {why}; wrote {result.out_path.with_suffix('.ckpt.pt')}"
               f" and {result.out_path.with_suffix('.train.json')}", file=sys.stderr)
         return 0
     print(f"wrote {args.output} ({result.weight_mode} weights; export PSNR hard/soft "

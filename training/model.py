@@ -290,24 +290,31 @@ class HairModel(nn.Module):
     def appearance_bytes(self) -> int:
         return 4 * self.appearance_parameters()  # float32
 
+    def export_refusal(self) -> str | None:
+        """Why this model cannot be written as a .cgh (None: it can)."""
+        if self.variant in ("unique", "single-sh"):
+            per = "Gaussian" if self.variant == "unique" else "strand"
+            return (f"variant {self.variant!r} stores free SH per {per}; the .cgh format stores only codebooks "
+                    "+ MLP, so it cannot be written (use --variant latents, multi-sh or no-card-clustering)")
+        if self.variant == "multi-sh" and self.out_dim > 4096:
+            return (f"multi-sh needs codebook entries of {self.out_dim} values; the format allows 4096 "
+                    "(fewer points per strand or a lower SH degree fit)")
+        return None
+
     def to_asset(self, base: HairAsset, mode: str = "soft", tau: float = 1.0) -> HairAsset:
         """The trained model as a :class:`HairAsset` (cards of ``base``, trained coordinates,
         opacities and appearance). ``mode`` is the stored weight mode, "soft" or "hard"."""
         if mode not in ("soft", "hard"):
             raise ValueError(f"export weight mode must be soft or hard, got {mode!r}")
-        if self.variant in ("unique", "single-sh"):
-            per = "Gaussian" if self.variant == "unique" else "strand"
-            raise ExportError(f"variant {self.variant!r} stores free SH per {per}; the .cgh format stores "
-                              "only codebooks + MLP, so it cannot be written "
-                              "(use --variant latents, multi-sh or no-card-clustering)")
+        refusal = self.export_refusal()
+        if refusal is not None:
+            raise ExportError(refusal)
         cards = base.cards
         if self.variant == "no-card-clustering":
             cards = type(cards)(cards.spine, cards.normal, cards.half_width, np.zeros_like(cards.group))
         logits = self.logits.detach().cpu().numpy().astype(np.float32)
         books = self.codebooks.detach().cpu().numpy().astype(np.float32)
         if self.variant == "multi-sh":
-            if self.out_dim > 4096:
-                raise ExportError(f"multi-sh needs codebook entries of {self.out_dim} values; the format allows 4096")
             layers = [MlpLayer(np.eye(self.out_dim, dtype=np.float32), np.zeros(self.out_dim, np.float32), "none")]
         else:
             layers = [MlpLayer(layer.weight.detach().cpu().numpy().astype(np.float32),

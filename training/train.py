@@ -153,7 +153,7 @@ def choose_export(model: HairModel, base: HairAsset, views: list[View], config: 
 
     from .backends import render_gaussians
 
-    if model.variant in ("unique", "single-sh"):
+    if model.export_refusal() is not None:
         return None, None, {}
     tau = tau_at(config, config.iterations)
     probe = views[:: max(1, len(views) // EXPORT_PROBE_VIEWS)][:EXPORT_PROBE_VIEWS]

@@ -90,6 +90,18 @@ def test_free_sh_variants_cannot_be_written(variant):
     assert sh.shape == (asset.n_gaussians, 4, 3) and means.shape == (asset.n_gaussians, 3)
 
 
+def test_multi_sh_beyond_the_formats_latent_size_trains_but_is_not_written():
+    """The paper's 100 points at SH degree 3 make multi-sh codebook entries of 99 x 48 = 4,752 values,
+    over META's latent_dim limit (4096): the model trains and renders; export says why it cannot."""
+    asset = example_asset(seed=3, strands=4, points=100, sh_degree=3)
+    model = HairModel(asset, _config("multi-sh", sh_degree=3))
+    assert "4752 values; the format allows 4096" in model.export_refusal()
+    with pytest.raises(ExportError, match="4752 values"):
+        model.to_asset(asset)
+    assert model("soft", 1.0)[4].shape == (asset.n_gaussians, 16, 3)
+    assert HairModel(asset, _config("latents", sh_degree=3)).export_refusal() is None
+
+
 def test_appearance_sizes():
     asset = example_asset(seed=4, strands=64, points=16, sh_degree=1)  # 15 segments, 4 SH coeffs
     s, g = asset.n_strands, asset.n_gaussians

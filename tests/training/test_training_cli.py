@@ -53,7 +53,7 @@ def test_unique_variant_writes_no_cgh(tmp_path, strands_file, capsys):
     out = tmp_path / "u.cgh"
     assert main(["train", str(ds), "--strands", str(strands_file), "-o", str(out), "--iters", "3",
                  "--variant", "unique", "--n-cards", "6", "--groups", "2", "--points", "5", "--no-progress"]) == 0
-    assert "has no .cgh encoding" in capsys.readouterr().err
+    assert "no .cgh written: variant 'unique' stores free SH" in capsys.readouterr().err
     assert not out.exists() and out.with_suffix(".train.json").is_file()
 
 
