@@ -191,8 +191,6 @@ class HairAsset:
     @property
     def n_gaussians(self) -> int:
         """One Gaussian per real segment: ``sum(n_s - 1)``."""
-        if self.point_counts is None:
-            return self.n_strands * (self.points_per_strand - 1)
         return int((self.counts - 1).sum())
 
     def real_points(self) -> np.ndarray:

@@ -38,6 +38,8 @@ try:
     from training import _rows
 except ImportError:  # not built: segment_rows computes every row
     _rows = None
+from cghair_format.codec.schema import MAX_LATENT_DIM
+
 from .config import TrainConfig
 
 WEIGHT_MODES = ("gumbel", "soft", "hard")
@@ -120,10 +122,11 @@ class HairModel(nn.Module):
 
         self.geometry = CardGeometry(asset)
         # the real segments among the S (P-1) (None: all): what the renderer gets, strand-major
-        real = torch.as_tensor(np.flatnonzero(asset.real_segments().ravel())) if asset.variable else None
+        mask = asset.real_segments() if asset.variable else None
+        real = None if mask is None else torch.as_tensor(np.flatnonzero(mask.ravel()))
         self.register_buffer("real_gaussians", real, persistent=False)
-        mask = torch.as_tensor(asset.real_segments()) if asset.variable else None
-        self.register_buffer("real_segments", mask, persistent=False)  # [S, P-1] bool, or None
+        self.register_buffer("real_segments", None if mask is None else torch.as_tensor(mask),
+                             persistent=False)  # [S, P-1] bool, or None
         self.uv = nn.Parameter(torch.as_tensor(asset.uvd[..., :2].astype(np.float32)))
         self.delta = nn.Parameter(torch.as_tensor(asset.uvd[..., 2].astype(np.float32)))
         opac = np.clip(asset.opacity.astype(np.float64), *INIT_OPACITY)
@@ -296,8 +299,8 @@ class HairModel(nn.Module):
             per = "Gaussian" if self.variant == "unique" else "strand"
             return (f"variant {self.variant!r} stores free SH per {per}; the .cgh format stores only codebooks "
                     "+ MLP, so it cannot be written (use --variant latents, multi-sh or no-card-clustering)")
-        if self.variant == "multi-sh" and self.out_dim > 4096:
-            return (f"multi-sh needs codebook entries of {self.out_dim} values; the format allows 4096 "
+        if self.variant == "multi-sh" and self.out_dim > MAX_LATENT_DIM:
+            return (f"multi-sh needs codebook entries of {self.out_dim} values; the format allows {MAX_LATENT_DIM} "
                     "(fewer points per strand or a lower SH degree fit)")
         return None
 

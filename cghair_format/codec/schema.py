@@ -20,6 +20,8 @@ from ..errors import AssetError, InvalidContentError, LimitError
 from ..quantize import TAPS, level_plan
 from ..residual_coder import MAX_NEIGHBOUR_CLASSES
 
+MAX_LATENT_DIM = 4096  # META latent_dim's range (2.1); also bounds a multi-sh codebook entry
+
 MAX_META_BYTES = 1 << 20
 POSITIVE = math.ulp(0.0)  # the smallest float above 0: a lower bound of POSITIVE means "> 0"
 TINY = 1e-30
@@ -117,7 +119,7 @@ FIELDS = (
     _count("segments", 1, 1024),
     _count("groups", 1, 1 << 16),
     _count("k", 1, 256),
-    _count("latent_dim", 1, 4096),
+    _count("latent_dim", 1, MAX_LATENT_DIM),
     Field("sh_degree", INTEGER, 0, 3),
     Field("weight_mode", STRING, one_of=WEIGHT_MODES),
     Field("temperature", NUMBER, TINY),

@@ -36,10 +36,10 @@ def _timed(fn, repeat=1):
                          ids=[m if a == "stand-in" else f"{m}-{a}" for m, a in CASES])
 def test_format_table(model, appearance, request, tmp_path, benchmark):
     if appearance == "trained":
-        (asset, appearance), build_timings = trained_paper_scale_asset(), {}
+        (asset, described), build_timings = trained_paper_scale_asset(), {}
     else:
         asset, build_timings = paper_scale_asset(model, request.config.cache.mkdir("cghair_paper_scale"))
-        appearance = "stand-in with trained-like statistics (tests/bench/paper_scale.py)"
+        described = "stand-in with trained-like statistics (tests/bench/paper_scale.py)"
     gaussians = cgh.decode_gaussians(asset)
     ply = tmp_path / "same_gaussians.ply"
     write_3dgs_ply(gaussians, ply)
@@ -69,7 +69,7 @@ def test_format_table(model, appearance, request, tmp_path, benchmark):
     lines = [f"\n.cgh at the paper's scale from {model}: {asset.n_strands:,} strands x {asset.points_per_strand} "
              f"points, {asset.n_gaussians:,} Gaussians, {asset.cards.count} cards, {asset.appearance.n_groups} "
              f"groups, K={asset.appearance.k}, D={asset.appearance.latent_dim}, SH degree "
-             f"{asset.appearance.sh_degree}; appearance: {appearance}",
+             f"{asset.appearance.sh_degree}; appearance: {described}",
              f"3DGS PLY of the same Gaussians (SH 3, INRIA layout): {ply_bytes:,} bytes",
              "profile   bytes        bits/G  encode s  decode s  Gaussians s  max pt err/diag  max opac err"
              "  max weight err  PLY ratio"]
@@ -81,13 +81,12 @@ def test_format_table(model, appearance, request, tmp_path, benchmark):
     if build_timings:
         lines.append("card build (s): " + ", ".join(f"{k} {v:.1f}" for k, v in build_timings.items()))
     print("\n".join(lines))
-    kind = appearance.split(" ")[0].rstrip(",")  # "stand-in" or "trained"
     benchmark.extra_info.update({
-        "table": lines, "model": model, "appearance": appearance, "strands": asset.n_strands,
+        "table": lines, "model": model, "appearance": described, "strands": asset.n_strands,
         "gaussians": asset.n_gaussians, "ply_bytes": ply_bytes,
-        "rows": [{"model": model, "appearance": kind, "profile": r[0], "bytes": r[1],
+        "rows": [{"model": model, "appearance": appearance, "profile": r[0], "bytes": r[1],
                   "bits/Gaussian": round(r[2], 2), "encode s": r[3],
                   "decode s": r[4], "to Gaussians s": r[5], "max point err / diag": r[6], "max opacity err": r[7],
                   "max weight err": r[10], "PLY / .cgh": round(r[8])} for r in rows],
-        "chunks": [{"model": model, "appearance": kind, "profile": r[0], **r[9]} for r in rows],
+        "chunks": [{"model": model, "appearance": appearance, "profile": r[0], **r[9]} for r in rows],
         "card_build": [{"model": model, **{f"{k} s": v for k, v in build_timings.items()}}] if build_timings else []})
