@@ -28,6 +28,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--iters", type=int_at_least(1), default=None,
                    help="iterations (default: 30000, the paper's; a shorter run keeps the paper's proportion of "
                         "frozen geometry, 7k of 30k)")
+    p.add_argument("--geometry-frozen-iters", type=int_at_least(0), metavar="ITERS", default=None,
+                   help="iterations before the strand points start to move (default: 7/30 of --iters, the paper's "
+                        "proportion); as many as --iters keeps the given strands as they are, and the file small "
+                        "(training/ABLATION.md, 'The trained file')")
     p.add_argument("--variant", choices=VARIANTS, default=None,
                    help="appearance model (default: latents, the paper's); others are the ablation's")
     p.add_argument("--config", help="a JSON config (as saved in <out>.train.json's 'config'); flags override it")
@@ -77,6 +81,8 @@ def _config(args: argparse.Namespace):
     if args.iters is not None and not args.config and cfg.geometry_frozen_iters >= args.iters:
         # a short run keeps the paper's proportion (7k of 30k iterations) of frozen geometry
         cfg.geometry_frozen_iters = round(FROZEN_FRACTION * args.iters)
+    if args.geometry_frozen_iters is not None:
+        cfg.geometry_frozen_iters = args.geometry_frozen_iters
     return cfg.validate()
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import sys
 
+import numpy as np
 import pytest
 
 from cghair_format.cli import main
@@ -44,6 +45,35 @@ def test_render_train_eval(tmp_path, strands_file, capsys):
     assert "PSNR" in text and "LPIPS" in text
     assert (tmp_path / "ev" / "metrics.json").is_file()
     assert len(list((tmp_path / "ev").glob("*_gt_render_diff.png"))) == 1
+
+
+def test_geometry_frozen_iters_flag(tmp_path, strands_file):
+    import argparse
+
+    from training.cli_train import _config, add_arguments
+
+    p = argparse.ArgumentParser()
+    add_arguments(p)
+    assert _config(p.parse_args(["DS", "-o", "x.cgh", "--iters", "300"])).geometry_frozen_iters == 70
+    assert _config(p.parse_args(["DS", "-o", "x.cgh", "--iters", "300",
+                                 "--geometry-frozen-iters", "300"])).geometry_frozen_iters == 300
+    # frozen for the whole run, the strands come out exactly as they went in
+    ds = tmp_path / "ds"
+    assert main(["render-dataset", str(strands_file), "-o", str(ds), "--views", "4", "--res", "16",
+                 "--no-progress"]) == 0
+    common = ["--iters", "4", "--n-cards", "6", "--groups", "2", "--points", "5", "--no-progress", "--threads", "1",
+              "--profile", "lossless"]
+    moved, kept = tmp_path / "moved.cgh", tmp_path / "kept.cgh"
+    assert main(["train", str(ds), "--strands", str(strands_file), "-o", str(moved), *common,
+                 "--geometry-frozen-iters", "0"]) == 0
+    assert main(["train", str(ds), "--cards", str(moved), "-o", str(kept), *common,
+                 "--geometry-frozen-iters", "4"]) == 0
+    from cghair_format import read
+
+    assert np.array_equal(read(kept).uvd, read(moved).uvd)
+    assert main(["train", str(ds), "--cards", str(kept), "-o", str(moved), *common,
+                 "--geometry-frozen-iters", "0"]) == 0
+    assert not np.array_equal(read(kept).uvd, read(moved).uvd)
 
 
 def test_unique_variant_writes_no_cgh(tmp_path, strands_file, capsys):
