@@ -114,14 +114,15 @@ def _lr_factor(config: TrainConfig, iteration: int) -> float:
 
 
 def save_checkpoint(path: Path, *, model: HairModel, optimizer: torch.optim.Optimizer, config: TrainConfig,
-                    base: HairAsset, iteration: int, history: list[dict], dataset: str) -> None:
+                    base: HairAsset, iteration: int, history: list[dict], dataset: str, seconds: float) -> None:
+    """``seconds``: training time of every run up to ``iteration``, so that a resumed run reports the total."""
     from cghair_format import encode
 
     state = {
         "version": CHECKPOINT_VERSION, "iteration": iteration, "config": config.to_dict(),
         "model": model.state_dict(), "optimizer": optimizer.state_dict(),
         "base_cgh": encode(base, "lossless")[0], "history": history, "dataset": dataset,
-        "rng": torch.get_rng_state(),
+        "rng": torch.get_rng_state(), "seconds": seconds,
     }
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:
@@ -244,12 +245,13 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
     optimizer = torch.optim.Adam(model.param_groups(config, _scene_scale(base)), eps=1e-15, fused=True)
     base_lr = {g["name"]: g["lr"] for g in optimizer.param_groups}
     history: list[dict] = []
-    start = 0
+    start, seconds_before = 0, 0.0
     if state is not None:
         model.load_state_dict(state["model"])
         optimizer.load_state_dict(state["optimizer"])  # moves the moments to the parameters' device
         history = list(state["history"])
         start = int(state["iteration"])
+        seconds_before = float(state.get("seconds", 0.0))  # (checkpoints before it was kept: unknown, 0)
         torch.set_rng_state(state["rng"])
     out_path = Path(out) if out is not None else None
     ckpt_path = Path(checkpoint) if checkpoint else (out_path.with_suffix(".ckpt.pt") if out_path else None)
@@ -324,14 +326,15 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
                 bar.update(1)
             if ckpt_path is not None and (it + 1) % config.checkpoint_every == 0:
                 save_checkpoint(ckpt_path, model=model, optimizer=optimizer, config=config, base=base,
-                                iteration=it + 1, history=history, dataset=dataset_name)
+                                iteration=it + 1, history=history, dataset=dataset_name,
+                                seconds=seconds_before + time.perf_counter() - t_start)
     if bar is not None:
         bar.close()
     seconds = time.perf_counter() - t_start
     iterations_run = end - start
     if ckpt_path is not None:
         save_checkpoint(ckpt_path, model=model, optimizer=optimizer, config=config, base=base,
-                        iteration=end, history=history, dataset=dataset_name)
+                        iteration=end, history=history, dataset=dataset_name, seconds=seconds_before + seconds)
 
     result = TrainResult(model, base, config, history=history, seconds=seconds, stage_seconds=stage,
                          iterations_run=iterations_run, out_path=out_path, backend=backend)
@@ -341,7 +344,8 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
     result.asset, result.weight_mode, result.export_psnr = asset, mode, scores
     summary = {
         "config": config.to_dict(), "dataset": dataset_name, "backend": backend, "iterations_run": iterations_run,
-        "seconds": round(seconds, 3), "stage_seconds": {k: round(v, 3) for k, v in stage.items()},
+        "seconds": round(seconds, 3), "seconds_total": round(seconds_before + seconds, 3),
+        "stage_seconds": {k: round(v, 3) for k, v in stage.items()},
         "final": history[-1] if history else None, "weight_mode": mode, "export_psnr": scores,
         "appearance_parameters": model.appearance_parameters(), "gaussians": model.n_gaussians,
     }

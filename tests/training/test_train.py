@@ -103,8 +103,13 @@ def test_resume_is_exact(tiny, tmp_path):
     full = train(ds, strands=tiny[1], config=cfg, checkpoint=tmp_path / "a.pt", progress=False)
     half = train(ds, strands=tiny[1], config=cfg, checkpoint=tmp_path / "b.pt", progress=False, stop_at=6)
     assert half.asset is None and load_checkpoint(tmp_path / "b.pt")["iteration"] == 6
+    assert load_checkpoint(tmp_path / "b.pt")["seconds"] == pytest.approx(half.seconds, abs=0.05)
     resumed = train(ds, resume=tmp_path / "b.pt", checkpoint=tmp_path / "b.pt", progress=False)
     assert resumed.iterations_run == 6
+    # the run's own time, and the whole training's (both runs) where the summary keeps it
+    summary = resumed.asset.metadata["training"]
+    assert summary["seconds"] == round(resumed.seconds, 3)
+    assert summary["seconds_total"] == pytest.approx(half.seconds + resumed.seconds, abs=0.05)
     for (name, a), (_, b) in zip(full.model.named_parameters(), resumed.model.named_parameters(), strict=True):
         assert torch.allclose(a, b, atol=1e-6), name
     assert [h["iteration"] for h in resumed.history] == [4, 8, 12]
