@@ -334,20 +334,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--strands", required=True, help="a real hair model, e.g. ../shared/data/hair/Ratboy_mohawk.tfx")
     p.add_argument("--work", default="ablation_out", help="output folder (dataset, .cgh files, ablation.json); "
                    "a rerun with the same folder and settings skips the rows already there")
-    p.add_argument("--iters", type=int_at_least(1), default=1000)
-    p.add_argument("--views", type=int_at_least(2), default=32)
-    p.add_argument("--res", type=int_at_least(8), default=128)
-    p.add_argument("--engine", choices=("cycles", "splat"), default="cycles")
+    p.add_argument("--iters", type=int_at_least(1), default=1000,
+                   help="iterations per row (default: 1000; the schedules keep the paper's proportions)")
+    p.add_argument("--views", type=int_at_least(2), default=32, help="views to render (default: 32)")
+    p.add_argument("--res", type=int_at_least(8), default=128, help="view size in pixels (default: 128)")
+    p.add_argument("--engine", choices=("cycles", "splat"), default="cycles",
+                   help="ground truth renderer (default: cycles, needs bpy)")
     p.add_argument("--dataset", default=None, help="use this rendered dataset instead of rendering one")
-    p.add_argument("--samples", type=int_at_least(1), default=32)
-    p.add_argument("--variants", default=",".join(VARIANTS))
+    p.add_argument("--samples", type=int_at_least(1), default=32, help="Cycles samples (default: 32)")
+    p.add_argument("--variants", default=",".join(VARIANTS), help=f"comma-separated (default: {','.join(VARIANTS)})")
     p.add_argument("--sweep", action="append", default=[], metavar="KEY=V1,V2,...",
                    help="instead of the variants, train latents at each value of K (codebook size), D (latent size) "
                    "or N_T (card groups, at most --n-cards); repeat for several sweeps; the paper's: K=10,30,60,90, "
                    "D=32,64,128,256, N_T=16,32,64,96,400 (400 with --n-cards 400: one group per card)")
-    p.add_argument("--n-cards", type=int_at_least(1), default=800)
-    p.add_argument("--points", type=int_at_least(4), default=32)
-    p.add_argument("--threads", type=int_at_least(1), default=None)
+    p.add_argument("--n-cards", type=int_at_least(1), default=800, help="cards to build (default: 800)")
+    p.add_argument("--points", type=int_at_least(4), default=32, help="points per strand (default: 32)")
+    p.add_argument("--threads", type=int_at_least(1), default=None,
+                   help="torch CPU threads (default: torch's choice; 1 is faster on a busy machine)")
     p.add_argument("--device", default="cpu", help="torch device, e.g. cpu or cuda (default: cpu)")
     add_backend_argument(p)
 
