@@ -126,7 +126,10 @@ class RowFile:
         self.path, self.settings, self.key = path, settings, key
         self.rows: list[dict] = []
         if path.is_file():
-            data = json.loads(path.read_text())
+            try:
+                data = json.loads(path.read_text())
+            except json.JSONDecodeError as exc:
+                raise ConfigError(f"{path} is not valid JSON ({exc}); give another --work or remove it") from None
             old = {k: data.get(k) for k in settings}
             if old != settings:
                 diff = ", ".join(f"{k} {old[k]!r} there, {v!r} now" for k, v in settings.items() if old[k] != v)
@@ -147,8 +150,10 @@ class RowFile:
         write_text(self.path, json.dumps({**self.settings, **extra, "rows": self.rows}, indent=2) + "\n")
 
 
-def _dataset(setup: Setup):
-    """Render the dataset once (kept in the work folder) or read the one given; resolves the backend."""
+def _start(setup: Setup, name: str, key: str, **settings):
+    """Check what can fail early (LPIPS weights, the backend, rows of other settings in ``<work>/<name>``),
+    then render the dataset once (kept in the work folder) or read the one given: the row record,
+    the strands and the dataset."""
     import torch
 
     from cghair_format.exchange import load_strands
@@ -161,6 +166,7 @@ def _dataset(setup: Setup):
         torch.set_num_threads(setup.threads)
     Lpips("alex")  # missing LPIPS weights fail now, not after the first row's training
     setup.backend = resolve_backend(setup.backend, setup.device)
+    record = RowFile(setup.work / name, {**settings, **setup.settings()}, key, setup.log)
     setup.work.mkdir(parents=True, exist_ok=True)
     ds_dir = setup.dataset if setup.dataset is not None else setup.work / f"dataset_{setup.engine}"
     strands = load_strands(setup.strands_path)
@@ -169,7 +175,7 @@ def _dataset(setup: Setup):
         render_dataset(strands, ds_dir, views=setup.views, res=setup.res, engine=setup.engine, samples=setup.samples,
                        progress=True, device=setup.device, backend=setup.backend)
         print(f"rendered {setup.views} views with {setup.engine} in {time.perf_counter() - t:.1f} s", file=setup.log)
-    return strands, read_dataset(ds_dir)
+    return record, strands, read_dataset(ds_dir)
 
 
 def _trained_model(ckpt: Path, cfg: TrainConfig, ds, device: str):
@@ -243,8 +249,7 @@ def run_ablation(strands_path: str, work: Path, iters: int, views: int, res: int
     log = log if log is not None else sys.stderr
     setup = Setup(strands_path, work, iters, views, res, engine, samples, threads, n_cards, points, dataset, log,
                   device, backend)
-    strands, ds = _dataset(setup)
-    record = RowFile(work / "ablation.json", setup.settings(), "variant", log)
+    record, strands, ds = _start(setup, "ablation.json", "variant")
     base = base_asset(scaled_config("latents", iters, n_cards=n_cards, points_per_strand=points), strands,
                       progress=False)
     sizes = {"gaussians": base.n_gaussians, "strands_count": base.n_strands}
@@ -276,8 +281,7 @@ def run_sweep(strands_path: str, work: Path, key: str, values: list[int], iters:
     log = log if log is not None else sys.stderr
     setup = Setup(strands_path, work, iters, views, res, engine, samples, threads, n_cards, points, dataset, log,
                   device, backend)
-    strands, ds = _dataset(setup)
-    record = RowFile(work / f"sweep_{key}.json", {"param": key, **setup.settings()}, "value", log)
+    record, strands, ds = _start(setup, f"sweep_{key}.json", "value", param=key)
     bases: dict[int, object] = {}  # card groups -> cards: only N_T rebuilds them
     for value in values:
         if record.done(value):

@@ -102,6 +102,16 @@ def test_rerun_resumes_after_the_last_finished_row(tmp_path, strands_file, monke
     assert "holds rows of another run (iterations 4 there, 5 now)" in capsys.readouterr().err
 
 
+def test_a_damaged_row_file_is_refused_before_the_dataset(tmp_path, strands_file, capsys):
+    work = tmp_path / "w"
+    work.mkdir()
+    (work / "ablation.json").write_text('{"rows": [')
+    assert ablation.main(["--strands", str(strands_file), "--work", str(work), *TINY]) == 2
+    err = capsys.readouterr().err
+    assert "ablation.json is not valid JSON" in err and err.count("\n") == 1
+    assert not (work / "dataset_splat").exists()
+
+
 def test_export_failure_keeps_the_row(tmp_path, strands_file, monkeypatch, capsys):
     def choose_export(*args, **kwargs):
         raise OSError("No space left on device")
