@@ -167,9 +167,9 @@ def _start(setup: Setup, name: str, key: str, **settings):
     Lpips("alex")  # missing LPIPS weights fail now, not after the first row's training
     setup.backend = resolve_backend(setup.backend, setup.device)
     record = RowFile(setup.work / name, {**settings, **setup.settings()}, key, setup.log)
+    strands = load_strands(setup.strands_path)
     setup.work.mkdir(parents=True, exist_ok=True)
     ds_dir = setup.dataset if setup.dataset is not None else setup.work / f"dataset_{setup.engine}"
-    strands = load_strands(setup.strands_path)
     if not (ds_dir / "transforms_test.json").is_file():
         t = time.perf_counter()
         render_dataset(strands, ds_dir, views=setup.views, res=setup.res, engine=setup.engine, samples=setup.samples,

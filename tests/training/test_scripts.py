@@ -145,6 +145,13 @@ def test_bad_sweeps_are_refused_in_one_line(tmp_path, strands_file, capsys, swee
     assert not work.exists()  # refused before the dataset
 
 
+def test_missing_strands_are_refused_before_the_work_folder(tmp_path, capsys):
+    assert cgh_main(["ablation", "--strands", str(tmp_path / "none.tfx"), "--work", str(tmp_path / "w"), *TINY]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("cgh ablation: error: No such file") and err.count("\n") == 1
+    assert not (tmp_path / "w").exists()
+
+
 def test_cgh_ablation_runs_the_sweep(tmp_path, strands_file, capsys):
     assert cgh_main(["ablation", "--strands", str(strands_file), "--work", str(tmp_path / "w"), *TINY,
                      "--sweep", "d=4"]) == 0
