@@ -242,7 +242,8 @@ def run_ablation(strands_path: str, work: Path, iters: int, views: int, res: int
                  dataset: Path | None = None, log: TextIO | None = None, device: str = "cpu",
                  backend: str | None = None) -> list[dict]:
     """Train each of ``variants`` from the same cards; rows go to ``<work>/ablation.json`` as they finish
-    (a rerun with the same settings skips those there) and the plot to ``<work>/ablation.png``."""
+    (a rerun with the same settings skips those there) and the plot to ``<work>/ablation.png``. Returns,
+    plots and prints every row of the folder, earlier calls' included."""
     from .plot import plot_ablation
     from .train import base_asset
 
@@ -257,7 +258,7 @@ def run_ablation(strands_path: str, work: Path, iters: int, views: int, res: int
         if not record.done(variant):
             cfg = scaled_config(variant, iters, n_cards=n_cards, points_per_strand=points)
             record.add({"variant": variant, **train_row(ds, base, cfg, variant, setup)}, **sizes)
-    rows = [r for r in record.rows if r["variant"] in variants]
+    rows = record.rows  # with those of earlier calls on the same folder (other --variants)
     unique = next((r for r in record.rows if r["variant"] == "unique"), None)
     for r in record.rows:
         r["ratio_vs_unique"] = unique["appearance_bytes"] / r["appearance_bytes"] if unique else None
@@ -273,7 +274,8 @@ def run_sweep(strands_path: str, work: Path, key: str, values: list[int], iters:
               backend: str | None = None) -> list[dict]:
     """Train the latents variant at each of ``values`` of ``key`` (K, D or N_T), the rest at the paper's
     configuration, from the same cards (N_T regroups them) and dataset; rows go to
-    ``<work>/sweep_<key>.json`` as they finish (a rerun skips those there), the plot to ``sweep_<key>.png``."""
+    ``<work>/sweep_<key>.json`` as they finish (a rerun skips those there), the plot to ``sweep_<key>.png``.
+    Returns and plots every row of the folder's sweep of ``key``, earlier calls' included."""
     from .plot import plot_sweep
     from .train import base_asset
 
@@ -294,7 +296,7 @@ def run_sweep(strands_path: str, work: Path, key: str, values: list[int], iters:
         if key == "N_T" and row["groups"] != value:
             print(f"N_T={value}: the cards hold {row['groups']} groups (capped at the strand count)", file=log)
         record.add(row)
-    rows = sorted((r for r in record.rows if r["value"] in values), key=lambda r: r["value"])
+    rows = sorted(record.rows, key=lambda r: r["value"])  # with those of earlier calls on the same folder
     plot_sweep(key, rows, PAPER_SWEEPS[key], work / f"sweep_{key}.png",
                f"{key} sweep (latents), {iters} iterations, {engine}")
     return rows

@@ -95,8 +95,11 @@ def test_rerun_resumes_after_the_last_finished_row(tmp_path, strands_file, monke
     calls.clear()
     sweep = [*argv[:-2], "--sweep", "K=2,3"]
     assert ablation.main([*argv[:-2], "--sweep", "K=3"]) == 0 and calls == ["latents K=3"]
-    assert ablation.main(sweep) == 0 and calls == ["latents K=3", "latents K=2"]
-    assert "rows already there, not trained again: value 3" in capsys.readouterr().err
+    capsys.readouterr()
+    assert ablation.main([*argv[:-2], "--sweep", "K=2"]) == 0 and calls == ["latents K=3", "latents K=2"]
+    captured = capsys.readouterr()
+    assert "rows already there, not trained again: value 3" in captured.err
+    assert "| 3 |" in captured.out and "| 2 |" in captured.out  # the folder's rows, earlier calls' included
     # other settings in the same folder: refused, not mixed
     assert ablation.main([*sweep[:sweep.index("--iters") + 1], "5", *sweep[sweep.index("--iters") + 2:]]) == 2
     assert "holds rows of another run (iterations 4 there, 5 now)" in capsys.readouterr().err
