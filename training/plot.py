@@ -1,5 +1,5 @@
-"""The ablation plot: held-out PSNR against appearance size (log scale), our variants next to the
-paper's, drawn with Pillow (already a training dependency): one scatter plot needs no plotting library."""
+"""The ablation and sweep plots: held-out PSNR against appearance size (log scale), our points next to
+the paper's, drawn with Pillow (already a training dependency): one scatter plot needs no plotting library."""
 
 from __future__ import annotations
 
@@ -8,6 +8,8 @@ from pathlib import Path
 
 COLOURS = {"unique": (31, 119, 180), "no-card-clustering": (148, 103, 189), "single-sh": (44, 160, 44),
            "multi-sh": (255, 127, 14), "latents": (214, 39, 40)}
+# a sweep's values, in order (colour-blind-safe Okabe-Ito colours)
+PALETTE = ((0, 114, 178), (230, 159, 0), (0, 158, 115), (204, 121, 167), (213, 94, 0), (86, 180, 233))
 SIZE = (900, 600)
 MARGIN = (90, 30, 200, 70)  # left, top, right (legend), bottom
 MARK = 7  # marker radius in pixels
@@ -30,10 +32,28 @@ def _nice_step(span: float) -> float:
 def plot_ablation(rows: list[dict], paper: dict[str, tuple[float, float]], path: str | Path, title: str = "") -> Path:
     """Write a PNG of PSNR against appearance bytes for ``rows`` (ablation rows with ``variant``,
     ``psnr`` and ``appearance_bytes``) as dots, and ``paper`` (variant -> (PSNR, MB)) as hollow squares."""
+    return plot_psnr_size([(r["variant"], r["appearance_bytes"], r["psnr"]) for r in rows],
+                          [(v, mb * 1e6, psnr) for v, (psnr, mb) in paper.items()], COLOURS, path, title)
+
+
+def plot_sweep(key: str, rows: list[dict], paper: dict[int, tuple[float, float]], path: str | Path,
+               title: str = "") -> Path:
+    """The same plot for a sweep of ``key`` (K, D or N_T): ``rows`` with ``value``, ``psnr`` and
+    ``appearance_bytes``, ``paper`` value -> (PSNR, MB); one colour per value, ours and the paper's alike."""
+    values = sorted({r["value"] for r in rows} | set(paper))
+    colours = {f"{key} = {v}": PALETTE[i % len(PALETTE)] for i, v in enumerate(values)}
+    return plot_psnr_size([(f"{key} = {r['value']}", r["appearance_bytes"], r["psnr"]) for r in rows],
+                          [(f"{key} = {v}", mb * 1e6, psnr) for v, (psnr, mb) in paper.items()], colours, path, title)
+
+
+def plot_psnr_size(ours: list[tuple[str, float, float]], paper: list[tuple[str, float, float]],
+                   colours: dict[str, tuple[int, int, int]], path: str | Path, title: str = "") -> Path:
+    """Write a PNG of held-out PSNR against appearance size (log scale): ``ours`` as dots and ``paper``
+    as hollow squares, each point ``(label, bytes, PSNR)`` coloured by ``colours[label]`` (the legend)."""
     from PIL import Image, ImageDraw, ImageFont
 
-    ours = [(r["variant"], math.log10(r["appearance_bytes"]), r["psnr"]) for r in rows]
-    paper = [(v, math.log10(mb * 1e6), psnr) for v, (psnr, mb) in paper.items()]
+    ours = [(label, math.log10(size), psnr) for label, size, psnr in ours]
+    paper = [(label, math.log10(size), psnr) for label, size, psnr in paper]
     xs = [p[1] for p in ours + paper]
     ys = [p[2] for p in ours + paper]
     x0, x1 = math.floor(min(xs) - 0.1), math.ceil(max(xs) + 0.1)  # whole decades, no point on an edge
@@ -68,17 +88,17 @@ def plot_ablation(rows: list[dict], paper: dict[str, tuple[float, float]], path:
     if title:
         draw.text(((left + right) / 2, top / 2), title, fill="black", font=font, anchor="mm")
 
-    for variant, x, y in paper:
+    for label, x, y in paper:
         cx, cy = px(x, y)
-        draw.rectangle([cx - MARK, cy - MARK, cx + MARK, cy + MARK], outline=COLOURS[variant], width=2)
-    for variant, x, y in ours:
+        draw.rectangle([cx - MARK, cy - MARK, cx + MARK, cy + MARK], outline=colours.get(label, (0, 0, 0)), width=2)
+    for label, x, y in ours:
         cx, cy = px(x, y)
-        draw.ellipse([cx - MARK, cy - MARK, cx + MARK, cy + MARK], fill=COLOURS.get(variant, (0, 0, 0)))
+        draw.ellipse([cx - MARK, cy - MARK, cx + MARK, cy + MARK], fill=colours.get(label, (0, 0, 0)))
 
-    lx, ly = right + 20, top + 10  # legend: one colour per variant, the two marker shapes
-    for variant, colour in COLOURS.items():
+    lx, ly = right + 20, top + 10  # legend: one colour per label, the two marker shapes
+    for label, colour in colours.items():
         draw.ellipse([lx, ly - 5, lx + 10, ly + 5], fill=colour)
-        draw.text((lx + 18, ly), variant, fill="black", font=small, anchor="lm")
+        draw.text((lx + 18, ly), label, fill="black", font=small, anchor="lm")
         ly += 22
     ly += 10
     draw.ellipse([lx, ly - 5, lx + 10, ly + 5], fill="black")

@@ -29,6 +29,7 @@ VERBS: dict[str, tuple[str, str]] = {
     "render-dataset": ("training.cli_dataset", "render a multi-view dataset of strands"),
     "train": ("training.cli_train", "fit the compact appearance model to a multi-view dataset"),
     "eval": ("training.cli_eval", "PSNR, SSIM and LPIPS of a .cgh on a dataset's held-out views"),
+    "ablation": ("training.ablation", "train the paper's appearance variants or codebook sweeps side by side"),
     "reconstruct": ("training.cli_reconstruct", "reconstruct strands from a multi-view dataset with hair masks"),
     "fit-strand-prior": ("training.cli_fit_prior", "fit a PCA basis of strand shapes for cgh reconstruct --prior"),
     "eval-strands": ("training.cli_eval_strands", "position, curvature, F1 of strands vs ground truth"),
@@ -40,8 +41,8 @@ VERBS: dict[str, tuple[str, str]] = {
 FOLDER_OUTPUTS = {"demo", "render-dataset"}
 # verbs that make their --output file's missing folders
 PARENTS_MADE = {"train"}
-# other options that name a folder a verb writes into (cgh eval --out, cgh cards --debug-dir)
-FOLDER_OPTIONS = ("out", "debug_dir")
+# other options that name a folder a verb writes into (cgh eval --out, cgh cards --debug-dir, cgh ablation --work)
+FOLDER_OPTIONS = ("out", "debug_dir", "work")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,12 +1,12 @@
-"""The ablation plot: our variants as dots placed by size (log x) and PSNR, the paper's as squares."""
+"""The ablation and sweep plots: our points as dots placed by size (log x) and PSNR, the paper's as squares."""
 
 from __future__ import annotations
 
 import numpy as np
 from PIL import Image
 
-from training.ablation import PAPER_ABLATION
-from training.plot import COLOURS, MARGIN, SIZE, plot_ablation
+from training.ablation import PAPER_ABLATION, PAPER_SWEEPS
+from training.plot import COLOURS, MARGIN, PALETTE, SIZE, plot_ablation, plot_sweep
 
 
 def _dot_centre(img: np.ndarray, colour) -> np.ndarray:
@@ -39,3 +39,14 @@ def test_dots_follow_size_and_psnr(tmp_path):
     # 4e3 .. 1.637e8 bytes (the paper's unique) span the decades 10^3 .. 10^9
     per_decade = (SIZE[0] - MARGIN[2] - MARGIN[0]) / 6
     assert abs((u[0] - single[0]) - 4 * per_decade) <= 1.5
+
+
+def test_sweep_dots_are_coloured_by_value(tmp_path):
+    rows = [{"value": 30, "psnr": 29.0, "appearance_bytes": 1e6}, {"value": 10, "psnr": 30.0, "appearance_bytes": 1e5}]
+    path = plot_sweep("K", rows, PAPER_SWEEPS["K"], tmp_path / "k.png", "K sweep")
+    img = np.asarray(Image.open(path).convert("RGB"))
+    # values in order (10, 30, then the paper's 60, 90) take the palette in order
+    k10, k30 = _dot_centre(img, PALETTE[0]), _dot_centre(img, PALETTE[1])
+    # 1e5 .. 4.72e6 bytes (the paper's K = 90) span the decades 10^4 .. 10^7
+    per_decade = (SIZE[0] - MARGIN[2] - MARGIN[0]) / 3
+    assert abs((k30[0] - k10[0]) - per_decade) <= 1.5 and k10[1] < k30[1]

@@ -1,4 +1,5 @@
-"""The ablation and speed scripts run end to end on a tiny scene and print their tables."""
+"""The ablation and speed scripts run end to end on a tiny scene and print their tables; the ablation's
+sweeps, its row-by-row record and resume, and its refusals of bad arguments."""
 
 from __future__ import annotations
 
@@ -6,7 +7,29 @@ import json
 
 import pytest
 
+import training.train
+from cghair_format.cli import main as cgh_main
 from training import ablation, bench
+
+# a tiny run: 4 views of 16 x 16 (LPIPS needs 31: test_export_failure_keeps_the_row uses 32), 6 cards
+TINY = ["--iters", "4", "--views", "4", "--res", "16", "--engine", "splat", "--n-cards", "6", "--points", "6",
+        "--threads", "1"]
+REAL_TRAIN = training.train.train
+
+
+def _counting_train(monkeypatch, fail_at: int | None = None) -> list[str]:
+    """Count the trainer's calls (the variant or value each trains); the ``fail_at``-th call raises
+    before training, as a run stopped there would."""
+    calls: list[str] = []
+
+    def train(*args, config, **kwargs):
+        calls.append(f"{config.variant} K={config.codebook_size}")
+        if len(calls) == fail_at:
+            raise training.train.TrainError("stopped for the test")
+        return REAL_TRAIN(*args, config=config, **kwargs)
+
+    monkeypatch.setattr(training.train, "train", train)
+    return calls
 
 
 def test_ablation_table(tmp_path, strands_file, capsys):
@@ -30,9 +53,113 @@ def test_scripts_refuse_a_device_this_torch_cannot_use(tmp_path, strands_file, s
     assert "unknown torch device 'gpu9'" in capsys.readouterr().err
 
 
-def test_ablation_rejects_unknown_variant(tmp_path, strands_file):
-    with pytest.raises(SystemExit):
-        ablation.main(["--strands", str(strands_file), "--variants", "latents,bogus"])
+def test_ablation_rejects_unknown_variant(tmp_path, strands_file, capsys):
+    assert ablation.main(["--strands", str(strands_file), "--variants", "latents,bogus"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "unknown variants ['bogus']" in err
+
+
+def test_sweeps_write_rows_and_plots(tmp_path, strands_file, capsys):
+    work = tmp_path / "w"
+    assert ablation.main(["--strands", str(strands_file), "--work", str(work), *TINY,
+                          "--sweep", "K=2,3", "--sweep", "N_T=1,6"]) == 0
+    out = capsys.readouterr().out
+    assert "K sweep of the latents variant" in out and "| 3 |" in out and "paper columns: its own sweep" in out
+    k = json.loads((work / "sweep_K.json").read_text())
+    assert k["param"] == "K" and k["iterations"] == 4 and [r["value"] for r in k["rows"]] == [2, 3]
+    small, large = k["rows"]
+    # one more codebook entry per group and one more logit per strand: more appearance, and a file
+    assert large["appearance_bytes"] > small["appearance_bytes"] and small["file_bytes"] > 0
+    assert all(r["groups"] == small["groups"] for r in k["rows"]) and "file_psnr" in large
+    n_t = json.loads((work / "sweep_N_T.json").read_text())
+    assert [r["groups"] for r in n_t["rows"]] == [1, 6]  # N_T = --n-cards: one group per card
+    assert (work / "sweep_K.png").is_file() and (work / "sweep_N_T.png").is_file()
+    assert not (work / "ablation.json").exists()  # --sweep runs the sweeps instead of the variants
+
+
+def test_rerun_resumes_after_the_last_finished_row(tmp_path, strands_file, monkeypatch, capsys):
+    """Rows are written as they finish: a run stopped at its second variant keeps the first, and the
+    rerun trains only what is missing."""
+    argv = ["--strands", str(strands_file), "--work", str(tmp_path / "w"), *TINY, "--variants", "latents,unique"]
+    calls = _counting_train(monkeypatch, fail_at=2)
+    assert ablation.main(argv) == 2
+    assert "stopped for the test" in capsys.readouterr().err
+    rows = json.loads((tmp_path / "w" / "ablation.json").read_text())["rows"]
+    assert [r["variant"] for r in rows] == ["latents"]
+    calls = _counting_train(monkeypatch)
+    assert ablation.main(argv) == 0
+    assert calls == ["unique K=10"]
+    assert "rows already there, not trained again: variant latents" in capsys.readouterr().err
+    assert [r["variant"] for r in json.loads((tmp_path / "w" / "ablation.json").read_text())["rows"]] == \
+        ["latents", "unique"]
+    calls.clear()
+    sweep = [*argv[:-2], "--sweep", "K=2,3"]
+    assert ablation.main([*argv[:-2], "--sweep", "K=3"]) == 0 and calls == ["latents K=3"]
+    capsys.readouterr()
+    assert ablation.main([*argv[:-2], "--sweep", "K=2"]) == 0 and calls == ["latents K=3", "latents K=2"]
+    captured = capsys.readouterr()
+    assert "rows already there, not trained again: value 3" in captured.err
+    assert "| 3 |" in captured.out and "| 2 |" in captured.out  # the folder's rows, earlier calls' included
+    # other settings in the same folder: refused, not mixed
+    assert ablation.main([*sweep[:sweep.index("--iters") + 1], "5", *sweep[sweep.index("--iters") + 2:]]) == 2
+    assert "holds rows of another run (iterations 4 there, 5 now)" in capsys.readouterr().err
+
+
+def test_a_damaged_row_file_is_refused_before_the_dataset(tmp_path, strands_file, capsys):
+    work = tmp_path / "w"
+    work.mkdir()
+    (work / "ablation.json").write_text('{"rows": [')
+    assert ablation.main(["--strands", str(strands_file), "--work", str(work), *TINY]) == 2
+    err = capsys.readouterr().err
+    assert "ablation.json is not valid JSON" in err and err.count("\n") == 1
+    assert not (work / "dataset_splat").exists()
+
+
+def test_export_failure_keeps_the_row(tmp_path, strands_file, monkeypatch, capsys):
+    def choose_export(*args, **kwargs):
+        raise OSError("No space left on device")
+
+    monkeypatch.setattr(training.train, "choose_export", choose_export)
+    argv = ["--strands", str(strands_file), "--work", str(tmp_path / "w"), *TINY, "--res", "32",
+            "--variants", "latents"]
+    assert ablation.main(argv) == 0
+    assert "the row keeps the model's figures" in capsys.readouterr().err
+    row = json.loads((tmp_path / "w" / "ablation.json").read_text())["rows"][0]
+    assert row["export_error"] == "OSError: No space left on device" and "file_bytes" not in row
+    assert row["psnr"] > 0 and row["lpips"] is not None and row["lpips"] >= 0
+
+
+@pytest.mark.parametrize(("sweep", "message"), [
+    ("X=1,2", "give KEY=V1,V2,... with KEY one of K, D, N_T"),
+    ("K=2,a", "values must be integers"),
+    ("K", "give KEY=V1,V2,..."),
+    ("K=2,2", "a value is repeated"),
+    ("K=300", "--sweep K=300: codebook_size must be <= 256"),
+    ("D=0", "--sweep D=0: latent_dim must be a positive integer"),
+    ("N_T=7", "--sweep N_T=7: more card groups than cards (6); give --n-cards 7 or more"),
+])
+def test_bad_sweeps_are_refused_in_one_line(tmp_path, strands_file, capsys, sweep, message):
+    work = tmp_path / "w"
+    for main, prefix in ((ablation.main, "ablation: error: "), (cgh_main, "cgh ablation: error: ")):
+        argv = ["--strands", str(strands_file), "--work", str(work), *TINY, "--sweep", sweep]
+        assert main(argv if main is ablation.main else ["ablation", *argv]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(prefix) and message in err and err.count("\n") == 1
+    assert not work.exists()  # refused before the dataset
+
+
+def test_missing_strands_are_refused_before_the_work_folder(tmp_path, capsys):
+    assert cgh_main(["ablation", "--strands", str(tmp_path / "none.tfx"), "--work", str(tmp_path / "w"), *TINY]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("cgh ablation: error: No such file") and err.count("\n") == 1
+    assert not (tmp_path / "w").exists()
+
+
+def test_cgh_ablation_runs_the_sweep(tmp_path, strands_file, capsys):
+    assert cgh_main(["ablation", "--strands", str(strands_file), "--work", str(tmp_path / "w"), *TINY,
+                     "--sweep", "d=4"]) == 0
+    assert "D sweep of the latents variant (latent_dim)" in capsys.readouterr().out
+    assert json.loads((tmp_path / "w" / "sweep_D.json").read_text())["rows"][0]["value"] == 4
 
 
 def test_bench_prints_a_breakdown(tmp_path, strands_file, capsys):
