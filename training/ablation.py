@@ -29,7 +29,7 @@ from typing import TextIO
 from cghair_format.atomic import write_text
 from cghair_format.cli.argtypes import int_at_least
 
-from .cli_train import add_backend_argument
+from .cli_train import FROZEN_FRACTION, add_backend_argument
 from .config import VARIANTS, ConfigError, TrainConfig
 
 PAPER_NOTE = ("paper (CGHair, CVPR 2026, as quoted in our brief): latents within 1.6 dB PSNR of unique, "
@@ -53,7 +53,6 @@ PAPER_SWEEPS: dict[str, dict[int, tuple[float, float]]] = {
     "N_T": {16: (31.49, 0.60), 32: (31.84, 0.64), 64: (32.40, 0.71), 96: (32.57, 0.79), 400: (33.04, 1.53)},
 }
 SWEEP_FIELDS = {"K": "codebook_size", "D": "latent_dim", "N_T": "n_groups"}  # sweep key -> TrainConfig field
-FROZEN_FRACTION = 7_000 / 30_000  # the paper's geometry freeze, as a fraction of the run
 
 
 def scaled_config(variant: str, iters: int, **overrides) -> TrainConfig:

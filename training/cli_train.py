@@ -15,7 +15,7 @@ from cghair_format.cli.argtypes import int_at_least
 from .config import BACKENDS, VARIANTS
 
 PROFILE_NAMES = ("compact", "high", "lossless")
-FROZEN_FRACTION = 7_000 / 30_000
+FROZEN_FRACTION = 7_000 / 30_000  # the paper's geometry freeze, as a fraction of the run
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
