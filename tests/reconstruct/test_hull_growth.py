@@ -58,7 +58,7 @@ def test_growth_keeps_the_inset_inside_the_hull_away_from_the_roots():
     from scipy.ndimage import distance_transform_edt
     from scipy.spatial import cKDTree
 
-    from training.reconstruct.grow import GRACE
+    from training.reconstruct.grow import GRACE, growth_volume
     from training.reconstruct.hull import Grid, Hull
 
     occ = np.zeros((30, 40, 30), bool)
@@ -81,3 +81,6 @@ def test_growth_keeps_the_inset_inside_the_hull_away_from_the_roots():
     assert n3 >= n0 > len(xz) // 2  # the inset drops no strand
     assert (d0 < 3).mean() > 0.05  # without it, strands run along the wall in its outer layers
     assert (d3 >= 3).all()
+    # roots inside the core get no band: the volume is the core alone
+    deep = Roots(np.array([[15.0, 20.0, 15.0]]), np.array([[0.0, 1.0, 0.0]]))
+    assert (growth_volume(hull, deep, 3.0) == (depth > 3)).all()

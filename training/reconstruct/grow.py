@@ -8,7 +8,7 @@ stops where it leaves the hull or reaches ``max_length``.
 The visual hull is larger than the hair: the masks are closed and dilated, the rendered strands have
 a width, and a voxel is kept when its centre projects into a mask pixel. Growth therefore keeps
 ``inset`` (world units; the pipeline passes a few pixel footprints) inside the hull's boundary,
-except near the roots, which a given scalp may place on that boundary.
+except near roots outside that core (a given scalp may place a thin hairline on the boundary).
 """
 
 from __future__ import annotations
@@ -52,7 +52,8 @@ def initial_directions(roots: Roots, up: np.ndarray) -> np.ndarray:
 
 
 def growth_volume(hull: Hull, roots: Roots, inset: float) -> np.ndarray:
-    """The hull less its outer ``inset``, plus the hull within ``inset + GRACE`` voxels of a root."""
+    """The hull less its outer ``inset``, plus the hull within ``inset + GRACE`` voxels of the roots
+    that lie outside that core."""
     from scipy.ndimage import distance_transform_edt
 
     depth = distance_transform_edt(hull.occupancy) * hull.grid.voxel
@@ -62,7 +63,10 @@ def growth_volume(hull: Hull, roots: Roots, inset: float) -> np.ndarray:
     seeds = np.ones(hull.grid.shape, bool)
     idx = np.round(hull.grid.to_index(roots.points)).astype(int)
     ok = ((idx >= 0) & (idx < np.array(hull.grid.shape))).all(1)
-    seeds[tuple(idx[ok].T)] = False
+    idx = idx[ok]
+    seeds[tuple(idx[~core[tuple(idx.T)]].T)] = False  # only roots the core leaves out get a band
+    if seeds.all():  # (the transform of an array without zeros is not a distance)
+        return core
     near_root = distance_transform_edt(seeds) * hull.grid.voxel <= inset + GRACE * hull.grid.voxel
     return core | (hull.occupancy & near_root)
 
