@@ -50,3 +50,37 @@ def test_field_recovers_the_known_direction_and_growth_follows_it(block):
     assert np.median(np.degrees(np.arccos(np.clip(np.abs(seg @ DIRECTION), 0, 1)))) < 15.0
     length = np.linalg.norm(np.diff(grown.to_array(), axis=1), axis=2).sum(1)
     assert 0.1 < np.median(length) < 0.3
+
+
+def test_growth_keeps_the_inset_inside_the_hull_away_from_the_roots():
+    """Strands slanting into a wall of a box hull slide along it: at ``inset`` 0 on the boundary
+    layer, at ``inset`` 3 voxels at least that deep, except near the roots on the box's top."""
+    from scipy.ndimage import distance_transform_edt
+    from scipy.spatial import cKDTree
+
+    from training.reconstruct.grow import GRACE, growth_volume
+    from training.reconstruct.hull import Grid, Hull
+
+    occ = np.zeros((30, 40, 30), bool)
+    occ[5:25, 5:35, 5:25] = True
+    d = np.array([0.6, -1.0, 0.0]) / np.linalg.norm([0.6, -1.0, 0.0])
+    field = np.where(occ[..., None, None], np.outer(d, d), 0.0).astype(np.float32)
+    hull = Hull(Grid(np.zeros(3), 1.0, occ.shape), occ, field)
+    xz = np.stack(np.meshgrid(np.arange(7, 23, 2.0), np.arange(7, 23, 2.0)), -1).reshape(-1, 2)
+    roots = Roots(np.stack([xz[:, 0], np.full(len(xz), 34.0), xz[:, 1]], 1), np.tile([0.0, 1.0, 0.0], (len(xz), 1)))
+    depth = distance_transform_edt(occ)
+    near_root = GRACE + 4.0  # voxels: the band around the roots where the inset does not apply
+
+    def depths(inset):
+        s = grow_strands(hull, roots, np.array([0.0, 1.0, 0.0]), 64, inset=inset)
+        pts = s.points[cKDTree(roots.points).query(s.points)[0] > near_root]
+        return s.count, depth[tuple(np.round(pts).astype(int).T)]
+
+    n0, d0 = depths(0.0)
+    n3, d3 = depths(3.0)
+    assert n3 >= n0 > len(xz) // 2  # the inset drops no strand
+    assert (d0 < 3).mean() > 0.05  # without it, strands run along the wall in its outer layers
+    assert (d3 >= 3).all()
+    # roots inside the core get no band: the volume is the core alone
+    deep = Roots(np.array([[15.0, 20.0, 15.0]]), np.array([[0.0, 1.0, 0.0]]))
+    assert (growth_volume(hull, deep, 3.0) == (depth > 3)).all()

@@ -4,6 +4,11 @@ At each step the field's tensor ``c d d^T`` is interpolated at the tip and one p
 from the previous direction gives the new one: it follows the field's dominant direction, keeps the
 strand's sense (the field has none), and, where the field is weak, keeps going straight. A strand
 stops where it leaves the hull or reaches ``max_length``.
+
+The visual hull is larger than the hair: the masks are closed and dilated, the rendered strands have
+a width, and a voxel is kept when its centre projects into a mask pixel. Growth therefore keeps
+``inset`` (world units; the pipeline passes a few pixel footprints) inside the hull's boundary,
+except near roots outside that core (a given scalp may place a thin hairline on the boundary).
 """
 
 from __future__ import annotations
@@ -46,9 +51,31 @@ def initial_directions(roots: Roots, up: np.ndarray) -> np.ndarray:
     return d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
 
 
+def growth_volume(hull: Hull, roots: Roots, inset: float) -> np.ndarray:
+    """The hull less its outer ``inset``, plus the hull within ``inset + GRACE`` voxels of the roots
+    that lie outside that core."""
+    from scipy.ndimage import distance_transform_edt
+
+    depth = distance_transform_edt(hull.occupancy) * hull.grid.voxel
+    core = depth > inset
+    if inset <= 0:
+        return core
+    seeds = np.ones(hull.grid.shape, bool)
+    idx = np.round(hull.grid.to_index(roots.points)).astype(int)
+    ok = ((idx >= 0) & (idx < np.array(hull.grid.shape))).all(1)
+    idx = idx[ok]
+    seeds[tuple(idx[~core[tuple(idx.T)]].T)] = False  # only roots the core leaves out get a band
+    if seeds.all():  # (the transform of an array without zeros is not a distance)
+        return core
+    near_root = distance_transform_edt(seeds) * hull.grid.voxel <= inset + GRACE * hull.grid.voxel
+    return core | (hull.occupancy & near_root)
+
+
 def grow_strands(hull: Hull, roots: Roots, up: np.ndarray, points_per_strand: int = 32,
-                 max_length: float | None = None, meters_per_unit: float = 1.0, up_axis: str = "Y") -> Strands:
-    """Grow from ``roots``; returns strands resampled to ``points_per_strand`` points."""
+                 max_length: float | None = None, meters_per_unit: float = 1.0, up_axis: str = "Y",
+                 inset: float = 0.0) -> Strands:
+    """Grow from ``roots`` inside :func:`growth_volume`; returns strands resampled to
+    ``points_per_strand`` points."""
     h = STEP * hull.grid.voxel
     up = np.asarray(up, np.float64) / np.linalg.norm(up)
     if max_length is None:
@@ -56,7 +83,7 @@ def grow_strands(hull: Hull, roots: Roots, up: np.ndarray, points_per_strand: in
     n_steps = int(max_length / h)
     from scipy.ndimage import gaussian_filter
 
-    occ = hull.occupancy.astype(np.float32)
+    occ = growth_volume(hull, roots, inset).astype(np.float32)
     inward = np.stack(np.gradient(gaussian_filter(occ, 1.5)), -1)  # towards the inside of the hull
     pos = roots.points.copy()
     prev = initial_directions(roots, up)

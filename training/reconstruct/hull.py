@@ -133,6 +133,12 @@ def visual_hull(views, resolution: int = 96) -> Hull:
     return Hull(grid, binary_fill_holes(_carve(grid, views, masks)))
 
 
+def pixel_footprint(hull: Hull, views) -> float:
+    """Mean width in world units of one pixel at the hull's centroid, over the views."""
+    c = hull.grid.origin + np.argwhere(hull.occupancy).mean(0) * hull.grid.voxel
+    return float(np.mean([np.linalg.norm(v.camera.center - c) / v.camera.fx for v in views]))
+
+
 def _line_plane_normals(cam: Camera, uv: np.ndarray, angle: np.ndarray) -> np.ndarray:
     """World normals of the planes through the camera centre and the image lines (point, angle)."""
     c2w = cam.camera_to_world[:3, :3]

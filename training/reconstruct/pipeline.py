@@ -18,13 +18,17 @@ import numpy as np
 
 from cghair_format.strands import Strands
 
-from .hull import Grid, Hull, ReconstructError, check_masks, orientation_field, visual_hull
+from .hull import Grid, Hull, ReconstructError, check_masks, orientation_field, pixel_footprint, visual_hull
 from .orientation import orientation_map, save_debug
 from .prior import BUILTIN as BUILTIN_PRIOR
 from .scalp import Roots, check_roots_in_hull, estimate_scalp, load_scalp_mesh, sample_mesh_roots
 
 STAGES = ("orientation", "hull", "scalp", "growth", "refine")
 CHECKPOINT_VERSION = 1
+# growth keeps this many pixel footprints inside the hull: the closed, dilated masks of strands a
+# pixel or more wide make the hull about that much larger than the hair (3 px: on splat renders of
+# harolongo and ruby at 128 px, 95 % of the ground-truth points lie deeper than 2.4 voxels ~ 2.3 px)
+INSET_PIXELS = 3.0
 
 
 @dataclass
@@ -161,7 +165,7 @@ def reconstruct(dataset, config: ReconstructConfig, checkpoint: str | Path, scal
     else:
         t0 = time.perf_counter()
         grown = grow_strands(hull, roots, up, cfg.points_per_strand, meters_per_unit=cfg.meters_per_unit,
-                             up_axis=up_axis)
+                             up_axis=up_axis, inset=INSET_PIXELS * pixel_footprint(hull, views))
         if grown.count == 0:
             raise ReconstructError("no strand grew from the roots: the scalp lies outside the hair volume")
         state.update(_strands_state("grown", grown))
