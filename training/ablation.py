@@ -168,7 +168,9 @@ def _start(setup: Setup, name: str, key: str, **settings):
     record = RowFile(setup.work / name, {**settings, **setup.settings()}, key, setup.log)
     strands = load_strands(setup.strands_path)
     setup.work.mkdir(parents=True, exist_ok=True)
-    ds_dir = setup.dataset if setup.dataset is not None else setup.work / f"dataset_{setup.engine}"
+    if setup.dataset is not None:  # a given dataset is read as it is, never rendered into
+        return record, strands, read_dataset(setup.dataset)
+    ds_dir = setup.work / f"dataset_{setup.engine}"
     if not (ds_dir / "transforms_test.json").is_file():
         t = time.perf_counter()
         render_dataset(strands, ds_dir, views=setup.views, res=setup.res, engine=setup.engine, samples=setup.samples,

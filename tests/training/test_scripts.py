@@ -155,6 +155,15 @@ def test_missing_strands_are_refused_before_the_work_folder(tmp_path, capsys):
     assert not (tmp_path / "w").exists()
 
 
+def test_a_missing_dataset_is_refused_not_rendered_into(tmp_path, strands_file, capsys):
+    missing = tmp_path / "no_such_dataset"
+    assert cgh_main(["ablation", "--strands", str(strands_file), "--work", str(tmp_path / "w"), *TINY,
+                     "--dataset", str(missing)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("cgh ablation: error: ") and err.count("\n") == 1
+    assert not missing.exists()
+
+
 def test_cgh_ablation_runs_the_sweep(tmp_path, strands_file, capsys):
     assert cgh_main(["ablation", "--strands", str(strands_file), "--work", str(tmp_path / "w"), *TINY,
                      "--sweep", "d=4"]) == 0
