@@ -303,14 +303,20 @@ def run_sweep(strands_path: str, work: Path, key: str, values: list[int], iters:
     return rows
 
 
+def _file_psnr(row: dict, missing: str) -> str:
+    """The written file's PSNR cell: the figure, else why there is none (its error, or ``missing``)."""
+    if "file_psnr" in row:
+        return f"{row['file_psnr']:.2f}"
+    return row.get("file_error", row.get("export_error", missing))
+
+
 def table(rows: list[dict], engine: str) -> str:
     lines = [f"ablation on {engine}-rendered held-out views",
              "| variant | PSNR (dB) | SSIM | LPIPS | appearance | ratio vs unique | .cgh PSNR | .cgh size |",
              "|---|---|---|---|---|---|---|---|"]
     for r in rows:
         ratio = f"{r['ratio_vs_unique']:.1f} x" if r.get("ratio_vs_unique") else "-"
-        fp = f"{r['file_psnr']:.2f}" if "file_psnr" in r else r.get("file_error", r.get("export_error",
-                                                                                       "n/a (no .cgh encoding)"))
+        fp = _file_psnr(r, "n/a (no .cgh encoding)")
         fb = f"{r['file_bytes'] / 1024:.0f} KiB" if "file_bytes" in r else "-"
         lp = f"{r['lpips']:.4f}" if r.get("lpips") is not None else "-"
         lines.append(f"| {r['variant']} | {r['psnr']:.2f} | {r['ssim']:.4f} | {lp} | "
@@ -328,7 +334,7 @@ def sweep_table(key: str, rows: list[dict], engine: str) -> str:
              "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         lp = f"{r['lpips']:.4f}" if r.get("lpips") is not None else "-"
-        fp = f"{r['file_psnr']:.2f}" if "file_psnr" in r else r.get("file_error", r.get("export_error", "-"))
+        fp = _file_psnr(r, "-")
         fb = f"{r['file_bytes']:,} B" if "file_bytes" in r else "-"
         pp, pmb = (f"{paper[r['value']][0]:.2f}", f"{paper[r['value']][1]:g} MB") if r["value"] in paper else ("-", "-")
         lines.append(f"| {r['value']} | {r['psnr']:.2f} | {r['ssim']:.4f} | {lp} | {r['appearance_bytes']:,} B | "
