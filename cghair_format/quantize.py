@@ -74,30 +74,42 @@ def level_plan(n: int, base_stride: int, taps: tuple[int, ...] | None = None
     return plan
 
 
-def hier_encode(y: np.ndarray, base_stride: int) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
+def hier_encode(y: np.ndarray, base_stride: int, lowerable: np.ndarray | None = None, floor: float = -0.5
+                ) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
     """Code sequences ``y [S, n]`` (already in quantization-step units) along axis 1.
 
     Base samples: DPCM with linear extrapolation of the previous two reconstructed base samples,
     residuals ``round(y - pred)``, reconstruction integer. Refinement samples: ``pred`` = Lagrange
     interpolation of reconstructed neighbours, residual ``r = round(y - pred)``, reconstruction
     ``pred + r`` (no re-rounding, so a sample within half a step of its prediction costs a zero).
-    Every reconstructed sample is within 0.5 of ``y``. Returns the base residuals ``[S, nb]``, one
-    residual array ``[S, L]`` per level (all int64) and the reconstruction ``[S, n]`` (float64), as
-    :func:`hier_decode` gives it.
+    Every reconstructed sample is within 0.5 of ``y``, except where ``lowerable [S, n]`` (bool) is
+    set: there it may reconstruct anywhere in ``[floor, y + 0.5]`` and takes the residual nearest zero
+    that lands there (``y >= floor + 0.5`` keeps that range a step wide). Returns the base residuals
+    ``[S, nb]``, one residual array ``[S, L]`` per level (all int64) and the reconstruction ``[S, n]``
+    (float64), as :func:`hier_decode` gives it.
     """
     yt = np.asarray(y, np.float64).T  # sample-major: each sample of every sequence is one contiguous row
     base, levels = level_plan(yt.shape[0], base_stride)
+    free = None if lowerable is None else np.asarray(lowerable, bool).T
+
+    def residual(i, pred: np.ndarray) -> np.ndarray:
+        r = np.rint(yt[i] - pred)
+        if free is None:
+            return r
+        nearest_zero = np.clip(0.0, np.ceil(floor - pred), np.floor(yt[i] + 0.5 - pred))
+        return np.where(free[i], nearest_zero, r)
+
     rec = np.zeros(yt.shape)
     base_res = np.zeros((len(base), yt.shape[1]), np.int64)
     for j, i in enumerate(base):
         pred = base_prediction(rec, base, j)
-        r = np.rint(yt[i] - pred)
+        r = residual(i, pred)
         base_res[j] = r
         rec[i] = pred + r
     out = []
     for idx, nb, wt in levels:
         pred = _interp(rec, nb, wt)
-        r = np.rint(yt[idx] - pred)
+        r = residual(idx, pred)
         rec[idx] = pred + r
         out.append(np.ascontiguousarray(r.T.astype(np.int64)))
     return np.ascontiguousarray(base_res.T), out, np.ascontiguousarray(rec.T)

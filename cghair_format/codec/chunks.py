@@ -65,9 +65,11 @@ def family_payload(family: Family) -> bytes:
     return w.getvalue()
 
 
-def appearance_chunks(asset: HairAsset, prof: Profile, quant: dict) -> list[container.Chunk]:
+def appearance_chunks(asset: HairAsset, prof: Profile, quant: dict, negligible: np.ndarray | None = None
+                      ) -> list[container.Chunk]:
     """OPAC, LOGT, CBKS and MLPW, then the optional chunks: none depends on the point step (the
-    opacities take the file's base stride, ``quant``)."""
+    opacities take the file's base stride, ``quant``; quantized, a ``negligible`` segment's may come
+    out anywhere from 0 up to its own, see :func:`.writer.encode`)."""
     opac_w, logt_w, cbks_w, mlp_w = (StreamWriter() for _ in range(4))
     app = asset.appearance
     if prof.lossless:
@@ -78,7 +80,7 @@ def appearance_chunks(asset: HairAsset, prof: Profile, quant: dict) -> list[cont
             mlp_w.array(layer.weight.astype(np.float32), shuffle=True)
             mlp_w.array(layer.bias.astype(np.float32), shuffle=True)
     else:
-        put_hier(opac_w, asset.opacity * prof.opacity_scale, quant["base_stride"])
+        opac_w = _opacities(asset.opacity * prof.opacity_scale, quant["base_stride"], negligible, prof.zstd_level)
         if app.weight_mode == "hard":
             logt_w.ints(np.argmax(app.logits, axis=1))
         else:
@@ -117,6 +119,20 @@ def _optional_chunks(asset: HairAsset) -> list[container.Chunk]:
     return out
 
 
+def _opacities(y: np.ndarray, base_stride: int, negligible: np.ndarray | None, level: int) -> StreamWriter:
+    """OPAC's stream: with ``negligible`` those samples may come out lower (down to -0.5, which decodes
+    to 0), where that compresses smaller; a barely trained file's smooth opacities can code better as
+    they are than with some samples taken down."""
+    plain = StreamWriter()
+    put_hier(plain, y, base_stride)
+    if negligible is None or not negligible.any():
+        return plain
+    lowered = StreamWriter()
+    put_hier(lowered, y, base_stride, negligible)
+    size = {w: len(container.compress(container.Chunk("OPAC", w.getvalue()), level).body) for w in (plain, lowered)}
+    return min((lowered, plain), key=size.get)
+
+
 def lossless_cards(cards: Cards) -> StreamWriter:
     """CARD's geometry streams of a lossless file: every float32 as it is."""
     w = StreamWriter()
@@ -137,9 +153,11 @@ def quantized_cards(cards: Cards, q: dict) -> tuple[StreamWriter, Cards]:
     return w, decode_cards(StreamReader(w.getvalue(), "CARD"), c, m1, q)
 
 
-def put_hier(w: StreamWriter, y: np.ndarray, base_stride: int) -> np.ndarray:
-    """Write ``y [rows, n]`` (step units) hierarchically (spec 4.1); return it as a decoder will read it."""
-    base, levels, rec = hier_encode(y, base_stride)
+def put_hier(w: StreamWriter, y: np.ndarray, base_stride: int, lowerable: np.ndarray | None = None) -> np.ndarray:
+    """Write ``y [rows, n]`` (step units) hierarchically (spec 4.1), each sample within half a step, or
+    where ``lowerable`` anywhere from -0.5 up (:func:`.quantize.hier_encode`); return it as a decoder
+    will read it."""
+    base, levels, rec = hier_encode(y, base_stride, lowerable)
     w.ints(base)
     for r in levels:
         w.ints(r)

@@ -85,15 +85,15 @@ class EncodeReport:
 
 
 def write(asset: HairAsset, path: str | os.PathLike, profile: str | Profile = DEFAULT_PROFILE,
-          keep_order: bool = False) -> EncodeReport:
+          keep_order: bool = False, negligible: np.ndarray | None = None) -> EncodeReport:
     """Write ``asset`` to ``path`` atomically (:mod:`.atomic`); see :func:`encode`."""
-    data, report = encode(asset, profile, keep_order)
+    data, report = encode(asset, profile, keep_order, negligible)
     write_bytes(path, data)
     return report
 
 
-def encode(asset: HairAsset, profile: str | Profile = DEFAULT_PROFILE, keep_order: bool = False
-           ) -> tuple[bytes, EncodeReport]:
+def encode(asset: HairAsset, profile: str | Profile = DEFAULT_PROFILE, keep_order: bool = False,
+           negligible: np.ndarray | None = None) -> tuple[bytes, EncodeReport]:
     """Serialise a validated asset; returns the bytes and what the quantization measured.
 
     The quantized profiles store the strands card by card, alike strands one after another (spec 4.3),
@@ -101,10 +101,20 @@ def encode(asset: HairAsset, profile: str | Profile = DEFAULT_PROFILE, keep_orde
     ``report.strand_order`` maps them back to the input's (the asset's optional per-strand data travel
     with their strands). ``keep_order`` keeps the input's order instead, and stores no children, at a
     cost; the lossless profile always keeps it. The encoder's arrays, short-lived, do without huge pages
-    (:func:`.memory.without_huge_pages`)."""
+    (:func:`.memory.without_huge_pages`).
+
+    ``negligible`` (bool ``[S, P-1]``, like ``asset.opacity``) marks segments whose Gaussians hardly
+    show (``training.visibility``): a quantized profile may store their opacities anywhere from 0 up
+    to their own, which codes smaller; every other opacity keeps the profile's bound. The lossless
+    profile stores every opacity as it is."""
     options = EncodeOptions.of(profile, keep_order)
+    if negligible is not None:
+        negligible = np.asarray(negligible)
+        if negligible.dtype != bool or negligible.shape != np.shape(asset.opacity):
+            raise ValueError(f"negligible must be a bool array shaped like the opacities "
+                             f"{np.shape(asset.opacity)}, got {negligible.dtype} {negligible.shape}")
     with memory.without_huge_pages():
-        return _encode(asset, options)
+        return _encode(asset, options, negligible)
 
 
 class _Geometry(NamedTuple):
@@ -141,7 +151,8 @@ class _Passed(NamedTuple):
     order: np.ndarray | None
 
 
-def _encode(asset: HairAsset, options: EncodeOptions) -> tuple[bytes, EncodeReport]:
+def _encode(asset: HairAsset, options: EncodeOptions, negligible: np.ndarray | None
+            ) -> tuple[bytes, EncodeReport]:
     prof = options.profile
     asset = asset.validate().with_placeholders()
     points = strand_points(asset.cards, asset.strand_card, asset.uvd)
@@ -150,10 +161,12 @@ def _encode(asset: HairAsset, options: EncodeOptions) -> tuple[bytes, EncodeRepo
     points = points.astype(np.float64)
     passed = _search_step(asset, points, prof, diag, options.reorder)
     asset, geometry = passed.asset, passed.geometry
+    if negligible is not None and passed.order is not None:
+        negligible = negligible[passed.order]
     level, quant = prof.zstd_level, dict(geometry.meta["quant"])
     with ThreadPoolExecutor(max_workers=1) as background:  # zstd on the appearance while STRD is coded
         appearance = background.submit(lambda: [container.compress(c, level)
-                                                for c in appearance_chunks(asset, prof, quant)])
+                                                for c in appearance_chunks(asset, prof, quant, negligible)])
         chunks = geometry_chunks(asset, geometry.meta, geometry.cards, geometry.residuals, geometry.family)
         stored = map_threads(lambda c: container.compress(c, level), chunks)
         data = container.assemble(stored + appearance.result())

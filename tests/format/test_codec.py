@@ -72,6 +72,30 @@ def test_round_trip_within_profile_bounds(seed, strands, points, cards, segments
         assert np.array_equal(np.argmax(a.appearance.logits, 1), np.argmax(b.appearance.logits, 1))
 
 
+@pytest.mark.parametrize("profile", ["compact", "high", "lossless"])
+def test_negligible_opacities_are_stored_at_most_as_opaque_and_code_smaller(profile):
+    """Marked segments follow the input's strands through the writer's reordering, decode between 0
+    and their own opacity (plus the profile's bound), the rest within the bound; lossless keeps all."""
+    a = example_asset(3, 60, 24, 4, 8, 2, 3, latent_dim=5, hidden=7)
+    rng = np.random.default_rng(0)
+    a.opacity = rng.uniform(0, 1, a.opacity.shape).astype(np.float32)
+    negligible = rng.random(a.opacity.shape) < 0.8
+    data, report = cgh.encode(a, profile, negligible=negligible)
+    b, plain = cgh.decode(data), cgh.decode(cgh.encode(a, profile)[0])
+    order = np.arange(a.n_strands) if report.strand_order is None else report.strand_order
+    own, marked = a.opacity[order], negligible[order]
+    bound = cgh.PROFILES[profile].opacity_tolerance if not cgh.PROFILES[profile].lossless else 0
+    assert (np.abs(b.opacity - own)[~marked] <= bound + 1e-7).all()
+    assert (b.opacity[marked] >= 0).all() and (b.opacity[marked] <= own[marked] + bound + 1e-7).all()
+    sizes = report.chunk_sizes["OPAC"], cgh.encode(a, profile)[1].chunk_sizes["OPAC"]
+    if profile == "lossless":
+        assert np.array_equal(b.opacity, plain.opacity) and sizes[0] == sizes[1]
+    else:
+        assert sizes[0] < 0.6 * sizes[1] and (b.opacity[marked] < own[marked] - bound).mean() > 0.3
+    with pytest.raises(ValueError, match="negligible must be a bool array"):
+        cgh.encode(a, profile, negligible=negligible[:, 1:])
+
+
 def test_gaussians_decode_shapes_and_values():
     a = example_asset(3, sh_degree=2)
     g = cgh.decode_gaussians(a)

@@ -73,6 +73,25 @@ def test_level_plan_refuses_widths_that_do_not_fit(taps):
         level_plan(100, 16, taps)
 
 
+@settings(max_examples=40, deadline=None)
+@given(n=st.integers(2, 130), stride=st.sampled_from([2, 8, 16]), seed=st.integers(0, 10**6))
+def test_lowerable_samples_land_between_the_floor_and_their_own_value(n, stride, seed):
+    """Marked samples may come out anywhere in [floor, y + 0.5], the others within half a step, and
+    the reader's reconstruction is still the writer's; marking everything codes nothing but zeros."""
+    rng = np.random.default_rng(seed)
+    y = rng.uniform(0, 31.5, size=(6, n))
+    lowerable = rng.random(y.shape) < 0.7
+    base, levels, encoded = hier_encode(y, stride, lowerable)
+    rec = hier_decode(base, levels, n, stride)
+    assert np.array_equal(encoded, rec)
+    assert (np.abs(rec - y)[~lowerable] <= 0.5 + 1e-9).all()
+    assert (rec[lowerable] >= -0.5 - 1e-9).all() and (rec[lowerable] <= y[lowerable] + 0.5 + 1e-9).all()
+    all_marked = hier_encode(y, stride, np.ones_like(lowerable))
+    assert not all_marked[0].any() and not any(r.any() for r in all_marked[1])  # every residual zero
+    exact, none_marked = hier_encode(y, stride), hier_encode(y, stride, np.zeros_like(lowerable))
+    assert np.array_equal(none_marked[2], exact[2])  # nothing marked: the plain coder's output
+
+
 def test_hierarchical_coder_zeroes_smooth_curves():
     t = np.linspace(0, 1, 100)
     y = 400 * np.sin(2 * t)[None, :]  # smooth: refinement residuals vanish
