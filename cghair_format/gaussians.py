@@ -146,13 +146,20 @@ def decode_gaussians(asset: HairAsset, sh_out: np.ndarray | None = None) -> Gaus
     of ``n`` points takes the first ``n - 1`` SH sets of its MLP output, spec 6.3)."""
     padded = asset.n_strands * (asset.points_per_strand - 1)
     sh = strand_sh(asset, sh_out).reshape(padded, asset.appearance.sh_coeffs, 3)
+    if asset.variable:
+        sh = sh[asset.real_segments().ravel()]
+    return Gaussians(*gaussian_frames(asset), sh)
+
+
+def gaussian_frames(asset: HairAsset) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The means, rotations, scales and opacities of :func:`decode_gaussians`, without the SH."""
     points = strand_points(asset.cards, asset.strand_card, asset.uvd)
     means, rotations, scales = segment_frames(points, asset.thickness)
     opacities = asset.opacity.reshape(-1).astype(np.float32)
     if asset.variable:
         real = asset.real_segments().ravel()
-        means, rotations, scales, opacities, sh = (a[real] for a in (means, rotations, scales, opacities, sh))
-    return Gaussians(means, rotations, scales, opacities, sh)
+        means, rotations, scales, opacities = (a[real] for a in (means, rotations, scales, opacities))
+    return means, rotations, scales, opacities
 
 
 def sh_polynomial(sh, dirs):

@@ -60,6 +60,10 @@ PROFILES: dict[str, Profile] = {
                                               "opacity within 1/63, weights on steps of 0.35 RMS"),
 }
 DEFAULT_PROFILE = "compact"
+# what a trained file's quantized opacities may give up: the Gaussians that together carry this share of the
+# training views' blend weight may be stored less opaque (training/visibility.py; on the paper-scale model
+# 0.1 halves OPAC for 0.03 dB held out: training/ABLATION.md, "Negligible opacities")
+DEFAULT_OPACITY_BUDGET = 0.1
 
 
 def get_profile(name: str | Profile) -> Profile:

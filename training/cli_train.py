@@ -10,7 +10,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from cghair_format.cli.argtypes import int_at_least
+from cghair_format.cli.argtypes import int_at_least, share
+from cghair_format.profiles import DEFAULT_OPACITY_BUDGET
 
 from .config import BACKENDS, VARIANTS
 
@@ -44,11 +45,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="points per strand after resampling (default: 32)")
     p.add_argument("--seed", type=int, default=None, help="random seed (default: 0)")
     p.add_argument("--profile", choices=PROFILE_NAMES, default="compact", help="precision of the written .cgh")
+    add_opacity_budget_argument(p)
     p.add_argument("--threads", type=int_at_least(1), default=None,
                    help="torch CPU threads (default: torch's choice; 1 is faster on a busy machine)")
     p.add_argument("--device", default="cpu", help="torch device, e.g. cpu or cuda (default: cpu)")
     add_backend_argument(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def add_opacity_budget_argument(p: argparse.ArgumentParser) -> None:
+    """``--opacity-budget``, shared by the commands that write a trained .cgh."""
+    p.add_argument("--opacity-budget", type=share, metavar="SHARE", default=None,
+                   help="the Gaussians that together carry this share of the training views' blend weight, the "
+                        "least used, may be stored less opaque, down to 0, which codes them for almost nothing "
+                        f"(default: {DEFAULT_OPACITY_BUDGET}; 0 keeps every opacity within the profile's bound; "
+                        "quantized profiles only; training/ABLATION.md, 'Negligible opacities')")
 
 
 def add_backend_argument(p: argparse.ArgumentParser) -> None:
@@ -74,7 +85,7 @@ def _config(args: argparse.Namespace):
         cfg = TrainConfig()
     for flag, name in (("iters", "iterations"), ("variant", "variant"), ("checkpoint_every", "checkpoint_every"),
                        ("n_cards", "n_cards"), ("groups", "n_groups"), ("points", "points_per_strand"),
-                       ("seed", "seed")):
+                       ("seed", "seed"), ("opacity_budget", "opacity_budget")):
         value = getattr(args, flag)
         if value is not None:
             setattr(cfg, name, value)

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from cghair_format.errors import CghError
+from cghair_format.profiles import DEFAULT_OPACITY_BUDGET
 
 VARIANTS = ("latents", "unique", "single-sh", "multi-sh", "no-card-clustering")
 BACKENDS = ("reference", "native", "gsplat")  # rasterizers, see training/backends.py
@@ -55,6 +56,9 @@ class TrainConfig:
     lambda_dssim: float = 0.2
     lambda_alpha: float = 0.1
     lambda_opacity_smooth: float = 0.01
+    # export
+    opacity_budget: float = DEFAULT_OPACITY_BUDGET  # share of the training views' blend weight whose Gaussians a
+    # quantized file may store less opaque, down to 0 (training/visibility.py; 0: every opacity within the bound)
     # bookkeeping
     seed: int = 0
     checkpoint_every: int = 1_000
@@ -77,6 +81,8 @@ class TrainConfig:
             raise ConfigError(f"sh_degree must be 0..3, got {self.sh_degree}")
         if not 0 < self.tau_end <= self.tau_start:
             raise ConfigError("need 0 < tau_end <= tau_start")
+        if not 0 <= self.opacity_budget < 1:
+            raise ConfigError(f"opacity_budget must be in [0, 1), got {self.opacity_budget}")
         if len(self.background) != 3:
             raise ConfigError("background must have 3 values")
         return self

@@ -17,6 +17,7 @@ import torch
 from cghair_format.asset import HairAsset
 from cghair_format.atomic import atomic_path, write_text
 from cghair_format.errors import CghError
+from cghair_format.profiles import get_profile
 from cghair_format.strands import Strands
 
 from . import losses
@@ -25,6 +26,7 @@ from .config import TrainConfig
 from .dataset import Dataset, View, read_dataset
 from .model import HairModel, tau_at
 from .splatter import torch_device
+from .visibility import negligible_segments
 
 CHECKPOINT_VERSION = 1
 # glibc mallopt parameters and their defaults (malloc.h)
@@ -205,7 +207,7 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
 
     ``checkpoint`` (default ``<out>.ckpt.pt``) is written every ``config.checkpoint_every``
     iterations and at the end; ``resume`` continues from one (its config wins, except
-    ``iterations`` when ``config`` is given). The config and final figures are saved in
+    ``iterations`` and ``opacity_budget`` when ``config`` is given). The config and final figures are saved in
     ``asset.metadata["training"]`` and as ``<out>.train.json``. ``device`` is a torch device
     ("cpu", "cuda"); the splatter follows it. ``backend`` is the rasterizer (:mod:`training.backends`;
     default: the fastest one that runs on ``device``). ``stop_at`` ends the run after
@@ -223,8 +225,8 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
     if resume is not None:
         state = load_checkpoint(resume)
         cfg = TrainConfig.from_dict(state["config"])
-        if config is not None:
-            cfg.iterations = config.iterations
+        if config is not None:  # how the run ends is the caller's
+            cfg.iterations, cfg.opacity_budget = config.iterations, config.opacity_budget
         config = cfg
         from cghair_format import decode
 
@@ -342,12 +344,18 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
         return result
     asset, mode, scores = choose_export(model, base, ds.train, config, profile, dev, backend)
     result.asset, result.weight_mode, result.export_psnr = asset, mode, scores
+    negligible = None
+    if asset is not None and out_path is not None and config.opacity_budget > 0 and not get_profile(profile).lossless:
+        t0 = time.perf_counter()
+        negligible = negligible_segments(asset, ds.train, config.opacity_budget, backend, dev)
+        stage["negligible"] = time.perf_counter() - t0
     summary = {
         "config": config.to_dict(), "dataset": dataset_name, "backend": backend, "iterations_run": iterations_run,
         "seconds": round(seconds, 3), "seconds_total": round(seconds_before + seconds, 3),
         "stage_seconds": {k: round(v, 3) for k, v in stage.items()},
         "final": history[-1] if history else None, "weight_mode": mode, "export_psnr": scores,
         "appearance_parameters": model.appearance_parameters(), "gaussians": model.n_gaussians,
+        "negligible_segments": None if negligible is None else int(negligible.sum()),
     }
     if asset is not None:
         asset.metadata["training"] = summary
@@ -357,5 +365,5 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
         if asset is not None:
             from cghair_format import write
 
-            write(asset, out_path, profile)
+            write(asset, out_path, profile, negligible=negligible)
     return result

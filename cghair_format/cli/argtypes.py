@@ -27,6 +27,17 @@ def positive_float(text: str) -> float:
     return v
 
 
+def share(text: str) -> float:
+    """A share in [0, 1)."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
+    if not 0 <= v < 1:
+        raise argparse.ArgumentTypeError(f"must be in [0, 1), got {text}")
+    return v
+
+
 def rgb(text: str) -> list[float]:
     parts = text.split(",")
     try:

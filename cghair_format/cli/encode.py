@@ -1,10 +1,14 @@
-"""``cgh encode IN.cgh -o OUT.cgh --profile P``: re-encode with another precision profile."""
+"""``cgh encode IN.cgh -o OUT.cgh --profile P [--views DATASET]``: re-encode with another precision
+profile; with a dataset, the opacities of the Gaussians its training views hardly use may be stored
+lower (``training.visibility``)."""
 
 from __future__ import annotations
 
 import argparse
 
-from ..profiles import PROFILES
+from ..errors import CghError, MissingDependencyError
+from ..profiles import DEFAULT_OPACITY_BUDGET, PROFILES
+from .argtypes import share
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -15,13 +19,31 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--keep-order", action="store_true",
                    help="keep the input's strand order (default: the writer's order, card by card, which codes "
                         "smaller; the lossless profile always keeps it)")
+    p.add_argument("--views", metavar="DATASET",
+                   help="a dataset the file was trained on: the Gaussians its training views use least may be stored "
+                        "less opaque, down to 0, as cgh train writes them (needs torch; quantized profiles only)")
+    p.add_argument("--opacity-budget", type=share, metavar="SHARE", default=None,
+                   help=f"with --views: the share of the blend weight those Gaussians carry together (default: "
+                        f"{DEFAULT_OPACITY_BUDGET})")
 
 
 def run(args: argparse.Namespace) -> int:
     from ..codec import read, read_info, write
 
+    if args.opacity_budget is not None and args.views is None:
+        raise CghError("--opacity-budget needs --views DATASET: the views that measure which Gaussians show")
+    if args.views is not None and PROFILES[args.profile].lossless:
+        raise CghError("--views lowers opacities, which the lossless profile keeps exact: choose a quantized "
+                       "--profile")
     source = read_info(args.input)
-    report = write(read(args.input), args.output, args.profile, keep_order=args.keep_order)
+    asset = read(args.input)
+    negligible = None
+    if args.views is not None:
+        negligible = _negligible(asset, args.views, args.opacity_budget)
+        print(f"{int(negligible.sum()):,} of {asset.n_gaussians:,} Gaussians carry "
+              f"{args.opacity_budget or DEFAULT_OPACITY_BUDGET:g} of the blend weight of {args.views}'s training "
+              "views: their opacities may be stored lower")
+    report = write(asset, args.output, args.profile, keep_order=args.keep_order, negligible=negligible)
     total = sum(report.chunk_sizes.values())
     print(f"wrote {args.output}: profile {report.profile}, {total:,} bytes of chunks, max point error "
           f"{report.max_point_error:.3g} ({report.max_point_error / max(report.bbox_diagonal, 1e-30):.2e} "
@@ -33,3 +55,13 @@ def run(args: argparse.Namespace) -> int:
         print(f"note: {args.input} is a {source['profile']} file, so that error is measured against its decoded "
               f"points, which already lie {bound} from the strands it was made from")
     return 0
+
+
+def _negligible(asset, dataset: str, budget: float | None):
+    try:
+        from training.dataset import read_dataset
+        from training.visibility import negligible_segments
+    except ImportError as exc:
+        raise MissingDependencyError(exc.name or "torch", "training", "cgh encode --views") from None
+    views = read_dataset(dataset).train
+    return negligible_segments(asset, views, DEFAULT_OPACITY_BUDGET if budget is None else budget)

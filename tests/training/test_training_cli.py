@@ -76,6 +76,41 @@ def test_geometry_frozen_iters_flag(tmp_path, strands_file):
     assert not np.array_equal(read(kept).uvd, read(moved).uvd)
 
 
+def test_opacity_budget_in_train_and_encode(tmp_path, strands_file, capsys, monkeypatch):
+    """cgh train --opacity-budget 0 keeps every opacity within the profile's bound; cgh encode --views
+    then stores the least used lower, in fewer bytes, as cgh train's default does (on opacities as
+    varied as a long run's: a few iterations leave them smooth, and the writer keeps those as they are)."""
+    from cghair_format import read, read_info, write
+
+    ds = tmp_path / "ds"
+    assert main(["render-dataset", str(strands_file), "-o", str(ds), "--views", "6", "--res", "24",
+                 "--no-progress"]) == 0
+    common = ["--iters", "6", "--n-cards", "8", "--groups", "2", "--points", "8", "--no-progress", "--threads", "1"]
+    kept, lowered, default = tmp_path / "kept.cgh", tmp_path / "lowered.cgh", tmp_path / "default.cgh"
+    assert main(["train", str(ds), "--strands", str(strands_file), "-o", str(kept), *common,
+                 "--opacity-budget", "0"]) == 0
+    assert main(["train", str(ds), "--cards", str(kept), "-o", str(default), *common, "--iters", "1"]) == 0
+    assert json.loads(kept.with_suffix(".train.json").read_text())["negligible_segments"] is None
+    assert json.loads(default.with_suffix(".train.json").read_text())["negligible_segments"] > 0
+    varied = read(kept)
+    varied.opacity = np.random.default_rng(0).uniform(0, 1, varied.opacity.shape).astype(np.float32)
+    write(varied, kept)
+    capsys.readouterr()
+    assert main(["encode", str(kept), "-o", str(lowered), "--views", str(ds), "--opacity-budget", "0.2"]) == 0
+    assert "Gaussians carry 0.2 of the blend weight" in capsys.readouterr().out
+    size = {p: {c["type"]: c["stored_bytes"] for c in read_info(p)["chunks"]}["OPAC"] for p in (kept, lowered)}
+    assert size[lowered] < size[kept]
+    before, after = read(kept), read(lowered)
+    assert after.opacity.sum() < 0.8 * before.opacity.sum() and after.n_gaussians == before.n_gaussians
+    for argv, message in ((["--opacity-budget", "0.1"], "--opacity-budget needs --views"),
+                          (["--views", str(ds), "--profile", "lossless"], "choose a quantized --profile")):
+        assert main(["encode", str(kept), "-o", str(tmp_path / "x.cgh"), *argv]) == 2
+        assert message in capsys.readouterr().err
+    monkeypatch.setitem(sys.modules, "training.visibility", None)  # as if torch were not installed
+    assert main(["encode", str(kept), "-o", str(tmp_path / "x.cgh"), "--views", str(ds)]) == 2
+    assert "pip install 'cghair[training]'" in capsys.readouterr().err
+
+
 def test_unique_variant_writes_no_cgh(tmp_path, strands_file, capsys):
     ds = tmp_path / "ds"
     assert main(["render-dataset", str(strands_file), "-o", str(ds), "--views", "4", "--res", "16",
@@ -122,6 +157,8 @@ def test_bad_inputs_give_clear_errors(tmp_path, strands_file, capsys, monkeypatc
                                   ["train", "d", "-o", "x.cgh", "--variant", "bogus"],
                                   ["train", "d", "-o", "x.cgh", "--iters", "0"],
                                   ["train", "d", "-o", "x.cgh", "--backend", "vulkan"],
+                                  ["train", "d", "-o", "x.cgh", "--opacity-budget", "1"],
+                                  ["encode", "f.cgh", "-o", "x.cgh", "--opacity-budget", "-0.1"],
                                   ["eval", "f.cgh", "d", "--backend", "vulkan"],
                                   ["train", "d", "--strands", "a", "--cards", "b", "-o", "x.cgh"]])
 def test_usage_errors(argv):
