@@ -344,11 +344,9 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
         return result
     asset, mode, scores = choose_export(model, base, ds.train, config, profile, dev, backend)
     result.asset, result.weight_mode, result.export_psnr = asset, mode, scores
-    negligible = None
+    negligible, t0 = None, time.perf_counter()  # (an export step, not one of the iterations' stages)
     if asset is not None and out_path is not None and config.opacity_budget > 0 and not get_profile(profile).lossless:
-        t0 = time.perf_counter()
         negligible = negligible_segments(asset, ds.train, config.opacity_budget, backend, dev)
-        stage["negligible"] = time.perf_counter() - t0
     summary = {
         "config": config.to_dict(), "dataset": dataset_name, "backend": backend, "iterations_run": iterations_run,
         "seconds": round(seconds, 3), "seconds_total": round(seconds_before + seconds, 3),
@@ -356,6 +354,7 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
         "final": history[-1] if history else None, "weight_mode": mode, "export_psnr": scores,
         "appearance_parameters": model.appearance_parameters(), "gaussians": model.n_gaussians,
         "negligible_segments": None if negligible is None else int(negligible.sum()),
+        "negligible_seconds": round(time.perf_counter() - t0, 3),
     }
     if asset is not None:
         asset.metadata["training"] = summary
