@@ -74,7 +74,7 @@ def level_plan(n: int, base_stride: int, taps: tuple[int, ...] | None = None
     return plan
 
 
-def hier_encode(y: np.ndarray, base_stride: int, lowerable: np.ndarray | None = None, floor: float = -0.5
+def hier_encode(y: np.ndarray, base_stride: int, lowerable: np.ndarray | None = None
                 ) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
     """Code sequences ``y [S, n]`` (already in quantization-step units) along axis 1.
 
@@ -83,8 +83,9 @@ def hier_encode(y: np.ndarray, base_stride: int, lowerable: np.ndarray | None = 
     interpolation of reconstructed neighbours, residual ``r = round(y - pred)``, reconstruction
     ``pred + r`` (no re-rounding, so a sample within half a step of its prediction costs a zero).
     Every reconstructed sample is within 0.5 of ``y``, except where ``lowerable [S, n]`` (bool) is
-    set: there it may reconstruct anywhere in ``[floor, y + 0.5]`` and takes the residual nearest zero
-    that lands there (``y >= floor + 0.5`` keeps that range a step wide). Returns the base residuals
+    set: there it may reconstruct anywhere in ``[-0.5, y + 0.5]`` (what a reader clamping at 0 decodes
+    to at most its own value; ``y >= 0`` keeps that range a step wide) and takes the residual nearest
+    zero that lands there. Returns the base residuals
     ``[S, nb]``, one residual array ``[S, L]`` per level (all int64) and the reconstruction ``[S, n]``
     (float64), as :func:`hier_decode` gives it.
     """
@@ -96,7 +97,7 @@ def hier_encode(y: np.ndarray, base_stride: int, lowerable: np.ndarray | None = 
         r = np.rint(yt[i] - pred)
         if free is None:
             return r
-        nearest_zero = np.clip(0.0, np.ceil(floor - pred), np.floor(yt[i] + 0.5 - pred))
+        nearest_zero = np.clip(0.0, np.ceil(-0.5 - pred), np.floor(yt[i] + 0.5 - pred))
         return np.where(free[i], nearest_zero, r)
 
     rec = np.zeros(yt.shape)

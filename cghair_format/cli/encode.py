@@ -39,10 +39,10 @@ def run(args: argparse.Namespace) -> int:
     asset = read(args.input)
     negligible = None
     if args.views is not None:
-        negligible = _negligible(asset, args.views, args.opacity_budget)
-        print(f"{int(negligible.sum()):,} of {asset.n_gaussians:,} Gaussians carry "
-              f"{args.opacity_budget or DEFAULT_OPACITY_BUDGET:g} of the blend weight of {args.views}'s training "
-              "views: their opacities may be stored lower")
+        budget = DEFAULT_OPACITY_BUDGET if args.opacity_budget is None else args.opacity_budget
+        negligible = _negligible(asset, args.views, budget)
+        print(f"{int(negligible.sum()):,} of {asset.n_gaussians:,} Gaussians carry {budget:g} of the blend "
+              f"weight of {args.views}'s training views: their opacities may be stored lower")
     report = write(asset, args.output, args.profile, keep_order=args.keep_order, negligible=negligible)
     total = sum(report.chunk_sizes.values())
     print(f"wrote {args.output}: profile {report.profile}, {total:,} bytes of chunks, max point error "
@@ -57,11 +57,11 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _negligible(asset, dataset: str, budget: float | None):
+def _negligible(asset, dataset: str, budget: float):
     try:
         from training.dataset import read_dataset
         from training.visibility import negligible_segments
     except ImportError as exc:
         raise MissingDependencyError(exc.name or "torch", "training", "cgh encode --views") from None
     views = read_dataset(dataset).train
-    return negligible_segments(asset, views, DEFAULT_OPACITY_BUDGET if budget is None else budget)
+    return negligible_segments(asset, views, budget)

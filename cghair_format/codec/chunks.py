@@ -66,11 +66,14 @@ def family_payload(family: Family) -> bytes:
 
 
 def appearance_chunks(asset: HairAsset, prof: Profile, quant: dict, negligible: np.ndarray | None = None
-                      ) -> list[container.Chunk]:
-    """OPAC, LOGT, CBKS and MLPW, then the optional chunks: none depends on the point step (the
-    opacities take the file's base stride, ``quant``; quantized, a ``negligible`` segment's may come
-    out anywhere from 0 up to its own, see :func:`.writer.encode`)."""
+                      ) -> list[container.Stored]:
+    """OPAC, LOGT, CBKS and MLPW, then the optional chunks, compressed at the profile's zstd level: none
+    depends on the point step (the opacities take the file's base stride, ``quant``). Quantized, OPAC
+    is also coded with the ``negligible`` segments' opacities anywhere from 0 up to their own (see
+    :func:`.writer.encode`), and the smaller of the two is kept: a barely trained file's smooth
+    opacities can code better as they are than with some samples taken down."""
     opac_w, logt_w, cbks_w, mlp_w = (StreamWriter() for _ in range(4))
+    opac_candidates = [opac_w]
     app = asset.appearance
     if prof.lossless:
         opac_w.array(asset.opacity.astype(np.float32), shuffle=True)
@@ -80,7 +83,12 @@ def appearance_chunks(asset: HairAsset, prof: Profile, quant: dict, negligible: 
             mlp_w.array(layer.weight.astype(np.float32), shuffle=True)
             mlp_w.array(layer.bias.astype(np.float32), shuffle=True)
     else:
-        opac_w = _opacities(asset.opacity * prof.opacity_scale, quant["base_stride"], negligible, prof.zstd_level)
+        opacity = asset.opacity * prof.opacity_scale
+        put_hier(opac_w, opacity, quant["base_stride"])
+        if negligible is not None and negligible.any():
+            lowered = StreamWriter()
+            put_hier(lowered, opacity, quant["base_stride"], negligible)
+            opac_candidates.insert(0, lowered)  # (first: kept where the two tie)
         if app.weight_mode == "hard":
             logt_w.ints(np.argmax(app.logits, axis=1))
         else:
@@ -94,9 +102,12 @@ def appearance_chunks(asset: HairAsset, prof: Profile, quant: dict, negligible: 
         for qw, qb in layers:
             mlp_w.ints(qw)
             mlp_w.ints(qb)
-    chunks = [container.Chunk(t, w.getvalue()) for t, w in
-              (("OPAC", opac_w), ("LOGT", logt_w), ("CBKS", cbks_w), ("MLPW", mlp_w))]
-    return chunks + _optional_chunks(asset)
+    def compress(c: container.Chunk) -> container.Stored:
+        return container.compress(c, prof.zstd_level)
+
+    opac = min((compress(container.Chunk("OPAC", w.getvalue())) for w in opac_candidates), key=lambda c: len(c.body))
+    rest = [container.Chunk(t, w.getvalue()) for t, w in (("LOGT", logt_w), ("CBKS", cbks_w), ("MLPW", mlp_w))]
+    return [opac] + [compress(c) for c in rest + _optional_chunks(asset)]
 
 
 def _optional_chunks(asset: HairAsset) -> list[container.Chunk]:
@@ -117,20 +128,6 @@ def _optional_chunks(asset: HairAsset) -> list[container.Chunk]:
         out.append(container.Chunk("XMET", json.dumps(asset.metadata, allow_nan=False).encode("utf-8"),
                                    required=False))
     return out
-
-
-def _opacities(y: np.ndarray, base_stride: int, negligible: np.ndarray | None, level: int) -> StreamWriter:
-    """OPAC's stream: with ``negligible`` those samples may come out lower (down to -0.5, which decodes
-    to 0), where that compresses smaller; a barely trained file's smooth opacities can code better as
-    they are than with some samples taken down."""
-    plain = StreamWriter()
-    put_hier(plain, y, base_stride)
-    if negligible is None or not negligible.any():
-        return plain
-    lowered = StreamWriter()
-    put_hier(lowered, y, base_stride, negligible)
-    size = {w: len(container.compress(container.Chunk("OPAC", w.getvalue()), level).body) for w in (plain, lowered)}
-    return min((lowered, plain), key=size.get)
 
 
 def lossless_cards(cards: Cards) -> StreamWriter:

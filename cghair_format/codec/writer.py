@@ -165,8 +165,7 @@ def _encode(asset: HairAsset, options: EncodeOptions, negligible: np.ndarray | N
         negligible = negligible[passed.order]
     level, quant = prof.zstd_level, dict(geometry.meta["quant"])
     with ThreadPoolExecutor(max_workers=1) as background:  # zstd on the appearance while STRD is coded
-        appearance = background.submit(lambda: [container.compress(c, level)
-                                                for c in appearance_chunks(asset, prof, quant, negligible)])
+        appearance = background.submit(appearance_chunks, asset, prof, quant, negligible)
         chunks = geometry_chunks(asset, geometry.meta, geometry.cards, geometry.residuals, geometry.family)
         stored = map_threads(lambda c: container.compress(c, level), chunks)
         data = container.assemble(stored + appearance.result())
