@@ -185,3 +185,11 @@ def test_baseline_deltas_invert():
             for i in np.nonzero(within >= k)[0]:
                 d[i] += d[i - 1]
         assert (d == q).all()
+
+
+def test_bench_tables_where_takes_fnmatch_patterns(tmp_path):
+    run, text = _fill(tmp_path, 'Hair: <!-- bench: test_sizes field=bytes where="model=a.*" --><!-- /bench -->.\n'
+                                'None: <!-- bench: test_sizes field=bytes where="model=c*" --><!-- /bench -->.\n')
+    assert run.returncode == 0, run.stderr
+    assert 'Hair: <!-- bench: test_sizes field=bytes where="model=a.*" -->1,000-2,000<!-- /bench -->.' in text
+    assert "None: <!-- bench: test_sizes field=bytes where=\"model=c*\" -->not measured" in text

@@ -17,7 +17,7 @@ becomes a caption (machine, date, load) and a table of the rows of every benchma
 name without its parameters, matches the pattern (fnmatch); a region on one line with ``field=``
 becomes that field's value, or the range of its values over the rows. Options: ``table=`` reads
 ``extra_info[table]`` instead of ``rows``; ``columns=`` picks and orders columns; ``where=`` keeps
-the rows whose column has one of the listed values (several ``where=`` all apply); ``field=`` falls
+the rows whose column has one of the listed values or fnmatch patterns (several ``where=`` all apply); ``field=`` falls
 back on the benchmarks' scalar ``extra_info`` values when no row has the field; ``timing`` adds
 each benchmark's median, min and max seconds and rounds to its rows. The pattern ``@run`` with
 ``field=date``, ``machine`` or ``load`` gives the run's. A pattern that matches nothing
@@ -161,8 +161,13 @@ def _rows(benches: list[dict], opts: dict) -> list[dict]:
         timing = _timing(bench) if opts.get("timing") else {}
         rows += [{**row, **timing} for row in own]
     for column, values in opts["where"]:
-        rows = [r for r in rows if column in r and (_cell(r[column]) in values or str(r[column]) in values)]
+        rows = [r for r in rows if column in r and _matches(r[column], values)]
     return rows
+
+
+def _matches(value, patterns: list[str]) -> bool:
+    """Whether a cell equals one of ``patterns`` or matches it as an fnmatch pattern (``native*``)."""
+    return any(fnmatch.fnmatchcase(text, pattern) for text in {_cell(value), str(value)} for pattern in patterns)
 
 
 def _value(rows: list[dict], field: str) -> str:
