@@ -69,6 +69,10 @@ def read_info(source: Source) -> dict:
     counts = (np.full(meta["strands"], meta["points"]) if counts_info is None else
               read_point_counts(container.payload(data, counts_info), meta["strands"], meta["points"]))
     gaussians = int((counts - 1).sum())
+    if not meta["quant"]["lossless"] and meta["quant"].get("opacity_lowered", 0) > gaussians:
+        raise InvalidContentError(f"META field 'quant.opacity_lowered' is out of range: "
+                                  f"{meta['quant']['opacity_lowered']} (the file holds {gaussians:,} Gaussians)",
+                                  chunk="META", offset=meta_info.offset)
     return {
         "version": f"{version[0]}.{version[1]}", "file_bytes": len(data), "profile": meta["profile"],
         "strands": meta["strands"], "points_per_strand": meta["points"], "gaussians": gaussians,
