@@ -16,6 +16,7 @@ import torch
 
 from cghair_format.asset import HairAsset
 from cghair_format.atomic import atomic_path, write_text
+from cghair_format.codec import EncodeReport
 from cghair_format.errors import CghError
 from cghair_format.profiles import get_profile
 from cghair_format.strands import Strands
@@ -148,7 +149,8 @@ def load_checkpoint(path: str | Path) -> dict:
 
 def choose_export(model: HairModel, base: HairAsset, views: list[View], config: TrainConfig,
                   profile: str, device: str | torch.device = "cpu", backend: str = "reference",
-                  negligible: np.ndarray | None = None, opacity_budget: float | None = None):
+                  negligible: np.ndarray | None = None, opacity_budget: float | None = None
+                  ) -> tuple[HairAsset | None, str | None, dict, EncodeReport | None]:
     """Export with hard and with soft weights, encode each with ``profile`` and the ``negligible`` marks
     as the file will be written (:func:`cghair_format.encode`; its metadata, which codes apart, aside),
     decode it, and keep the one with the higher PSNR on a few training views (rendered on the torch
