@@ -119,6 +119,14 @@ def run(args: argparse.Namespace) -> int:
         print(f"no .cgh written: {why}; wrote {result.out_path.with_suffix('.ckpt.pt')}"
               f" and {result.out_path.with_suffix('.train.json')}", file=sys.stderr)
         return 0
-    print(f"wrote {args.output} ({result.weight_mode} weights; export PSNR hard/soft "
-          + "/".join(f"{result.export_psnr[m]:.2f}" for m in ("hard", "soft")) + " dB on training views)")
+    from cghair_format import read_info
+    from cghair_format.cli.info import opacity_line
+
+    from .train import EXPORT_PROBE_VIEWS
+
+    mode, other = result.weight_mode, "soft" if result.weight_mode == "hard" else "hard"
+    print(f"wrote {args.output}: export PSNR {result.export_psnr[mode]:.2f} dB, this file as decoded ({mode} "
+          f"weights, opacities as stored) on up to {EXPORT_PROBE_VIEWS} training views; with {other} weights "
+          f"{result.export_psnr[other]:.2f} dB")
+    print(f"opacities: {opacity_line(read_info(args.output))}")
     return 0

@@ -16,6 +16,7 @@ import torch
 
 from cghair_format.asset import HairAsset
 from cghair_format.atomic import atomic_path, write_text
+from cghair_format.codec import EncodeReport
 from cghair_format.errors import CghError
 from cghair_format.profiles import get_profile
 from cghair_format.strands import Strands
@@ -47,7 +48,7 @@ class TrainResult:
     config: TrainConfig
     asset: HairAsset | None = None  # the exported asset (None for variants without a .cgh encoding)
     weight_mode: str | None = None  # "soft" or "hard", chosen by measurement
-    export_psnr: dict = field(default_factory=dict)  # weight mode -> PSNR on the probe views
+    export_psnr: dict = field(default_factory=dict)  # weight mode -> PSNR of its file as written, on the probe views
     history: list[dict] = field(default_factory=list)  # iteration, loss, psnr
     seconds: float = 0.0
     stage_seconds: dict = field(default_factory=dict)
@@ -147,29 +148,32 @@ def load_checkpoint(path: str | Path) -> dict:
 
 
 def choose_export(model: HairModel, base: HairAsset, views: list[View], config: TrainConfig,
-                  profile: str, device: str | torch.device = "cpu", backend: str = "reference"
-                  ) -> tuple[HairAsset | None, str | None, dict]:
-    """Export with hard and with soft weights, decode each through the codec with ``profile``, and
-    keep the one with the higher PSNR on a few training views (rendered on the torch ``device``
-    with ``backend``)."""
+                  profile: str, device: str | torch.device = "cpu", backend: str = "reference",
+                  negligible: np.ndarray | None = None, opacity_budget: float | None = None
+                  ) -> tuple[HairAsset | None, str | None, dict, EncodeReport | None]:
+    """Export with hard and with soft weights, encode each with ``profile`` and the ``negligible`` marks
+    as the file will be written (:func:`cghair_format.encode`; its metadata, which codes apart, aside),
+    decode it, and keep the one with the higher PSNR on a few training views (rendered on the torch
+    ``device`` with ``backend``): the asset, its mode, each mode's PSNR and the kept one's EncodeReport."""
     from cghair_format import decode, decode_gaussians, encode
 
     from .backends import render_gaussians
 
     if model.export_refusal() is not None:
-        return None, None, {}
+        return None, None, {}, None
     tau = tau_at(config, config.iterations)
     probe = views[:: max(1, len(views) // EXPORT_PROBE_VIEWS)][:EXPORT_PROBE_VIEWS]
     target, _ = _targets(probe, config.background)
-    scores, assets = {}, {}
+    scores, assets, reports = {}, {}, {}
     for mode in ("hard", "soft"):
         asset = model.to_asset(base, mode, tau)
-        g = decode_gaussians(decode(encode(asset, profile)[0]))
+        data, reports[mode] = encode(asset, profile, negligible=negligible, opacity_budget=opacity_budget)
+        g = decode_gaussians(decode(data))
         rgbs = [render_gaussians(g, v.camera, tuple(config.background), device, backend)["rgb"] for v in probe]
         scores[mode] = losses.psnr(torch.as_tensor(np.stack(rgbs)), target)
         assets[mode] = asset
     best = max(scores, key=scores.get)
-    return assets[best], best, scores
+    return assets[best], best, scores, reports[best]
 
 
 @contextmanager
@@ -342,19 +346,24 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
                          iterations_run=iterations_run, out_path=out_path, backend=backend)
     if end < config.iterations:
         return result
-    asset, mode, scores = choose_export(model, base, ds.train, config, profile, dev, backend)
+    negligible, budget, t0 = None, None, time.perf_counter()  # (an export step, not one of the iterations' stages)
+    if (model.export_refusal() is None and out_path is not None and config.opacity_budget > 0
+            and not get_profile(profile).lossless):  # (the marks rest on geometry and opacity: either mode's)
+        negligible, budget = negligible_segments(model.to_asset(base), ds.train, config.opacity_budget, backend,
+                                                 dev), config.opacity_budget
+    marked_seconds = time.perf_counter() - t0
+    asset, mode, scores, report = choose_export(model, base, ds.train, config, profile, dev, backend, negligible,
+                                                budget)  # scores: the files as written, marks and all
     result.asset, result.weight_mode, result.export_psnr = asset, mode, scores
-    negligible, t0 = None, time.perf_counter()  # (an export step, not one of the iterations' stages)
-    if asset is not None and out_path is not None and config.opacity_budget > 0 and not get_profile(profile).lossless:
-        negligible = negligible_segments(asset, ds.train, config.opacity_budget, backend, dev)
     summary = {
         "config": config.to_dict(), "dataset": dataset_name, "backend": backend, "iterations_run": iterations_run,
         "seconds": round(seconds, 3), "seconds_total": round(seconds_before + seconds, 3),
         "stage_seconds": {k: round(v, 3) for k, v in stage.items()},
         "final": history[-1] if history else None, "weight_mode": mode, "export_psnr": scores,
         "appearance_parameters": model.appearance_parameters(), "gaussians": model.n_gaussians,
-        "negligible_segments": None if negligible is None else int(negligible.sum()),
-        "negligible_seconds": round(time.perf_counter() - t0, 3),
+        # the opacities the writer lowered: none where the plain stream coded smaller
+        "negligible_segments": None if negligible is None else report.opacity.marked if report.opacity.kept else 0,
+        "negligible_seconds": round(marked_seconds, 3),
     }
     if asset is not None:
         asset.metadata["training"] = summary
@@ -364,5 +373,5 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
         if asset is not None:
             from cghair_format import write
 
-            write(asset, out_path, profile, negligible=negligible)
+            write(asset, out_path, profile, negligible=negligible, opacity_budget=budget)
     return result

@@ -9,6 +9,7 @@ import argparse
 from ..errors import CghError, MissingDependencyError
 from ..profiles import DEFAULT_OPACITY_BUDGET, PROFILES
 from .argtypes import share
+from .info import opacity_line
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -37,23 +38,29 @@ def run(args: argparse.Namespace) -> int:
                        "--profile")
     source = read_info(args.input)
     asset = read(args.input)
-    negligible = None
+    negligible, budget = None, None
     if args.views is not None:
         budget = DEFAULT_OPACITY_BUDGET if args.opacity_budget is None else args.opacity_budget
         negligible = _negligible(asset, args.views, budget)
         print(f"{int(negligible.sum()):,} of {asset.n_gaussians:,} Gaussians carry {budget:g} of the blend "
               f"weight of {args.views}'s training views: their opacities may be stored lower")
-    report = write(asset, args.output, args.profile, keep_order=args.keep_order, negligible=negligible)
+    report = write(asset, args.output, args.profile, keep_order=args.keep_order, negligible=negligible,
+                   opacity_budget=budget)
     total = sum(report.chunk_sizes.values())
     print(f"wrote {args.output}: profile {report.profile}, {total:,} bytes of chunks, max point error "
           f"{report.max_point_error:.3g} ({report.max_point_error / max(report.bbox_diagonal, 1e-30):.2e} "
           "of the bbox diagonal)" + ("" if report.strand_order is None else "; strands stored card by card"))
+    if report.opacity is not None:
+        print(report.opacity.summary())
     if not source["quant"]["lossless"]:
         known = PROFILES.get(source["profile"])  # (a profile of the caller's own, written through the API: None)
         bound = (f"up to {known.position_tolerance:.0e} of the bbox diagonal" if known is not None
                  else "a quantization step")
         print(f"note: {args.input} is a {source['profile']} file, so that error is measured against its decoded "
               f"points, which already lie {bound} from the strands it was made from")
+        if source["opacities"]["lowered"] is not None:
+            print(f"note: {args.input} stores opacities lower ({opacity_line(source)}), and {args.output}'s are "
+                  "measured against those")
     return 0
 
 

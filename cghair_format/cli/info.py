@@ -37,6 +37,7 @@ def format_info(name: str, info: dict) -> str:
         f"  scene       thickness {info['thickness']:.3g}, {info['meters_per_unit']:g} m per unit, "
         f"up axis {info['up_axis']}",
         f"  points      {_coding(info['quant'])}",
+        f"  opacities   {opacity_line(info)}",
         f"  generator   {info['generator']}" + (f"; attribution: {info['attribution']}" if info["attribution"] else ""),
         "  chunk  required  codec      stored        raw   share",
     ]
@@ -44,6 +45,25 @@ def format_info(name: str, info: dict) -> str:
         lines.append(f"  {c['type']:<6} {'yes' if c['required'] else 'no':<9} {c['codec']:<5} {c['stored_bytes']:>11,} "
                      f"{c['raw_bytes']:>10,} {100 * c['stored_bytes'] / info['file_bytes']:6.1f}%")
     return "\n".join(lines)
+
+
+def opacity_line(info: dict) -> str:
+    """How near the opacities lie to the writer's input (:func:`.codec.read_info`'s ``opacities``, spec 4.4)."""
+    o = info["opacities"]
+    if not o["within"]:
+        return "stored exactly"
+    within = _fraction(o["within"])
+    if o["lowered"] is None:
+        return f"all within {within} of the writer's input"
+    budget = "" if o["budget"] is None else f" (budget {o['budget']:g})"
+    return (f"{o['lowered']:,} of {info['gaussians']:,} stored lower, down to 0{budget}; others within {within} "
+            "of the writer's input")
+
+
+def _fraction(x: float) -> str:
+    """``x`` as ``1/n`` where that is exact to 4 digits (the profiles' bounds: 1/15, 1/2047), else as is."""
+    n = round(1 / x) if 1e-9 < x <= 1 else 0  # (a hostile file's scale may be anything positive)
+    return f"1/{n}" if n and abs(n * x - 1) < 1e-4 else f"{x:.3g}"
 
 
 GUIDES = ("", ", guided by the card neighbour's steps", ", guided by the card neighbour's steps, scaled",

@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 
 from .argtypes import int_at_least
+from .info import opacity_line
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -24,13 +25,14 @@ def run(args: argparse.Namespace) -> int:
     from ..reference_decoder import compare, evenly_spaced_cards
 
     asset = read(args.file)
+    info = read_info(args.file)
     counts = asset.counts
     points = f"{counts.max()}" if counts.min() == counts.max() else f"{counts.min()}-{counts.max()}"
     print(f"{args.file}: valid .cgh ({asset.n_strands:,} strands of {points} points, {asset.n_gaussians:,} "
-          "Gaussians)")
+          f"Gaussians); opacities: {opacity_line(info)}")
     if not args.reference:
         return 0
-    if read_info(args.file)["quant"]["lossless"]:
+    if info["quant"]["lossless"]:
         print(f"{args.file}: lossless: it stores its points, so there is nothing for the reference decoder to check")
         return 0
     with open(args.file, "rb") as f:

@@ -14,7 +14,7 @@ what they do:
 
 from .layout import FAMILY_CHUNK, KNOWN_CHUNKS, OPTIONAL_CHUNKS, REQUIRED_CHUNKS
 from .reader import decode, read, read_info, read_with_gaussians
-from .writer import EncodeOptions, EncodeReport, encode, write
+from .writer import EncodeOptions, EncodeReport, OpacityMarks, encode, write
 
 __all__ = ["FAMILY_CHUNK", "KNOWN_CHUNKS", "OPTIONAL_CHUNKS", "REQUIRED_CHUNKS", "EncodeOptions", "EncodeReport",
-           "decode", "encode", "read", "read_info", "read_with_gaussians", "write"]
+           "OpacityMarks", "decode", "encode", "read", "read_info", "read_with_gaussians", "write"]

@@ -8,6 +8,7 @@ expects them.
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -19,17 +20,16 @@ from ..quantize import hier_encode, softmax_levels_encode, weights_encode
 from ..residual_coder import NEIGHBOUR_CLASSES, write_residuals
 from ..strand_coder import neighbour_encode, neighbour_order
 from ..streams import StreamReader, StreamWriter
-from . import schema
 from .layout import COUNTS_CHUNK, FAMILY_CHUNK, Family
 from .reader import decode_cards
 
 
 def geometry_chunks(asset: HairAsset, meta: dict, cards_w: StreamWriter, residuals: list[np.ndarray] | None,
                     family: Family | None) -> list[container.Chunk]:
-    """META, CARD and STRD (and CHLD with a ``family``, PCNT where some strand has fewer points) once the
-    step is settled: the ``residuals`` (None: lossless, the card coordinates as float32) go through
+    """CARD and STRD (and CHLD with a ``family``, PCNT where some strand has fewer points) once the step
+    is settled: the ``residuals`` (None: lossless, the card coordinates as float32) go through
     neighbour prediction and the entropy coder, which fill META's ``quant.neighbour`` and
-    ``quant.neighbour_classes``."""
+    ``quant.neighbour_classes`` (the writer stores META last: the opacities add to it)."""
     strd_w = StreamWriter()
     strd_w.ints(np.diff(asset.strand_card.astype(np.int64), prepend=0))
     if residuals is None:
@@ -41,8 +41,7 @@ def geometry_chunks(asset: HairAsset, meta: dict, cards_w: StreamWriter, residua
         meta["quant"]["neighbour_classes"] = write_residuals(strd_w, stored, coded, (NEIGHBOUR_CLASSES, 1))
     groups = asset.cards.group.astype(np.uint16 if asset.appearance.n_groups <= 65536 else np.uint32)
     cards_w.array(groups, shuffle=True)
-    chunks = [container.Chunk("META", schema.dump(meta)), container.Chunk("CARD", cards_w.getvalue()),
-              container.Chunk("STRD", strd_w.getvalue())]
+    chunks = [container.Chunk("CARD", cards_w.getvalue()), container.Chunk("STRD", strd_w.getvalue())]
     if family is not None and len(family.parents):
         chunks.append(container.Chunk(FAMILY_CHUNK, family_payload(family)))
     if asset.variable:
@@ -65,30 +64,45 @@ def family_payload(family: Family) -> bytes:
     return w.getvalue()
 
 
+@dataclass(frozen=True)
+class OpacityMarks:
+    """What the writer did with the opacities marked negligible (:func:`.writer.encode`'s ``negligible``):
+    a quantized profile codes OPAC twice, plain and with the marked opacities anywhere from 0 up to their
+    own (spec 4.4, "Lowered opacities"), and keeps the smaller."""
+
+    marked: int  # the Gaussians marked (placeholders' segments aside)
+    lowered: int  # of those, how many the marked stream stores more than half a step below their own opacity
+    kept: bool  # whether OPAC is the marked stream (then META records ``lowered``, spec 2.1)
+    plain_bytes: int  # OPAC's stored bytes without the marks ...
+    marked_bytes: int | None  # ... and with them (None: no marked stream, lossless or nothing marked)
+    budget: float | None = None  # the share of the blend weight the marks carry, as the caller said
+
+    def summary(self) -> str:
+        """The figures in a line, as ``cgh encode`` prints them."""
+        budget = "" if self.budget is None else f" (budget {self.budget:g})"
+        if self.marked_bytes is None:
+            return (f"opacities: {self.marked:,} marked negligible{budget}; stored plain, every one within the "
+                    "profile's bound (lossless: exact)")
+        verdict = (f"kept the marked stream: {self.lowered:,} stored lower, down to 0" if self.kept else
+                   "kept the plain stream: every opacity within the bound")
+        return (f"opacities: {self.marked:,} marked negligible{budget}; OPAC {self.marked_bytes:,} bytes with the "
+                f"marks, {self.plain_bytes:,} without; {verdict}")
+
+
 def appearance_chunks(asset: HairAsset, prof: Profile, quant: dict, negligible: np.ndarray | None = None
-                      ) -> list[container.Stored]:
+                      ) -> tuple[list[container.Stored], OpacityMarks | None]:
     """OPAC, LOGT, CBKS and MLPW, then the optional chunks, compressed at the profile's zstd level: none
-    depends on the point step (the opacities take the file's base stride, ``quant``). Quantized, OPAC
-    is also coded with the ``negligible`` segments' opacities anywhere from 0 up to their own (see
-    :func:`.writer.encode`), and the smaller of the two is kept: a barely trained file's smooth
-    opacities can code better as they are than with some samples taken down."""
-    opac_w, logt_w, cbks_w, mlp_w = (StreamWriter() for _ in range(4))
-    opac_candidates = [opac_w]
+    depends on the point step (the opacities take the file's base stride, ``quant``); and what became
+    of the ``negligible`` marks (None: none given), :func:`opacity_chunk`."""
+    logt_w, cbks_w, mlp_w = (StreamWriter() for _ in range(3))
     app = asset.appearance
     if prof.lossless:
-        opac_w.array(asset.opacity.astype(np.float32), shuffle=True)
         logt_w.array(app.logits.astype(np.float32), shuffle=True)
         cbks_w.array(app.codebooks.astype(np.float32), shuffle=True)
         for layer in app.mlp:
             mlp_w.array(layer.weight.astype(np.float32), shuffle=True)
             mlp_w.array(layer.bias.astype(np.float32), shuffle=True)
     else:
-        opacity = asset.opacity * prof.opacity_scale
-        put_hier(opac_w, opacity, quant["base_stride"])
-        if negligible is not None and negligible.any():
-            lowered = StreamWriter()
-            put_hier(lowered, opacity, quant["base_stride"], negligible)
-            opac_candidates.insert(0, lowered)  # (first: kept where the two tie)
         if app.weight_mode == "hard":
             logt_w.ints(np.argmax(app.logits, axis=1))
         else:
@@ -102,12 +116,34 @@ def appearance_chunks(asset: HairAsset, prof: Profile, quant: dict, negligible: 
         for qw, qb in layers:
             mlp_w.ints(qw)
             mlp_w.ints(qb)
-    def compress(c: container.Chunk) -> container.Stored:
-        return container.compress(c, prof.zstd_level)
-
-    opac = min((compress(container.Chunk("OPAC", w.getvalue())) for w in opac_candidates), key=lambda c: len(c.body))
+    opac, marks = opacity_chunk(asset, prof, quant, negligible)
     rest = [container.Chunk(t, w.getvalue()) for t, w in (("LOGT", logt_w), ("CBKS", cbks_w), ("MLPW", mlp_w))]
-    return [opac] + [compress(c) for c in rest + _optional_chunks(asset)]
+    return [opac] + [container.compress(c, prof.zstd_level) for c in rest + _optional_chunks(asset)], marks
+
+
+def opacity_chunk(asset: HairAsset, prof: Profile, quant: dict, negligible: np.ndarray | None
+                  ) -> tuple[container.Stored, OpacityMarks | None]:
+    """OPAC, compressed, and what became of the ``negligible`` marks (None: none given). Quantized, OPAC
+    is also coded with the marked opacities anywhere from 0 up to their own (see
+    :func:`.writer.encode`), and the smaller of the two is kept: a barely trained file's smooth
+    opacities can code better as they are than with some samples taken down."""
+    w = StreamWriter()
+    marked = 0 if negligible is None else int(np.count_nonzero(negligible & asset.real_segments()))
+    if prof.lossless:
+        w.array(asset.opacity.astype(np.float32), shuffle=True)
+    else:
+        opacity = asset.opacity * prof.opacity_scale
+        put_hier(w, opacity, quant["base_stride"])
+    plain = container.compress(container.Chunk("OPAC", w.getvalue()), prof.zstd_level)
+    if negligible is None or prof.lossless or not marked:
+        return plain, None if negligible is None else OpacityMarks(marked, 0, False, len(plain.body), None)
+    w = StreamWriter()
+    rec = put_hier(w, opacity, quant["base_stride"], negligible)
+    # a decoder clamps at 0 (spec 4.4): below the bound is more than half a step under the opacity
+    lowered = int(np.count_nonzero((np.maximum(rec, 0) < opacity - 0.5) & negligible & asset.real_segments()))
+    with_marks = container.compress(container.Chunk("OPAC", w.getvalue()), prof.zstd_level)
+    kept = len(with_marks.body) <= len(plain.body)  # (the marked stream where the two tie)
+    return (with_marks if kept else plain), OpacityMarks(marked, lowered, kept, len(plain.body), len(with_marks.body))
 
 
 def _optional_chunks(asset: HairAsset) -> list[container.Chunk]:

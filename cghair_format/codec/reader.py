@@ -69,6 +69,10 @@ def read_info(source: Source) -> dict:
     counts = (np.full(meta["strands"], meta["points"]) if counts_info is None else
               read_point_counts(container.payload(data, counts_info), meta["strands"], meta["points"]))
     gaussians = int((counts - 1).sum())
+    if not meta["quant"]["lossless"] and meta["quant"].get("opacity_lowered", 0) > gaussians:
+        raise InvalidContentError(f"META field 'quant.opacity_lowered' is out of range: "
+                                  f"{meta['quant']['opacity_lowered']} (the file holds {gaussians:,} Gaussians)",
+                                  chunk="META", offset=meta_info.offset)
     return {
         "version": f"{version[0]}.{version[1]}", "file_bytes": len(data), "profile": meta["profile"],
         "strands": meta["strands"], "points_per_strand": meta["points"], "gaussians": gaussians,
@@ -78,10 +82,20 @@ def read_info(source: Source) -> dict:
         "weight_mode": meta["weight_mode"], "mlp": [layer["out"] for layer in meta["mlp"]],
         "thickness": meta["thickness"], "meters_per_unit": meta["meters_per_unit"], "up_axis": meta["up_axis"],
         "generator": meta["generator"], "attribution": meta["attribution"],
-        "bits_per_gaussian": 8 * len(data) / gaussians, "quant": meta["quant"],
+        "bits_per_gaussian": 8 * len(data) / gaussians, "quant": meta["quant"], "opacities": _opacities(meta),
         "chunks": [{"type": i.type, "required": i.required, "codec": ["raw", "zstd"][i.codec],
                     "stored_bytes": i.stored, "raw_bytes": i.raw} for i in infos],
     }
+
+
+def _opacities(meta: dict) -> dict:
+    """How near the file's opacities lie to the writer's input (spec 4.4): each within ``within`` (0:
+    exact), but ``lowered`` of them (None: none; the file records it) more than that lower, down to 0,
+    those of Gaussians that carry ``budget`` of the blend weight together (None: not recorded)."""
+    q = meta["quant"]
+    if q["lossless"]:
+        return {"within": 0.0, "lowered": None, "budget": None}
+    return {"within": 0.5 / q["opacity_scale"], "lowered": q.get("opacity_lowered"), "budget": q.get("opacity_budget")}
 
 
 def read_bytes(source: Source) -> bytes:

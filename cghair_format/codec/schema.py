@@ -80,6 +80,10 @@ def _plain_levels(meta: dict, masks: list) -> str | None:
     return None
 
 
+def _with_lowered(meta: dict, _budget: float) -> str | None:
+    return None if "opacity_lowered" in meta["quant"] else "it describes opacity_lowered, which is missing"
+
+
 def _count(key: str, lo: int, hi: int) -> Field:
     return Field(key, INTEGER, lo, hi)
 
@@ -108,6 +112,11 @@ QUANT_FIELDS = (
     Field("neighbour", LIST, lambda m: _levels(m) + 1, lambda m: _levels(m) + 1,
           item=Field("", INTEGER, 0, 7), when=_quantized, rule=_plain_levels),
     Field("neighbour_classes", INTEGER, 1, MAX_NEIGHBOUR_CLASSES, when=_quantized),
+    # spec 4.4, "Lowered opacities": how many opacities lie below the profile's bound, and the share of the
+    # blend weight their Gaussians carry (both only where the writer stored some so)
+    Field("opacity_lowered", INTEGER, 0, lambda m: m["strands"] * (m["points"] - 1), when=_quantized,
+          optional=True),
+    Field("opacity_budget", NUMBER, 0, 1, when=_quantized, optional=True, rule=_with_lowered),
 )
 
 MLP_LAYER = (Field("out", INTEGER, 1, 1 << 20), Field("activation", STRING, one_of=ACTIVATIONS))

@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 import os
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -28,7 +28,7 @@ from ..streams import StreamWriter
 from . import choices as choosing
 from . import schema
 from .choices import Choices
-from .chunks import appearance_chunks, geometry_chunks, lossless_cards, quantized_cards
+from .chunks import OpacityMarks, appearance_chunks, geometry_chunks, lossless_cards, quantized_cards
 from .layout import Family, prediction, uvd_scale
 
 MIN_CHILD_SHARE = 0.1  # interpolated strands are stored where at least this share of the strands are (below
@@ -74,6 +74,7 @@ class EncodeReport:
     chunk_sizes: dict[str, int] = field(default_factory=dict)  # stored bytes per chunk
     # the file's strand i is the input's strand_order[i] (None: the input's order, kept)
     strand_order: np.ndarray | None = None
+    opacity: OpacityMarks | None = None  # what became of the negligible marks (None: none given)
 
     def in_file_order(self, asset: HairAsset) -> HairAsset:
         """The encoded ``asset`` with its strands in the order the file stores them."""
@@ -85,15 +86,17 @@ class EncodeReport:
 
 
 def write(asset: HairAsset, path: str | os.PathLike, profile: str | Profile = DEFAULT_PROFILE,
-          keep_order: bool = False, negligible: np.ndarray | None = None) -> EncodeReport:
+          keep_order: bool = False, negligible: np.ndarray | None = None,
+          opacity_budget: float | None = None) -> EncodeReport:
     """Write ``asset`` to ``path`` atomically (:mod:`.atomic`); see :func:`encode`."""
-    data, report = encode(asset, profile, keep_order, negligible)
+    data, report = encode(asset, profile, keep_order, negligible, opacity_budget)
     write_bytes(path, data)
     return report
 
 
 def encode(asset: HairAsset, profile: str | Profile = DEFAULT_PROFILE, keep_order: bool = False,
-           negligible: np.ndarray | None = None) -> tuple[bytes, EncodeReport]:
+           negligible: np.ndarray | None = None, opacity_budget: float | None = None
+           ) -> tuple[bytes, EncodeReport]:
     """Serialise a validated asset; returns the bytes and what the quantization measured.
 
     The quantized profiles store the strands card by card, alike strands one after another (spec 4.3),
@@ -105,16 +108,22 @@ def encode(asset: HairAsset, profile: str | Profile = DEFAULT_PROFILE, keep_orde
 
     ``negligible`` (bool ``[S, P-1]``, like ``asset.opacity``) marks segments whose Gaussians hardly
     show (``training.visibility``): a quantized profile may store their opacities anywhere from 0 up
-    to their own, which codes smaller; every other opacity keeps the profile's bound. The lossless
-    profile stores every opacity as it is."""
+    to their own, where that codes smaller; every other opacity keeps the profile's bound. The lossless
+    profile stores every opacity as it is. Where the file stores some lower, META says how many and
+    ``opacity_budget`` (the share of the blend weight the marked Gaussians carry, in [0, 1], if known)
+    (spec 4.4, "Lowered opacities"); ``report.opacity`` has the figures."""
     options = EncodeOptions.of(profile, keep_order)
     if negligible is not None:
         negligible = np.asarray(negligible)
         if negligible.dtype != bool or negligible.shape != np.shape(asset.opacity):
             raise ValueError(f"negligible must be a bool array shaped like the opacities "
                              f"{np.shape(asset.opacity)}, got {negligible.dtype} {negligible.shape}")
+    if opacity_budget is not None and (negligible is None or not 0 <= opacity_budget <= 1):
+        raise ValueError(f"opacity_budget is the share of the blend weight that the negligible marks carry, in "
+                         f"[0, 1], and needs them: got {opacity_budget} with "
+                         f"{'no marks' if negligible is None else 'marks'}")
     with memory.without_huge_pages():
-        return _encode(asset, options, negligible)
+        return _encode(asset, options, negligible, opacity_budget)
 
 
 class _Geometry(NamedTuple):
@@ -151,7 +160,7 @@ class _Passed(NamedTuple):
     order: np.ndarray | None
 
 
-def _encode(asset: HairAsset, options: EncodeOptions, negligible: np.ndarray | None
+def _encode(asset: HairAsset, options: EncodeOptions, negligible: np.ndarray | None, budget: float | None
             ) -> tuple[bytes, EncodeReport]:
     prof = options.profile
     asset = asset.validate().with_placeholders()
@@ -168,10 +177,16 @@ def _encode(asset: HairAsset, options: EncodeOptions, negligible: np.ndarray | N
         appearance = background.submit(appearance_chunks, asset, prof, quant, negligible)
         chunks = geometry_chunks(asset, geometry.meta, geometry.cards, geometry.residuals, geometry.family)
         stored = map_threads(lambda c: container.compress(c, level), chunks)
-        data = container.assemble(stored + appearance.result())
+        appearance, marks = appearance.result()
+    marks = None if marks is None else replace(marks, budget=budget)
+    if marks is not None and marks.kept:  # the record of spec 4.4's "Lowered opacities", in META
+        geometry.meta["quant"].update(opacity_lowered=marks.lowered, **(
+            {} if budget is None else {"opacity_budget": float(budget)}))
+    meta = container.compress(container.Chunk("META", schema.dump(geometry.meta)), level)
+    data = container.assemble([meta] + stored + appearance)
     _, infos = container.read_table(data)
     return data, EncodeReport(prof.name, passed.step, passed.error, diag, {i.type: i.stored for i in infos},
-                              passed.order)
+                              passed.order, marks)
 
 
 def _search_step(input_asset: HairAsset, input_points: np.ndarray, prof: Profile, diag: float, reorder: bool

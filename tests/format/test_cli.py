@@ -74,6 +74,46 @@ def test_encode_of_a_quantized_file_says_what_its_error_is_measured_against(asse
     assert "note:" not in capsys.readouterr().out
 
 
+@pytest.mark.parametrize("profile", ["high", "compact"])
+def test_encode_without_views_keeps_every_opacity_within_the_bound(tmp_path, capsys, profile):
+    """Without --views (and so without an opacity budget) no opacity is lowered: each decodes within the
+    profile's bound of the input's, the file records none lowered, and info and validate say so."""
+    source, out = tmp_path / "src.cgh", tmp_path / "out.cgh"
+    asset = example_asset(2, strands=40, points=12)
+    asset.opacity = np.random.default_rng(1).uniform(0, 1, asset.opacity.shape).astype(np.float32)
+    cgh.write(asset, source, "lossless")
+    assert main(["encode", str(source), "-o", str(out), "--profile", profile]) == 0
+    assert "opacities" not in capsys.readouterr().out
+    prof = cgh.PROFILES[profile]
+    own = cgh.encode(asset, profile)[1].in_file_order(asset).opacity  # (the writer's order: it is deterministic)
+    assert np.abs(cgh.read(out).opacity - own).max() <= prof.opacity_tolerance + 1e-7
+    assert cgh.read_info(out)["opacities"] == {"within": prof.opacity_tolerance, "lowered": None, "budget": None}
+    within = f"all within 1/{round(2 * prof.opacity_scale)} of the writer's input"
+    assert main(["info", str(out)]) == 0 and f"opacities   {within}" in capsys.readouterr().out
+    assert main(["validate", str(out)]) == 0 and f"; opacities: {within}" in capsys.readouterr().out
+    assert main(["encode", str(source), "-o", str(out), "--opacity-budget", "0"]) == 2
+    assert "--opacity-budget needs --views" in capsys.readouterr().err
+
+
+def test_info_and_validate_say_how_many_opacities_are_stored_lower(tmp_path, capsys):
+    asset = example_asset(3, strands=40, points=12)
+    rng = np.random.default_rng(0)
+    asset.opacity = rng.uniform(0, 1, asset.opacity.shape).astype(np.float32)
+    path = tmp_path / "lowered.cgh"
+    report = cgh.write(asset, path, negligible=rng.random(asset.opacity.shape) < 0.8, opacity_budget=0.25)
+    assert report.opacity.kept and report.opacity.lowered > 0
+    line = f"{report.opacity.lowered:,} of 440 stored lower, down to 0 (budget 0.25); others within 1/15"
+    assert main(["info", str(path)]) == 0 and line in capsys.readouterr().out
+    assert main(["validate", str(path)]) == 0 and line in capsys.readouterr().out
+    assert main(["info", str(path), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["opacities"]["lowered"] == report.opacity.lowered
+    assert main(["encode", str(path), "-o", str(tmp_path / "again.cgh")]) == 0
+    assert f"stores opacities lower ({line}" in capsys.readouterr().out
+    lossless = tmp_path / "lossless.cgh"
+    cgh.write(asset, lossless, "lossless")
+    assert main(["info", str(lossless)]) == 0 and "opacities   stored exactly" in capsys.readouterr().out
+
+
 def test_encode_of_a_file_written_with_a_profile_of_ones_own(tmp_path, capsys):
     """A Profile the caller made (its name unknown to the CLI) is stored in META: re-encoding that file
     says what its error is measured against without the profile's bound."""

@@ -75,25 +75,52 @@ def test_round_trip_within_profile_bounds(seed, strands, points, cards, segments
 @pytest.mark.parametrize("profile", ["compact", "high", "lossless"])
 def test_negligible_opacities_are_stored_at_most_as_opaque_and_code_smaller(profile):
     """Marked segments follow the input's strands through the writer's reordering, decode between 0
-    and their own opacity (plus the profile's bound), the rest within the bound; lossless keeps all."""
+    and their own opacity (plus the profile's bound), the rest within the bound; lossless keeps all.
+    The report gives the figures, and META records how many lie below the bound, with the budget."""
     a = example_asset(3, 60, 24, 4, 8, 2, 3, latent_dim=5, hidden=7)
     rng = np.random.default_rng(0)
     a.opacity = rng.uniform(0, 1, a.opacity.shape).astype(np.float32)
     negligible = rng.random(a.opacity.shape) < 0.8
-    data, report = cgh.encode(a, profile, negligible=negligible)
-    b, plain = cgh.decode(data), cgh.decode(cgh.encode(a, profile)[0])
+    data, report = cgh.encode(a, profile, negligible=negligible, opacity_budget=0.1)
+    plain_data, plain_report = cgh.encode(a, profile)
+    b, plain = cgh.decode(data), cgh.decode(plain_data)
     order = np.arange(a.n_strands) if report.strand_order is None else report.strand_order
     own, marked = a.opacity[order], negligible[order]
     bound = cgh.PROFILES[profile].opacity_tolerance if not cgh.PROFILES[profile].lossless else 0
     assert (np.abs(b.opacity - own)[~marked] <= bound + 1e-7).all()
     assert (b.opacity[marked] >= 0).all() and (b.opacity[marked] <= own[marked] + bound + 1e-7).all()
-    sizes = report.chunk_sizes["OPAC"], cgh.encode(a, profile)[1].chunk_sizes["OPAC"]
+    sizes = report.chunk_sizes["OPAC"], plain_report.chunk_sizes["OPAC"]
+    marks, info = report.opacity, cgh.read_info(data)
+    assert plain_report.opacity is None and marks.marked == np.count_nonzero(negligible) and marks.budget == 0.1
+    assert marks.plain_bytes == sizes[1]
     if profile == "lossless":
         assert np.array_equal(b.opacity, plain.opacity) and sizes[0] == sizes[1]
-    else:
-        assert sizes[0] < 0.7 * sizes[1] and (b.opacity[marked] < own[marked] - bound).mean() > 0.3
+        assert not marks.kept and marks.marked_bytes is None and info["opacities"]["lowered"] is None
+        return
+    below = b.opacity < own - bound
+    assert sizes[0] < 0.7 * sizes[1] and below[marked].mean() > 0.3 and not below[~marked].any()
+    assert marks.kept and marks.marked_bytes == sizes[0]
+    assert np.count_nonzero(b.opacity < own - bound - 1e-6) <= marks.lowered <= np.count_nonzero(below)
+    assert info["opacities"] == {"within": bound, "lowered": marks.lowered, "budget": 0.1}
+    assert cgh.read_info(plain_data)["opacities"] == {"within": bound, "lowered": None, "budget": None}
     with pytest.raises(ValueError, match="negligible must be a bool array"):
         cgh.encode(a, profile, negligible=negligible[:, 1:])
+    with pytest.raises(ValueError, match="opacity_budget is the share"):
+        cgh.encode(a, profile, opacity_budget=0.1)
+
+
+def test_marks_that_do_not_pay_leave_the_file_as_without_them():
+    """Smooth opacities (a barely trained file's) code smaller as they are: the writer keeps the plain
+    OPAC, so the file is byte for byte the one without marks, with no record of lowered opacities."""
+    a = example_asset(3, 60, 24, 4, 8, 2, 3, latent_dim=5, hidden=7)
+    a.opacity = np.tile(np.linspace(0.9, 0.3, a.opacity.shape[1]), (a.n_strands, 1)).astype(np.float32)
+    negligible = np.random.default_rng(0).random(a.opacity.shape) < 0.3
+    data, report = cgh.encode(a, "compact", negligible=negligible, opacity_budget=0.1)
+    assert data == cgh.encode(a, "compact")[0]
+    marks = report.opacity
+    assert not marks.kept and marks.marked_bytes > marks.plain_bytes == report.chunk_sizes["OPAC"]
+    assert "kept the plain stream" in marks.summary()
+    assert "opacity_lowered" not in cgh.read_info(data)["quant"] and cgh.read_info(data)["opacities"]["lowered"] is None
 
 
 def test_gaussians_decode_shapes_and_values():

@@ -174,3 +174,25 @@ def test_info_refuses_a_pcnt_of_another_size_before_decompressing_it(varied):
     with pytest.raises(LimitError, match="PCNT") as caught:
         cgh.read_info(container.pack(chunks))
     assert caught.value.chunk == "PCNT"
+
+
+def test_lowered_opacities_count_the_real_gaussians(varied):
+    """A file with PCNT records the lowered opacities of its real Gaussians (spec 4.4): placeholders'
+    segments are never counted, and a count above the real Gaussians is refused naming the field."""
+    import json
+
+    from hostile import with_meta
+
+    rng = np.random.default_rng(3)
+    asset = dataclasses.replace(varied, opacity=rng.uniform(0, 1, varied.opacity.shape).astype(np.float32))
+    data, report = cgh.encode(asset, "compact", negligible=np.ones(asset.opacity.shape, bool), opacity_budget=0.5)
+    info = cgh.read_info(data)
+    assert report.opacity.kept and report.opacity.marked == info["gaussians"] == asset.n_gaussians
+    assert 0 < info["opacities"]["lowered"] == report.opacity.lowered <= info["gaussians"]
+
+    def lowered(count):
+        return lambda text: json.dumps((lambda m: m | {"quant": m["quant"] | {"opacity_lowered": count}})(
+            json.loads(text)))
+
+    with pytest.raises(InvalidContentError, match=r"'quant.opacity_lowered' is out of range: \d+ \(the file holds"):
+        cgh.read_info(with_meta(data, lowered(info["gaussians"] + 1)))

@@ -105,3 +105,15 @@ def test_the_writer_refuses_what_meta_cannot_hold_before_the_long_work(monkeypat
     asset = example_asset(11, strands=4, points=4097, cards=2, segments=5)  # META holds up to 4096 points
     with pytest.raises(AssetError, match="META field 'points' is out of range: 4097"):
         cgh.encode(asset, "compact")
+
+
+def test_an_opacity_budget_without_the_lowered_count_is_refused():
+    """``quant.opacity_budget`` describes ``quant.opacity_lowered`` (spec 4.4): alone it is refused, with it read."""
+    def record(**fields):
+        return lambda text: json.dumps((lambda m: m | {"quant": m["quant"] | fields})(json.loads(text)))
+
+    with pytest.raises(InvalidContentError, match="META field 'quant.opacity_budget' .* opacity_lowered, which is "
+                                                  "missing"):
+        cgh.decode(with_meta(DATA, record(opacity_budget=0.1)))
+    info = cgh.read_info(with_meta(DATA, record(opacity_lowered=3, opacity_budget=0.1)))
+    assert info["opacities"]["lowered"] == 3 and info["opacities"]["budget"] == 0.1

@@ -77,9 +77,10 @@ def test_geometry_frozen_iters_flag(tmp_path, strands_file):
 
 
 def test_opacity_budget_in_train_and_encode(tmp_path, strands_file, capsys, monkeypatch):
-    """cgh train --opacity-budget 0 keeps every opacity within the profile's bound; cgh encode --views
-    then stores the least used lower, in fewer bytes, as cgh train's default does (on opacities as
-    varied as a long run's: a few iterations leave them smooth, and the writer keeps those as they are)."""
+    """cgh train --opacity-budget 0 keeps every opacity within the profile's bound; the default lowers
+    the least used where that codes smaller, and then the file says so, the summary counts them and the
+    export PSNR is the written file's; cgh encode --views stores them lower, in fewer bytes (on opacities
+    as varied as a long run's: a few iterations leave them smooth, and the writer keeps those as they are)."""
     from cghair_format import read, read_info, write
 
     ds = tmp_path / "ds"
@@ -89,19 +90,28 @@ def test_opacity_budget_in_train_and_encode(tmp_path, strands_file, capsys, monk
     kept, lowered, default = tmp_path / "kept.cgh", tmp_path / "lowered.cgh", tmp_path / "default.cgh"
     assert main(["train", str(ds), "--strands", str(strands_file), "-o", str(kept), *common,
                  "--opacity-budget", "0"]) == 0
-    assert main(["train", str(ds), "--cards", str(kept), "-o", str(default), *common, "--iters", "1"]) == 0
+    assert "opacities: all within 1/15 of the writer's input" in capsys.readouterr().out
     assert json.loads(kept.with_suffix(".train.json").read_text())["negligible_segments"] is None
-    assert json.loads(default.with_suffix(".train.json").read_text())["negligible_segments"] > 0
     varied = read(kept)
     varied.opacity = np.random.default_rng(0).uniform(0, 1, varied.opacity.shape).astype(np.float32)
     write(varied, kept)
+    assert main(["train", str(ds), "--cards", str(kept), "-o", str(default), *common, "--iters", "1"]) == 0
+    summary = json.loads(default.with_suffix(".train.json").read_text())
+    opacities = read_info(default)["opacities"]
+    assert summary["negligible_segments"] > 0 and opacities["lowered"] > 0 and opacities["budget"] == 0.1
+    out = capsys.readouterr().out
+    assert f"export PSNR {summary['export_psnr'][summary['weight_mode']]:.2f} dB, this file as decoded" in out
+    assert f"opacities: {opacities['lowered']:,} of " in out
+    assert _probe_psnr(default, ds, summary) == pytest.approx(summary["export_psnr"][summary["weight_mode"]], abs=1e-4)
     capsys.readouterr()
     assert main(["encode", str(kept), "-o", str(lowered), "--views", str(ds), "--opacity-budget", "0.2"]) == 0
-    assert "Gaussians carry 0.2 of the blend weight" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "Gaussians carry 0.2 of the blend weight" in out and "kept the marked stream" in out
     size = {p: {c["type"]: c["stored_bytes"] for c in read_info(p)["chunks"]}["OPAC"] for p in (kept, lowered)}
-    assert size[lowered] < size[kept]
+    assert size[lowered] < size[kept] and f"OPAC {size[lowered]:,} bytes with the marks, {size[kept]:,} without" in out
     before, after = read(kept), read(lowered)
     assert after.opacity.sum() < 0.8 * before.opacity.sum() and after.n_gaussians == before.n_gaussians
+    assert read_info(lowered)["opacities"]["budget"] == 0.2
     for argv, message in ((["--opacity-budget", "0.1"], "--opacity-budget needs --views"),
                           (["--views", str(ds), "--profile", "lossless"], "choose a quantized --profile")):
         assert main(["encode", str(kept), "-o", str(tmp_path / "x.cgh"), *argv]) == 2
@@ -109,6 +119,48 @@ def test_opacity_budget_in_train_and_encode(tmp_path, strands_file, capsys, monk
     monkeypatch.setitem(sys.modules, "training.visibility", None)  # as if torch were not installed
     assert main(["encode", str(kept), "-o", str(tmp_path / "x.cgh"), "--views", str(ds)]) == 2
     assert "pip install 'cghair[training]'" in capsys.readouterr().err
+
+
+def _probe_psnr(path, dataset, summary) -> float:
+    """The PSNR of the file at ``path``, decoded, on the training views the export probe renders."""
+    import torch
+
+    from cghair_format import decode_gaussians, read
+    from training import losses
+    from training.backends import render_gaussians
+    from training.dataset import read_dataset
+    from training.train import EXPORT_PROBE_VIEWS, _targets
+
+    views = read_dataset(dataset).train
+    probe = views[:: max(1, len(views) // EXPORT_PROBE_VIEWS)][:EXPORT_PROBE_VIEWS]
+    background = tuple(summary["config"]["background"])
+    g = decode_gaussians(read(path))
+    rgbs = [render_gaussians(g, v.camera, background, "cpu", summary["backend"])["rgb"] for v in probe]
+    return losses.psnr(torch.as_tensor(np.stack(rgbs)), _targets(probe, background)[0])
+
+
+@pytest.mark.parametrize("profile", ["high", "compact"])
+def test_opacity_budget_0_keeps_every_opacity_within_the_profiles_bound(tmp_path, strands_file, profile):
+    """With --opacity-budget 0 no opacity is lowered: every one in the decoded file lies within the
+    profile's bound of the trained model's, for each quantized profile."""
+    import cghair_format as cgh
+    from training.config import TrainConfig
+    from training.train import train
+
+    ds, cards = tmp_path / "ds", tmp_path / "cards.cgh"
+    assert main(["render-dataset", str(strands_file), "-o", str(ds), "--views", "4", "--res", "16",
+                 "--no-progress"]) == 0
+    assert main(["cards", str(strands_file), "-o", str(cards), "--cards", "6", "--groups", "2", "--points", "6"]) == 0
+    varied = cgh.read(cards)
+    varied.opacity = np.random.default_rng(1).uniform(0.05, 0.95, varied.opacity.shape).astype(np.float32)
+    cgh.write(varied, cards)
+    config = TrainConfig(iterations=2, codebook_size=2, latent_dim=4, mlp_hidden=[8], sh_degree=0,
+                         geometry_frozen_iters=2, opacity_budget=0.0)
+    out = tmp_path / "trained.cgh"
+    result = train(ds, cards=cards, out=out, config=config, profile=profile, progress=False, threads=1)
+    own = cgh.encode(result.asset, profile)[1].in_file_order(result.asset).opacity  # (the writer is deterministic)
+    assert np.abs(cgh.read(out).opacity - own).max() <= cgh.PROFILES[profile].opacity_tolerance + 1e-7
+    assert cgh.read_info(out)["opacities"]["lowered"] is None
 
 
 def test_unique_variant_writes_no_cgh(tmp_path, strands_file, capsys):
