@@ -18,6 +18,7 @@ from cghair_format.limits import ReadLimits, decoded_bytes
 
 MAX_SECONDS = 1.0
 MAX_PEAK = 256 << 20
+pytestmark = pytest.mark.filterwarnings("error")  # refusing bad input must not warn
 
 
 @pytest.fixture(scope="module")
