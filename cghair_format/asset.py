@@ -78,7 +78,7 @@ class Cards:
         _check_array("cards.half_width", self.half_width, (c, m1), "f", MAX_LENGTH)
         _check_array("cards.group", self.group, (c,), "iu")
         _check(bool((self.half_width >= 0).all()), "cards.half_width must be >= 0")
-        norms = np.linalg.norm(self.normal, axis=-1)
+        norms = np.linalg.norm(self.normal.astype(np.float64), axis=-1)  # float64: a float32's square fits
         _check(bool((np.abs(norms - 1) < 1e-3).all()), "cards.normal must be unit vectors")
         _check(bool(((self.group >= 0) & (self.group < n_groups)).all()),
                f"cards.group must lie in [0, {n_groups})")

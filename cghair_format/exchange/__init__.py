@@ -11,6 +11,8 @@ import importlib
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
+
 from ..strands import Strands
 from ._common import StrandFileError, UnsupportedFormatError
 from .cgh_strands import strands_from_asset
@@ -82,7 +84,7 @@ def load_strands(path: str | Path, *, units: float | None = None, up: str | None
 def override(strands: Strands, *, units: float | None = None, up: str | None = None) -> Strands:
     """Set metres-per-unit and up axis where given (the CLI's ``--units`` / ``--up``)."""
     if units is not None:
-        if not units > 0:
+        if not (np.isfinite(units) and units > 0):
             raise UnsupportedFormatError(f"units (metres per unit) must be positive, got {units}")
         strands.meters_per_unit = float(units)
     if up is not None:

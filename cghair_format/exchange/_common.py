@@ -16,6 +16,7 @@ class StrandFileError(CghError, ValueError):
     def __init__(self, path: str | Path, message: str):
         super().__init__(f"{path}: {message}")
         self.path = str(path)
+        self.message = message
 
 
 class UnsupportedFormatError(CghError, ValueError):
@@ -33,9 +34,19 @@ def need(path: str | Path, data: bytes, end: int, what: str) -> None:
         raise StrandFileError(path, f"truncated: {what} needs bytes up to {end}, the file has {len(data)}")
 
 
-def finish(path: str | Path, strands: Strands) -> Strands:
-    """Validate loaded strands, turning an inconsistency into an error that names the file: no strands, a
-    strand without points, a NaN or infinite point, colour or width, arrays that do not fit together."""
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+# what Strands calls each field a loader may fill, as messages name it unless the loader says otherwise
+FIELDS = {"colors": "colours", "widths": "widths", "meters_per_unit": "units (metres per unit)",
+          "root_uv": "root UVs"}
+
+
+def finish(path: str | Path, strands: Strands, fields: dict[str, str] | None = None) -> Strands:
+    """Validate loaded strands, turning an inconsistency into an error that names the file and the field
+    (``fields``: the file's own names for :data:`FIELDS`): no strands, a strand without points, a NaN or
+    infinite point, arrays that do not fit together, units that are not a positive number, colours that
+    are NaN, infinite or negative (those above 1 are clipped), widths that are NaN, infinite, negative
+    or zero along a whole strand, root UVs that are NaN or infinite."""
+    names = FIELDS | (fields or {})
     if strands.count == 0:
         raise StrandFileError(path, "the file holds no strands")
     try:
@@ -45,13 +56,76 @@ def finish(path: str | Path, strands: Strands) -> Strands:
     empty = np.flatnonzero(np.diff(strands.offsets) < 1)
     if len(empty):
         raise StrandFileError(path, f"{len(empty)} strands have no points (the first is strand {int(empty[0])})")
+    strands.meters_per_unit = positive(path, names["meters_per_unit"], strands.meters_per_unit)
     for name, shape in (("colors", (len(strands.points), 3)), ("widths", (len(strands.points),))):
         values = getattr(strands, name)
         if values is not None and values.shape != shape:
-            raise StrandFileError(path, f"point {name} have shape {values.shape}, expected {shape}")
-        if values is not None and not np.isfinite(values).all():
-            raise StrandFileError(path, f"point {name} contain NaN or infinite values")
+            raise StrandFileError(path, f"{names[name]}: shape {values.shape}, expected {shape} (one per point)")
+    if strands.colors is not None:
+        strands.colors = colours(path, names["colors"], strands.colors)
+    if strands.widths is not None:
+        _check_widths(path, names["widths"], strands.widths, strands.offsets)
+    if strands.root_uv is not None and not np.isfinite(strands.root_uv).all():
+        bad = ~np.isfinite(strands.root_uv)
+        raise StrandFileError(path, f"{names['root_uv']}: {_first_bad(strands.root_uv, bad, 'NaN or infinite')}")
     return strands
+
+
+def float32(path: str | Path, field: str, values) -> np.ndarray:
+    """``values`` as float32, refused (naming ``field``) where any is NaN, infinite or beyond float32's
+    range, before the cast would turn it into an infinity (and warn)."""
+    v = np.asarray(values)
+    if v.dtype == np.float32:
+        return v  # NaN and infinities are refused by finish, naming the field
+    wide = v.astype(np.float64)
+    fits = np.abs(wide) <= FLOAT32_MAX  # False for NaN and infinities too
+    if not fits.all():
+        raise StrandFileError(path, f"{field}: {_first_bad(wide, ~fits, 'NaN, infinite or beyond float32')}")
+    return wide.astype(np.float32)
+
+
+def positive(path: str | Path, field: str, value) -> float:
+    """``value`` as a float, refused (naming ``field``) unless it is a finite number above zero: a unit or a
+    scale that is NaN, infinite, zero or negative makes every coordinate meaningless."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError) as exc:
+        raise StrandFileError(path, f"{field} must be a number, got {value!r}") from exc
+    if not (np.isfinite(number) and number > 0):
+        raise StrandFileError(path, f"{field} must be a positive finite number, got {number!r}")
+    return number
+
+
+def nonnegative(path: str | Path, field: str, values) -> np.ndarray:
+    """``values`` as float64, refused (naming ``field``) where any is NaN, infinite or negative."""
+    v = np.asarray(values, np.float64)
+    good = np.isfinite(v) & (v >= 0)
+    if not good.all():
+        raise StrandFileError(path, f"{field}: {_first_bad(v, ~good, 'NaN, infinite or negative')}")
+    return v
+
+
+def colours(path: str | Path, field: str, values: np.ndarray) -> np.ndarray:
+    """Colour values as float32 in [0, 1]: refused (naming ``field``) where any is NaN, infinite or
+    negative; values above 1 (linear HDR colours) are clipped to 1."""
+    return np.minimum(nonnegative(path, field, values), 1.0).astype(np.float32)
+
+
+def _check_widths(path: str | Path, field: str, widths: np.ndarray, offsets: np.ndarray) -> None:
+    """Widths must be finite and >= 0, and above 0 somewhere in every strand (a tip may taper to 0; a
+    strand of no width at all is not hair)."""
+    w = nonnegative(path, field, widths)
+    flat = np.flatnonzero(np.maximum.reduceat(w, offsets[:-1]) <= 0)
+    if len(flat):
+        raise StrandFileError(path, f"{field}: {len(flat)} strands have zero width at every point (the first is "
+                                    f"strand {int(flat[0])})")
+
+
+def _first_bad(values: np.ndarray, bad: np.ndarray, what: str) -> str:
+    """How many entries (rows) of ``values`` are ``bad`` (a mask of their shape), and the first."""
+    rows = np.flatnonzero(bad.reshape(len(bad), -1).any(1))
+    first = np.asarray(values)[rows[0]]
+    return f"{len(rows)} entries hold {what} values (the first is entry {int(rows[0])}: {first.tolist()})"
 
 
 def offsets_from_counts(counts: np.ndarray) -> np.ndarray:

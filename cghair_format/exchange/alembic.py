@@ -68,7 +68,10 @@ def load(path: str | Path) -> Strands:
             run_worker("abc_to_usd", path.resolve(), usd)
         except BlenderRunError as exc:
             raise StrandFileError(path, str(exc)) from exc
-        strands = load_usd(usd)
+        try:
+            strands = load_usd(usd)
+        except StrandFileError as exc:  # name the Alembic file, not Blender's temporary stage
+            raise StrandFileError(path, exc.message) from exc
     return finish(path, strands)
 
 

@@ -6,7 +6,8 @@ f32 default transparency, f32x3 default colour, 88 bytes of text. Arrays follow 
 u16 segments per strand, f32x3 points, f32 thickness, f32 transparency, f32x3 colours.
 The format names no units or up axis. The header's default thickness and colour are not
 applied when their arrays are absent: writers fill them with placeholders (Bangs_100.hair
-says white and 1.0), so only stored per-point arrays become colours and widths.
+says white and 1.0), so only stored per-point arrays become colours and widths (checked as
+:func:`._common.finish` says; colours above 1 are clipped).
 """
 
 from __future__ import annotations
@@ -62,8 +63,8 @@ def load(path: str | Path) -> Strands:
     if bits & BIT_COLORS:
         need(path, data, pos + 12 * n_points, "the colours array")
         colors = np.frombuffer(data, "<f4", 3 * n_points, pos).reshape(-1, 3).astype(np.float32)
-        colors = np.clip(colors, 0.0, 1.0)
-    return finish(path, Strands(points, offsets_from_counts(counts), colors, widths))
+    return finish(path, Strands(points, offsets_from_counts(counts), colors, widths),
+                  {"widths": "the thickness array", "colors": "the colours array"})
 
 
 def save(strands: Strands, path: str | Path) -> None:

@@ -19,12 +19,13 @@ from pathlib import Path
 import numpy as np
 
 from ..gaussians import Gaussians, sh_polynomial
-from ._common import StrandFileError, UnsupportedFormatError, check_scale
+from ._common import FLOAT32_MAX, StrandFileError, UnsupportedFormatError, check_scale
 from ._ply import read_ply, write_ply
 
 OPACITY_EPS = 1e-6  # opacities are clipped to [eps, 1 - eps] so their logit is finite
 MIN_SCALE = 1e-12  # zero scales (zero-length segments) are written as log(MIN_SCALE)
 REST_COUNTS = {0: 0, 9: 1, 24: 2, 45: 3}
+LOG_SCALES = (-87.0, 88.0)  # the log standard deviations whose exponentials are normal float32s
 UP_CHOICES = ("-y", "y", "z")
 DEFAULT_UP = "-y"  # the INRIA / COLMAP convention 3DGS viewers expect
 # rotations taking a y-up frame to each written up axis (column vectors: x' = R x)
@@ -101,6 +102,26 @@ def orient_gaussians(g: Gaussians, r: np.ndarray, scale: float = 1.0) -> Gaussia
                      opacities=g.opacities, sh=sh.astype(np.float32))
 
 
+def _check_values(path: str | Path, d: dict[str, np.ndarray]) -> None:
+    """Refuse, naming the property, a value that is NaN, infinite or beyond float32, a log-scale whose
+    exponential is not a normal float32 (``LOG_SCALES``) and a rotation quaternion of length zero."""
+    for name, values in d.items():
+        fits = np.abs(values) <= FLOAT32_MAX  # False for NaN and infinities too
+        if not fits.all():
+            raise StrandFileError(path, f"vertex property {name!r}: {np.count_nonzero(~fits)} values are NaN, "
+                                        f"infinite or beyond float32 (the first at vertex {int(np.argmin(fits))})")
+    for i in range(3):
+        out = (d[f"scale_{i}"] < LOG_SCALES[0]) | (d[f"scale_{i}"] > LOG_SCALES[1])
+        if out.any():
+            raise StrandFileError(path, f"vertex property 'scale_{i}' (a log standard deviation) must lie in "
+                                        f"{list(LOG_SCALES)}: {np.count_nonzero(out)} values do not (the first "
+                                        f"at vertex {int(np.argmax(out))} is {d[f'scale_{i}'][np.argmax(out)]:g})")
+    zero = ~(np.linalg.norm(np.stack([d[f"rot_{i}"] for i in range(4)], 1), axis=1) > 0)  # tiny ones underflow
+    if zero.any():
+        raise StrandFileError(path, f"vertex properties rot_0..3: {np.count_nonzero(zero)} rotations are zero "
+                                    f"quaternions (the first at vertex {int(np.argmax(zero))})")
+
+
 def write_3dgs_ply(gaussians: Gaussians, path: str | Path, pad_to_degree: int = 3, *, source_up: str = "Y",
                    up: str = DEFAULT_UP, scale: float = 1.0, meters_per_unit: float | None = None) -> None:
     """Write ``gaussians`` (in a ``source_up`` frame of ``meters_per_unit``) turned to ``up`` and
@@ -147,7 +168,8 @@ def read_3dgs_ply(path: str | Path, up: str | None = None) -> Gaussians:
     if v is None or any(n not in v.data for n in need):
         missing = need if v is None else [n for n in need if n not in v.data]
         raise StrandFileError(path, f"not a 3DGS PLY: missing vertex properties {missing}")
-    d = {k: np.asarray(a, np.float64) for k, a in v.data.items()}
+    d = {k: np.asarray(a, np.float64) for k, a in v.data.items() if k in need or k.startswith("f_rest_")}
+    _check_values(path, d)
     n_rest = sum(1 for k in d if k.startswith("f_rest_"))
     if n_rest not in REST_COUNTS:
         raise StrandFileError(path, f"3DGS PLY has {n_rest} f_rest properties; expected 0, 9, 24 or 45")
@@ -160,14 +182,12 @@ def read_3dgs_ply(path: str | Path, up: str | None = None) -> Gaussians:
         rest = np.stack([d[f"f_rest_{j}"] for j in range(n_rest)], 1).reshape(g_count, 3, k - 1)
         sh[:, 1:] = rest.transpose(0, 2, 1)
     q = np.stack([d[f"rot_{i}"] for i in range(4)], 1)
-    norm = np.linalg.norm(q, axis=1, keepdims=True)
-    q = np.where(norm > 0, q / np.maximum(norm, 1e-30), np.array([1.0, 0, 0, 0]))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)  # _check_values refused zero quaternions
     means = np.stack([d["x"], d["y"], d["z"]], 1)
-    if not (np.isfinite(means).all() and np.isfinite(sh).all()):
-        raise StrandFileError(path, "3DGS PLY has NaN or infinite positions or colours")
     g = Gaussians(means=means.astype(np.float32), rotations=q.astype(np.float32),
                   scales=np.exp(np.stack([d[f"scale_{i}"] for i in range(3)], 1)).astype(np.float32),
-                  opacities=(1 / (1 + np.exp(-d["opacity"]))).astype(np.float32), sh=sh.astype(np.float32))
+                  opacities=(0.5 + 0.5 * np.tanh(d["opacity"] / 2)).astype(np.float32),  # sigmoid, never overflows
+                  sh=sh.astype(np.float32))
     if up is None:
         return g
     stated = [c[len(UP_COMMENT):].strip() for c in ply.comments if c.startswith(UP_COMMENT)]

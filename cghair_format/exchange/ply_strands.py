@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ..strands import Strands
-from ._common import StrandFileError, finish, offsets_from_counts
+from ._common import StrandFileError, finish, float32, offsets_from_counts
 from ._ply import read_ply, write_ply
 
 DEFAULT_FIXED_COUNT = 100
@@ -41,18 +41,19 @@ def load(path: str | Path, points_per_strand: int | None = None) -> Strands:
     if "f_dc_0" in v and "strand" not in ply.elements:
         raise StrandFileError(path, "this is a 3D Gaussian splat PLY, not strands: read it with "
                                     "read_3dgs_ply, or convert it with cgh export FILE -o out.usda")
-    points = np.stack([v["x"], v["y"], v["z"]], 1).astype(np.float32)
+    points = float32(path, "vertex x, y, z", np.stack([v["x"], v["y"], v["z"]], 1))
     n = len(points)
     counts = _strand_counts(path, ply, v, n, points_per_strand)
     if int(counts.sum()) != n or (counts < 1).any():
         raise StrandFileError(path, f"strand sizes add up to {int(counts.sum())} vertices, the file has {n}")
     colors = _colors(v)
-    widths = None
+    widths, fields = None, {"colors": "vertex colours"}
     for name in ("thickness", "width"):
         if name in v:
-            widths = np.asarray(v[name], np.float32)
+            fields["widths"] = f"vertex property {name!r}"
+            widths = float32(path, fields["widths"], v[name])
             break
-    return finish(path, Strands(points, offsets_from_counts(counts), colors, widths))
+    return finish(path, Strands(points, offsets_from_counts(counts), colors, widths), fields)
 
 
 def _strand_counts(path, ply, v, n: int, points_per_strand: int | None) -> np.ndarray:
@@ -120,7 +121,7 @@ def _colors(v: dict) -> np.ndarray | None:
             c = np.stack([np.asarray(v[k]) for k in names], 1)
             if np.issubdtype(c.dtype, np.integer):
                 return (c.astype(np.float32) / np.iinfo(c.dtype).max).astype(np.float32)
-            return np.clip(c, 0, 1).astype(np.float32)
+            return c.astype(np.float64)  # checked and clipped to [0, 1] by finish
     return None
 
 

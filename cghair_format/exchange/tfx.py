@@ -21,7 +21,7 @@ import numpy as np
 
 from ..atomic import atomic_open
 from ..strands import Strands
-from ._common import StrandFileError, finish, need, offsets_from_counts, read_bytes, warn
+from ._common import StrandFileError, finish, float32, need, offsets_from_counts, positive, read_bytes, warn
 
 HEADER = struct.Struct("<fIIIIIII32I")  # 160 bytes (TressFX 4)
 V3_HEADER_SIZE = 296
@@ -61,7 +61,7 @@ def _load_binary(path: str | Path, data: bytes) -> Strands:
         if not root_uv.any():  # writers that have no UVs fill zeros
             root_uv = None
     return finish(path, Strands(points, np.arange(n_strands + 1, dtype=np.int64) * n_per, up_axis="Y",
-                                root_uv=root_uv))
+                                root_uv=root_uv), {"root_uv": "strand UVs"})
 
 
 def _load_ascii(path: str | Path, data: bytes) -> Strands:
@@ -78,11 +78,14 @@ def _load_ascii(path: str | Path, data: bytes) -> Strands:
         i += 1
     try:
         declared = int(header["numStrands"][0])
-        scale = float(header.get("scale", ["1"])[0])
+        scale = positive(path, "header 'scale'", header.get("scale", ["1"])[0])
         translation = np.array([float(v) for v in header.get("translation", ["0", "0", "0"])[:3]])
         rotation = [float(v) for v in header.get("rotation", ["0", "0", "0"])[:3]]
     except (KeyError, IndexError, ValueError) as exc:
         raise StrandFileError(path, f"TressFX ASCII header is missing or garbles {exc}") from exc
+    if not np.isfinite(translation).all() or not np.isfinite(rotation).all():
+        raise StrandFileError(path, f"header 'translation' {translation.tolist()} or 'rotation' {rotation} is "
+                                    "NaN or infinite")
     if any(rotation):
         warn(f"{path}: TressFX header rotation {rotation} is ignored")
     counts, blocks, uvs = [], [], []
@@ -102,7 +105,7 @@ def _load_ascii(path: str | Path, data: bytes) -> Strands:
             raise StrandFileError(path, f"line {i + 1}: strand {parts[1]} declares {c} points, "
                                         f"the file has {len(lines) - i - 1} lines left (truncated?)")
         try:
-            block = np.array([ln.split() for ln in lines[i + 1:i + 1 + c]], dtype=np.float32)
+            block = np.array([ln.split() for ln in lines[i + 1:i + 1 + c]], dtype=np.float64)
         except ValueError:
             raise StrandFileError(path, f"lines {i + 2}..{i + 1 + c}: point lines must hold 3 numbers "
                                         f"(strand {parts[1]})") from None
@@ -118,11 +121,12 @@ def _load_ascii(path: str | Path, data: bytes) -> Strands:
     if len(counts) != declared:
         raise StrandFileError(path, f"header declares {declared} strands, the file holds {len(counts)} "
                                     "(truncated?)")
-    points = np.concatenate(blocks) * scale + translation
+    points = float32(path, "points (after the header's scale and translation)",
+                     np.concatenate(blocks) * scale + translation)
     offsets = offsets_from_counts(np.array(counts))
-    root_uv = np.array(uvs, np.float32).reshape(-1, 2)
-    return finish(path, Strands(points.astype(np.float32), offsets, up_axis="Y",
-                                root_uv=root_uv if root_uv.any() else None))
+    root_uv = float32(path, "texcoord", np.array(uvs, np.float64).reshape(-1, 2))
+    return finish(path, Strands(points, offsets, up_axis="Y", root_uv=root_uv if root_uv.any() else None),
+                  {"root_uv": "texcoord"})
 
 
 def save(strands: Strands, path: str | Path) -> None:

@@ -18,7 +18,16 @@ import numpy as np
 
 from ..errors import require
 from ..strands import Strands
-from ._common import StrandFileError, finish, linear_to_srgb, offsets_from_counts, read_bytes
+from ._common import (
+    StrandFileError,
+    colours,
+    finish,
+    float32,
+    linear_to_srgb,
+    nonnegative,
+    offsets_from_counts,
+    read_bytes,
+)
 
 CUBIC_SAMPLES = 4
 BASIS = {
@@ -70,7 +79,10 @@ def load(path: str | Path) -> Strands:
         kw["meters_per_unit"] = float(UsdGeom.GetStageMetersPerUnit(stage))
     if stage.HasAuthoredMetadata("upAxis"):
         kw["up_axis"] = str(UsdGeom.GetStageUpAxis(stage))
-    return finish(path, Strands(points.astype(np.float32), offsets_from_counts(counts), colors, widths, **kw))
+    strands = Strands(float32(path, "points (in world space)", points), offsets_from_counts(counts), colors,
+                      widths, **kw)
+    return finish(path, strands, {"meters_per_unit": "metersPerUnit", "colors": "displayColor / groom_color",
+                                  "widths": "widths"})
 
 
 def _usd_message(exc: Exception) -> str:
@@ -119,16 +131,18 @@ def _curves(path, curves, time):
     if color_pv is not None:
         raw = np.asarray(color_pv.ComputeFlattened(time), np.float64)
         raw = raw.reshape(len(raw), -1)[:, :3]  # color3f, or color4f (Blender writes groom_color as RGBA)
-        colors = _per_point(path, prim_path, raw, color_pv.GetInterpolation(), cnt, plan, ctype)
-        colors = np.clip(colors, 0, 1).astype(np.float32)
+        raw = colours(path, f"{prim_path} primvars:{color_pv.GetPrimvarName()}", raw)
+        colors = np.clip(_per_point(path, prim_path, raw, color_pv.GetInterpolation(), cnt, plan, ctype), 0, 1)
         if not color_pv.GetAttr().GetColorSpace().startswith("srgb"):
             colors = linear_to_srgb(colors)
     widths = None
     wattr = curves.GetWidthsAttr()
     w = wattr.Get(time)
     if w is not None and len(w):
-        widths = _per_point(path, prim_path, np.asarray(w, np.float64).reshape(-1, 1),
-                            curves.GetWidthsInterpolation(), cnt, plan, ctype)[:, 0].astype(np.float32)
+        w = nonnegative(path, f"{prim_path} widths", w).reshape(-1, 1)
+        # a cubic through widths that fall to 0 can dip below it: clamp (finish refuses negative widths)
+        widths = np.maximum(_per_point(path, prim_path, w, curves.GetWidthsInterpolation(), cnt, plan, ctype)[:, 0],
+                            0).astype(np.float32)
     if plan is None:
         return pts, cnt, colors, widths
     return _eval_cubic(pts, plan), plan["counts"], colors, widths

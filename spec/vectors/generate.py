@@ -83,6 +83,15 @@ def _differs(data: bytes, change: dict) -> None:
 def main() -> None:
     minimal = example_asset(1, strands=3, points=2, cards=1, segments=1, groups=1, k=1, latent_dim=1, hidden=1,
                             sh_degree=0, weight_mode="hard")
+    compact = _small_vectors(minimal)
+    built = _synth_vectors()
+    children, family = _children_vector(built)
+    counts_file = _variable_counts_vector(built)
+    _reject_vectors(minimal, compact, children, family, counts_file)
+
+
+def _small_vectors(minimal) -> bytes:
+    """The minimal and small example assets' vectors; returns the small compact file."""
     small = example_asset(0)
     _expected("minimal_lossless", cgh.encode(minimal, "lossless")[0])
     _expected("minimal_compact", cgh.encode(minimal, "compact")[0])
@@ -99,6 +108,11 @@ def main() -> None:
     _expected("optional_chunks", _rechunk(cgh.encode(extras, "compact")[0],
                                           lambda c: c + [container.Chunk("ZEXT", b"future data", required=False)]))
     _expected("newer_minor", container.rewrite_header(compact, minor=9))
+    return compact
+
+
+def _synth_vectors():
+    """Grown hair on built cards, straight and curly; returns the straight asset."""
     # real-looking hair: grown strands on built cards, for which the writer picks the world-guided
     # (Newton) prediction of spec section 4.3 (the assertion below keeps it so), with guided base samples
     from cghair_format.cards import build_cards
@@ -128,25 +142,35 @@ def main() -> None:
                    {"level_guide": 0}):
         _differs(data, change)
     _expected("synth_curly_compact", data)
-    # interpolated strands (spec 4.5): half the strands are blends of others, plain and resampled; a
-    # decoder that takes none, or resamples none, gets other points
+    return built
+
+
+def _children_vector(built):
+    """Interpolated strands (spec 4.5): half the strands are blends of others, plain and resampled; a
+    decoder that takes none, or resamples none, gets other points. Returns the file and its family."""
     data = cgh.encode(with_interpolated_strands(built, seed=4), "compact")[0]
     assert _quant(data)["children"] > 0
     family = cgh.codec.reader.read_family(container.unpack(data, set(cgh.codec.KNOWN_CHUNKS))[2]["CHLD"],
-                                    96 - _quant(data)["children"], _quant(data)["children"])
+                                          96 - _quant(data)["children"], _quant(data)["children"])
     assert family.respaced.any() and not family.respaced.all()
     _differs(data, {"children": 0})
     _expected("synth_children_compact", data)
-    children = data
-    # strands of their own point counts (spec 3, PCNT), with source colours: placeholders decode as any point
-    # (section 4) and are then dropped with their Gaussians, SH sets and colours
+    return data, family
+
+
+def _variable_counts_vector(built) -> bytes:
+    """Strands of their own point counts (spec 3, PCNT), with source colours: placeholders decode as any
+    point (section 4) and are then dropped with their Gaussians, SH sets and colours."""
     varied = with_point_counts(built, seed=5)
     varied.source_color = np.linspace(0, 1, varied.uvd.size, dtype=np.float32).reshape(varied.uvd.shape)
     data = cgh.encode(varied, "compact")[0]
     assert cgh.read_info(data)["version"] == "2.1" and cgh.decode(data).variable
     _expected("variable_counts_compact", data)
-    counts_file = data
+    return data
 
+
+def _reject_vectors(minimal, compact: bytes, children: bytes, family, counts_file: bytes) -> None:
+    """The must-reject files and reject.json."""
     reject = {}
 
     def bad(name: str, data: bytes, error: str, fragment: str) -> None:

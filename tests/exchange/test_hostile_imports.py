@@ -1,5 +1,6 @@
-"""Crafted and mutated strand files (issue 21): every importer refuses them with a StrandFileError naming
-the file, checks sizes before it allocates (peak traced memory), and takes under a second."""
+"""Crafted and mutated strand files (issues 21, 35): every importer refuses them with a StrandFileError naming
+the file (and the field at fault), checks sizes before it allocates (peak traced memory), takes under a
+second and raises no warning on the way (the module runs with warnings as errors)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,8 @@ import struct
 import time
 import tracemalloc
 import zipfile
+import zlib
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,9 +18,12 @@ import pytest
 from cghair_format.errors import CghError
 from cghair_format.exchange import StrandFileError, load_strands, save_strands
 from cghair_format.exchange.hair import HEADER as HAIR_HEADER
+from cghair_format.limits import ReadLimits, set_default_limits
 
 MAX_SECONDS = 1.0
 MAX_TRACED = 64 << 20
+
+pytestmark = pytest.mark.filterwarnings("error")
 
 
 def _refused(path, match: str | None = None) -> StrandFileError:
@@ -41,34 +47,6 @@ def test_hair_header_cannot_allocate_beyond_the_file(tmp_path):
     path = tmp_path / "big.hair"
     path.write_bytes(HAIR_HEADER.pack(b"HAIR", 1 << 30, (1 << 32) - 1, 2, 3, 1.0, 1.0, 1, 1, 1, b""))
     _refused(path, "cannot hold")
-
-
-def _hair(tmp_path, small_strands, name, edit):
-    path = tmp_path / name
-    edit(small_strands)
-    save_strands(small_strands, path)
-    return path
-
-
-def test_nan_widths_and_colours_are_refused(tmp_path, small_strands):
-    def nan_width(s):
-        s.widths[3] = np.nan
-
-    def nan_colour(s):
-        s.colors = s.colors.copy()
-        s.colors[4, 1] = np.nan
-
-    _refused(_hair(tmp_path, small_strands, "w.hair", nan_width), "widths contain NaN")
-    path = tmp_path / "c.hair"
-    save_strands(small_strands, path)  # the writer clips nothing: poke the NaN into the colours array
-    raw = bytearray(path.read_bytes())
-    raw[-12 * 5 + 4:-12 * 5 + 8] = struct.pack("<f", np.nan)
-    path.write_bytes(bytes(raw))
-    _refused(path, "colors contain NaN")
-    nan_colour(small_strands)
-    path = tmp_path / "c.npz"
-    save_strands(small_strands, path)
-    _refused(path, "colors contain NaN")
 
 
 def test_zero_point_strands_are_refused(tmp_path):
@@ -108,6 +86,101 @@ def test_npz_whose_header_declares_a_huge_array(tmp_path):
     _refused(path, "declares")
 
 
+def _member(name: str, stored: bytes, raw: int, crc: int, method: int) -> tuple[bytes, bytes]:
+    """A zip member (its local header and ``stored`` bytes) and its central directory entry (local header
+    offset 0: :func:`_zip` fills it in); ``method`` 0 stores, 8 deflates."""
+    encoded = name.encode()
+    fields = (method, 0, 0, crc, len(stored), raw, len(encoded), 0)
+    local = struct.pack("<IHHHHHIIIHH", 0x04034B50, 20, 0, *fields) + encoded + stored
+    central = struct.pack("<IHHHHHHIIIHHHHHII", 0x02014B50, 20, 20, 0, *fields, 0, 0, 0, 0, 0) + encoded
+    return local, central
+
+
+def _stored(name: str, data: bytes) -> tuple[bytes, bytes]:
+    return _member(name, data, len(data), zlib.crc32(data), 0)
+
+
+def _zeros_member(name: str, header: bytes, mib: int) -> tuple[bytes, bytes]:
+    """A deflated member ``name`` holding ``header`` then zeros up to ``mib`` MiB, in about 1 KB per MiB.
+    The deflate stream is written a block at a time (each MiB ends in a full flush, so every block after
+    the first is the same bytes) instead of compressing a gigabyte; the CRC is left 0, as a reader must
+    refuse the member before it inflates its data."""
+    z = zlib.compressobj(9, zlib.DEFLATED, -15)
+    first = z.compress(header + bytes((1 << 20) - len(header))) + z.flush(zlib.Z_FULL_FLUSH)
+    block = z.compress(bytes(1 << 20)) + z.flush(zlib.Z_FULL_FLUSH)
+    return _member(name, first + block * (mib - 1) + z.flush(), mib << 20, 0, 8)
+
+
+def _zip(members: list[tuple[bytes, bytes]]) -> bytes:
+    """A zip archive of members (each central entry's local header offset filled in)."""
+    body, central = b"", b""
+    for local, entry in members:
+        central += entry[:42] + struct.pack("<I", len(body)) + entry[46:]
+        body += local
+    end = struct.pack("<IHHHHIIH", 0x06054B50, 0, 0, len(members), len(members), len(central), len(body), 0)
+    return body + central + end
+
+
+def _npy_header(shape: tuple, descr: str = "<f4") -> bytes:
+    head = io.BytesIO()
+    np.lib.format.write_array_header_1_0(head, {"descr": descr, "fortran_order": False, "shape": shape})
+    return head.getvalue()
+
+
+GIB_POINTS = ((1 << 30) // 12, 3)  # a gigabyte of float32 points: 89 million, beyond the 2^24 Gaussians limit
+
+
+def _bomb_refused(path: Path, match: str) -> None:
+    """Refused in under a second within a small multiple of the file's own size (traced)."""
+    tracemalloc.start()
+    start = time.perf_counter()
+    try:
+        with pytest.raises(StrandFileError, match=match):
+            load_strands(path)
+    finally:
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+    seconds = time.perf_counter() - start
+    assert seconds < MAX_SECONDS, seconds
+    assert peak < 4 * path.stat().st_size, (peak, path.stat().st_size)
+
+
+def test_npz_that_inflates_to_a_gigabyte_is_refused_before_inflating(tmp_path):
+    """1 MB on disk, 1 GiB of points inflated (honestly declared by its .npy header and the zip's central
+    directory): more points than the reader's Gaussian limit allows."""
+    path = tmp_path / "bomb.npz"
+    path.write_bytes(_zip([_zeros_member("points.npy", _npy_header(GIB_POINTS), 1024),
+                           _stored("offsets.npy", _npy(np.array([0, GIB_POINTS[0]])))]))
+    assert path.stat().st_size < 2 << 20
+    _bomb_refused(path, "declares 268,435,455 values, more than the 50,331,649 that this reader's limit of "
+                        "16,777,216 points allows")
+
+
+def test_npz_beyond_the_decoded_bytes_limit_is_refused(tmp_path):
+    path = tmp_path / "wide.npz"
+    offsets = _npy(np.array([0, 1 << 20]))
+    path.write_bytes(_zip([_zeros_member("points.npy", _npy_header((1 << 20, 3), "<f8"), 24),
+                           _stored("offsets.npy", offsets)]))
+    set_default_limits(ReadLimits(max_decoded_bytes=16 << 20))
+    try:
+        _bomb_refused(path, f"inflate to {(24 << 20) + len(offsets):,} bytes, more than this reader's limit of "
+                            "16,777,216")
+    finally:
+        set_default_limits(ReadLimits())
+
+
+def test_npz_members_it_does_not_read_are_not_inflated(tmp_path):
+    """A gigabyte of zeros in a member the importer does not know is never inflated: the file loads fast."""
+    path = tmp_path / "extra.npz"
+    points = np.zeros((4, 3), np.float32)
+    points[:, 1] = np.arange(4)
+    path.write_bytes(_zip([_stored("points.npy", _npy(points)), _stored("offsets.npy", _npy(np.array([0, 2, 4]))),
+                           _zeros_member("junk.npy", _npy_header(GIB_POINTS), 1024)]))
+    start = time.perf_counter()
+    assert load_strands(path).count == 2
+    assert time.perf_counter() - start < MAX_SECONDS
+
+
 def _npy(a: np.ndarray) -> bytes:
     out = io.BytesIO()
     np.save(out, a)
@@ -117,7 +190,9 @@ def _npy(a: np.ndarray) -> bytes:
 @pytest.mark.parametrize("arrays, match", [
     ({"points": np.array([["a", "b", "c"]]), "offsets": np.array([0, 1])}, "not a real number type"),
     ({"points": np.zeros((2, 3), np.float32), "offsets": np.array([0, 2]), "meters_per_unit": np.ones(3)},
-     "wrong type"),
+     "must hold one value"),
+    ({"points": np.zeros((2, 3), np.float32), "offsets": np.array([0, 2]), "up_axis": np.str_("Y" * 100)},
+     "not a short string"),
     ({"points": np.zeros((2, 3), np.float32), "offsets": np.array([0, 2]), "widths": np.ones((2, 2))}, "shape"),
     ({"points": np.zeros((2, 3), np.complex64), "offsets": np.array([0, 2])}, "not a real number type"),
 ])

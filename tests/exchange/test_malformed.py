@@ -12,6 +12,7 @@ from cghair_format.errors import CghError
 from cghair_format.exchange import StrandFileError, UnsupportedFormatError, load_strands, save_strands
 
 CUTS = (0, 3, 64, 127, 0.25, 0.5, 0.9)
+pytestmark = pytest.mark.filterwarnings("error")  # refusing bad input must not warn
 
 
 def _cut_points(size: int) -> list[int]:

@@ -17,6 +17,7 @@ import cghair_format as cgh
 from cghair_format.examples import example_asset
 
 MAX_SECONDS = 1.0
+pytestmark = pytest.mark.filterwarnings("error")  # refusing bad input must not warn
 
 
 @pytest.fixture(scope="module")
@@ -86,7 +87,6 @@ def test_mutated_files_never_return_an_asset_with_bad_values(small_file):
         asset.validate()  # a flip that still decodes must give a consistent asset
 
 
-@pytest.mark.filterwarnings("error")
 @pytest.mark.parametrize("chunk", ["META", "CARD", "STRD", "OPAC", "LOGT", "CBKS", "MLPW"])
 def test_resealed_garbage_is_refused_or_decodes(small_file, chunk):
     """Checksums catch accidents; a file re-sealed after a chunk's payload was changed (valid CRCs)

@@ -1,6 +1,7 @@
 """Crafted hostile files (tests/hostile.py, issue 21): each is refused with a CghFormatError that names
 a chunk and a byte offset, within 1 s and 256 MB above the process's resident memory; reader limits."""
 
+import dataclasses
 import json
 import os
 import subprocess
@@ -18,6 +19,7 @@ from cghair_format.limits import ReadLimits, decoded_bytes
 
 MAX_SECONDS = 1.0
 MAX_PEAK = 256 << 20
+pytestmark = pytest.mark.filterwarnings("error")  # refusing bad input must not warn
 
 
 @pytest.fixture(scope="module")
@@ -57,6 +59,28 @@ def test_a_file_within_the_limits_decodes():
         cgh.decode(data, ReadLimits(max_decoded_bytes=need - 1))
     with pytest.raises(cgh.CghFormatError, match="max-gaussians"):
         cgh.read(data, ReadLimits(max_gaussians=263))
+
+
+def _array_bytes(obj) -> int:
+    """The bytes of every numpy array in ``obj``, its dataclass fields and lists, counted one by one."""
+    if isinstance(obj, np.ndarray):
+        return obj.nbytes
+    if dataclasses.is_dataclass(obj):
+        return sum(_array_bytes(getattr(obj, f.name)) for f in dataclasses.fields(obj))
+    if isinstance(obj, (list, tuple)):
+        return sum(_array_bytes(x) for x in obj)
+    return 0
+
+
+@pytest.mark.parametrize("profile", ["compact", "high", "lossless"])
+def test_the_limit_counts_what_the_decoder_returns(profile):
+    """decoded_bytes (what the limits compare) against the arrays a decode really returns, measured: an
+    undercount would let a file past --max-decoded-mb; the limit tests above take decoded_bytes on trust."""
+    data = small_file(profile)
+    meta = json.loads(container.unpack(data, set(cgh.codec.KNOWN_CHUNKS), {"META"})[2]["META"])
+    asset, gaussians = cgh.read_with_gaussians(data)
+    assert _array_bytes(asset) == decoded_bytes(meta, gaussians=False)
+    assert _array_bytes(asset) + _array_bytes(gaussians) == decoded_bytes(meta, gaussians=True)
 
 
 def test_the_cli_raises_the_limits(tmp_path, capsys):

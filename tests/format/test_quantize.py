@@ -22,11 +22,13 @@ from cghair_format.quantize import (
 )
 
 
-@given(st.lists(st.integers(-2**62, 2**62), min_size=1, max_size=50))
+@given(st.lists(st.integers(-2**63, 2**63 - 1), min_size=1, max_size=50))
 def test_zigzag_is_exact_inverse(values):
+    """Over the whole int64 range (its ends are where a shift would overflow): 0, -1, 1, -2 ... map to
+    0, 1, 2, 3 ... (Python's integers, which do not overflow, are the oracle) and back."""
     x = np.array(values, np.int64)
+    assert zigzag(x).tolist() == [2 * v if v >= 0 else -2 * v - 1 for v in values]
     assert (unzigzag(zigzag(x)) == x).all()
-    assert (zigzag(x) >= 0).all()
 
 
 @settings(max_examples=60, deadline=None)
@@ -99,7 +101,6 @@ def test_hierarchical_coder_zeroes_smooth_curves():
     assert np.mean(np.concatenate(levels, axis=1) == 0) > 0.9
 
 
-@settings(max_examples=30, deadline=None)
 def _twisting_cards(seed: int, cards: int = 5, points: int = 33):
     """Spines that wander and turn, with unit normals across them that twist along each card."""
     rng = np.random.default_rng(seed)
@@ -109,6 +110,7 @@ def _twisting_cards(seed: int, cards: int = 5, points: int = 33):
     return spine, np.cos(twist) * r + np.sin(twist) * np.cross(t, r)
 
 
+@settings(max_examples=30, deadline=None)
 @given(seed=st.integers(0, 10**6), bits=st.integers(8, 24))
 def test_normal_angles_within_bound(seed, bits):
     spine, normal = _twisting_cards(seed)

@@ -1,5 +1,5 @@
-"""The conformance vectors in spec/vectors: valid files decode to their expected values, must-reject
-files raise the named error."""
+"""The conformance vectors in spec/vectors: valid files decode to their expected values, which a second,
+independent computation confirms; must-reject files raise the named error."""
 
 import json
 import re
@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 import cghair_format as cgh
-from cghair_format import errors
+from cghair_format import container, errors, reference_decoder
 from cghair_format.geometry import strand_points
+from cghair_format.streams import StreamReader
 
 VECTORS = Path(__file__).resolve().parents[2] / "spec" / "vectors"
 VALID = sorted(p for p in VECTORS.glob("*.cgh") if not p.name.startswith("reject_"))
@@ -21,6 +22,78 @@ def test_vector_folder_is_complete():
     assert len(VALID) >= 5 and len(REJECT) >= 8
     assert any("point_counts" in np.load(p.with_name(p.stem + ".expected.npz")) for p in VALID)
     assert sorted(p.name for p in VECTORS.glob("reject_*.cgh")) == sorted(REJECT)
+
+
+@pytest.mark.parametrize("path", VALID, ids=lambda p: p.stem)
+def test_expected_values_agree_with_a_second_computation(path):
+    """The expected values were written by the implementation (spec/vectors/generate.py): check them against
+    computations that share none of its float code. Points and opacities from the reference decoder
+    (written from the spec alone) or, in a lossless file, its card map on the stored floats; Gaussians from
+    those points by spec 6.2 and SH by spec 6.3, in float64, here."""
+    expected = np.load(path.with_name(path.stem + ".expected.npz"))
+    points, counts, opacity = _reference(path)
+    assert np.array_equal(points, expected["points"])
+    asset = cgh.read(path)
+    real = np.arange(points.shape[1] - 1)[None, :] < (counts - 1)[:, None]  # each strand's own segments
+    means, rotations, scales = _spec_gaussians(points.astype(np.float64), real, asset.thickness)
+    for name, value in (("means", means), ("rotations", rotations), ("scales", scales),
+                        ("opacities", opacity[real])):
+        np.testing.assert_allclose(expected[name], value, rtol=0, atol=1e-6, err_msg=name)
+    np.testing.assert_allclose(expected["sh"], _spec_sh(asset)[real], rtol=1e-5, atol=1e-5)
+
+
+def _reference(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points ``[S, P, 3]``, point counts and opacities ``[S, P-1]``: a quantized file's from the reference
+    decoder and its H (spec 4.1, 4.4); a lossless file's from the reference card map (6.1) on the stored
+    floats, and its stored opacities."""
+    data = path.read_bytes()
+    meta = json.loads(container.unpack(data, set(cgh.codec.KNOWN_CHUNKS), {"META"})[2]["META"])
+    q = meta["quant"]
+    if not q["lossless"]:
+        ref = reference_decoder.decode_points(data)
+        opac = StreamReader(container.unpack(data, set(cgh.codec.KNOWN_CHUNKS), {"OPAC"})[2]["OPAC"], "OPAC")
+        rows = reference_decoder.hier_rows(opac, meta["strands"], meta["points"] - 1, q["base_stride"], "opacity")
+        opacity = np.clip(np.array(rows) / q["opacity_scale"], 0, 1).astype(np.float32)
+        return ref.points, ref.counts, opacity
+    asset = cgh.read(path)
+    c = asset.cards
+    strips = [reference_decoder.strip(reference_decoder.Card(*(a.astype(np.float64).tolist() for a in (
+        c.spine[k], c.normal[k], c.half_width[k]))), 0.0) for k in range(c.count)]
+    points = np.array([[reference_decoder.card_map(strips[card], z.astype(np.float64).tolist()) for z in row]
+                       for card, row in zip(asset.strand_card, asset.uvd, strict=True)]).astype(np.float32)
+    return points, asset.counts, asset.opacity
+
+
+def _spec_gaussians(x: np.ndarray, real: np.ndarray, d: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Spec 6.2 for the real segments of points ``x [S, P, 3]``: means, (w, x, y, z) rotations taking +z
+    onto each segment, standard deviations (d, d, length / 2)."""
+    a, b = x[:, :-1][real], x[:, 1:][real]
+    e = b - a
+    length = np.linalg.norm(e, axis=1)
+    direction = np.where(length[:, None] > 0, e / np.where(length > 0, length, 1)[:, None], [0.0, 0.0, 1.0])
+    q = np.stack([1 + direction[:, 2], -direction[:, 1], direction[:, 0], np.zeros(len(e))], 1)
+    q = np.where((1 + direction[:, 2] < 1e-12)[:, None], [0.0, 1.0, 0.0, 0.0], q)
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    scales = np.stack([np.full(len(e), d), np.full(len(e), d), length / 2], 1)
+    return (a + b) / 2, q, scales
+
+
+def _spec_sh(asset) -> np.ndarray:
+    """Spec 6.3 in float64: ``[S, P-1, NC, 3]`` SH of every segment, placeholders' included."""
+    app = asset.appearance
+    logits = app.logits.astype(np.float64)
+    if app.weight_mode == "soft":
+        z = np.exp(logits / app.temperature - (logits / app.temperature).max(1, keepdims=True))
+        weights = z / z.sum(1, keepdims=True)
+    else:
+        weights = np.eye(app.k)[np.argmax(logits, axis=1)]
+    group = asset.cards.group[asset.strand_card]
+    h = np.einsum("sk,skd->sd", weights, app.codebooks.astype(np.float64)[group])
+    for layer in app.mlp:
+        h = h @ layer.weight.astype(np.float64).T + layer.bias.astype(np.float64)
+        if layer.activation == "relu":
+            h = np.maximum(h, 0)
+    return h.reshape(asset.n_strands, asset.points_per_strand - 1, app.sh_coeffs, 3)
 
 
 @pytest.mark.parametrize("path", VALID, ids=lambda p: p.stem)
@@ -52,8 +125,6 @@ def test_reject_vector_raises_named_error(name):
 
 
 def test_worked_example_in_the_spec_matches_its_vector():
-    from cghair_format import container
-
     spec = (VECTORS.parent / "cgh.md").read_text()
     data = (VECTORS / "minimal_compact.cgh").read_bytes()
     assert f"**{len(data)} bytes**" in spec

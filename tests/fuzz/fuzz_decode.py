@@ -5,7 +5,8 @@ every chunk stored raw (codec 0), so that libFuzzer's byte mutations land in the
 input is re-sealed (every chunk's and the header's CRC recomputed) before it is decoded, so that mutations
 get past the checksums into the decoders (tests/format/test_hostile.py and the byte-flip sweeps cover the
 checksums). An input fails when decoding, or decoding to Gaussians, raises anything but a
-CghFormatError with a byte offset, returns non-finite Gaussians, runs over 1 s (``-timeout=1``) or
+CghFormatError with a byte offset (a warning, turned into an error, included: validating untrusted
+values must not warn), returns non-finite Gaussians, runs over 1 s (``-timeout=1``) or
 takes 256 MB above the resident memory before it (the peak, ``VmHWM``, reset for each input).
 
     PYTHONPATH=. python tests/fuzz/fuzz_decode.py [CORPUS_DIR] -max_total_time=600   # make fuzz
@@ -18,6 +19,7 @@ import resource
 import struct
 import sys
 import tempfile
+import warnings
 import zlib
 from pathlib import Path
 
@@ -142,6 +144,7 @@ def main(argv: list[str]) -> None:
     if not any(a.startswith("-timeout") for a in args):
         args.append("-timeout=1")
     instrument()
+    warnings.simplefilter("error")
     atheris.Setup([argv[0], *args, *dirs], test_one_input)
     atheris.Fuzz()
 

@@ -11,9 +11,52 @@ import torch
 from cghair_format.camera import Camera
 from training import splatter
 
+# real SH constants of degrees 0..3 in closed form (the 3DGS basis and signs), written out here so that the
+# oracle shares no code with the splatter's SH (cghair_format.gaussians.sh_polynomial)
+SH0 = 1 / (2 * math.sqrt(math.pi))
+SH1 = math.sqrt(3 / (4 * math.pi))
+SH2 = (math.sqrt(15 / math.pi) / 2, -math.sqrt(15 / math.pi) / 2, math.sqrt(5 / math.pi) / 4,
+       -math.sqrt(15 / math.pi) / 2, math.sqrt(15 / math.pi) / 4)
+SH3 = (-math.sqrt(35 / (2 * math.pi)) / 4, math.sqrt(105 / math.pi) / 2, -math.sqrt(21 / (2 * math.pi)) / 4,
+       math.sqrt(7 / math.pi) / 4, -math.sqrt(21 / (2 * math.pi)) / 4, math.sqrt(105 / math.pi) / 4,
+       -math.sqrt(35 / (2 * math.pi)) / 4)
+
+
+def oracle_colour(coeffs, d):
+    """RGB of one Gaussian's SH ``[K, 3]`` seen along the unit direction ``d``: the basis functions one by
+    one, + 0.5, clamped at 0."""
+    x, y, z = d
+    basis = [SH0 + 0 * x]
+    if len(coeffs) > 1:
+        basis += [-SH1 * y, SH1 * z, -SH1 * x]
+    if len(coeffs) > 4:
+        basis += [SH2[0] * x * y, SH2[1] * y * z, SH2[2] * (2 * z * z - x * x - y * y), SH2[3] * x * z,
+                  SH2[4] * (x * x - y * y)]
+    if len(coeffs) > 9:
+        basis += [SH3[0] * y * (3 * x * x - y * y), SH3[1] * x * y * z, SH3[2] * y * (4 * z * z - x * x - y * y),
+                  SH3[3] * z * (2 * z * z - 3 * x * x - 3 * y * y), SH3[4] * x * (4 * z * z - x * x - y * y),
+                  SH3[5] * z * (x * x - y * y), SH3[6] * x * (x * x - 3 * y * y)]
+    return torch.clamp_min(sum(b * c for b, c in zip(basis, coeffs, strict=True)) + 0.5, 0.0)
+
+
+def _hamilton(a, b):
+    """The quaternion product ``a b`` of (w, x, y, z) quaternions."""
+    w1, v1, w2, v2 = a[0], a[1:], b[0], b[1:]
+    return torch.cat([(w1 * w2 - v1 @ v2)[None], w1 * v2 + w2 * v1 + torch.linalg.cross(v1, v2)])
+
+
+def oracle_rotation(q):
+    """The rotation matrix of a (w, x, y, z) quaternion, normalised: its columns are the axes turned by the
+    sandwich product ``q (0, e) q*`` (not the closed-form matrix the splatter uses)."""
+    q = q / q.norm()
+    conj = q * torch.tensor([1.0, -1.0, -1.0, -1.0], dtype=q.dtype)
+    axes = torch.eye(3, dtype=q.dtype)
+    return torch.stack([_hamilton(_hamilton(q, torch.cat([q.new_zeros(1), e])), conj)[1:] for e in axes], 1)
+
 
 def dense_render(means, quats, scales, opacities, sh, camera, background=(0.0, 0.0, 0.0)):
-    """Every pixel against every Gaussian, written from the contract (float64 oracle)."""
+    """Every pixel against every Gaussian, written from the contract (float64 oracle; its SH and rotations
+    are its own, above)."""
     w2c = torch.as_tensor(camera.world_to_camera, dtype=torch.float64)
     rot, trans = w2c[:3, :3], w2c[:3, 3]
     t = means @ rot.T + trans
@@ -22,7 +65,7 @@ def dense_render(means, quats, scales, opacities, sh, camera, background=(0.0, 0
     out_d = torch.zeros(camera.height, camera.width, dtype=torch.float64)
     order = [int(i) for i in torch.argsort(t[:, 2], stable=True) if t[i, 2] > splatter.NEAR_PLANE]
     cen = torch.as_tensor(camera.center, dtype=torch.float64)
-    rq = splatter.quat_to_rotmat(quats)
+    rq = [oracle_rotation(q) for q in quats]
     for j in range(camera.height):
         for i in range(camera.width):
             p = torch.tensor([i + 0.5, j + 0.5], dtype=torch.float64)
@@ -44,7 +87,7 @@ def dense_render(means, quats, scales, opacities, sh, camera, background=(0.0, 0
                 if float(a) < 1 / 255:
                     continue
                 dirs = means[g] - cen
-                col = splatter.eval_sh(sh[g:g + 1], (dirs / dirs.norm())[None])[0]
+                col = oracle_colour(sh[g], dirs / dirs.norm())
                 c = c + col * a * trans_t
                 dep = dep + z * a * trans_t
                 trans_t = trans_t * (1 - a)
