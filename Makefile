@@ -52,7 +52,7 @@ check: venv
 # Figures go to docs/benchmarks.json and, as tables, to docs/benchmarks.md and into the marked
 # regions (<!-- bench: ... -->) of BENCH_PAGES (tools/bench_tables.py); all three are committed.
 # `make bench-tables` regenerates the pages from the committed JSON without measuring again.
-BENCH_PAGES := README.md docs/format.md docs/viewer.md training/ABLATION.md
+BENCH_PAGES := README.md docs/format.md docs/viewer.md docs/ablation.md
 
 bench: venv
 	CGH_PAPER_DATA=$(PAPER_DATA) $(PY) -m pytest -q -s -m bench --benchmark-enable --benchmark-only --benchmark-json=docs/benchmarks.json tests/bench
@@ -61,7 +61,7 @@ bench: venv
 bench-tables:
 	$(PYTHON) tools/bench_tables.py docs/benchmarks.json -o docs/benchmarks.md --fill $(BENCH_PAGES)
 
-# The paper-scale trained file `make bench` measures when present (training/ABLATION.md): harolongo
+# The paper-scale trained file `make bench` measures when present (docs/ablation.md): harolongo
 # resampled to 100 points and densified to 25,000 strands, its cards, a Cycles dataset (64 views at
 # 256 x 256, 64 samples, denoised) and PAPER_ITERS iterations of the latents variant, then the held-out
 # scores, the geometry frozen throughout (the dataset is rendered from these strands; moving them cost 2.6x

@@ -5,14 +5,14 @@ Gaussians writes its SH with one matrix product, which is quicker than faulting 
 numpy's own allocation asks for transparent huge pages, which are quick once the process has freed
 some, but the first such array of a process (and, now and then, a later one) stalls while the kernel
 finds them. An anonymous mapping that the kernel populates ahead costs the same every time, and less
-than faulting it in page by page (COMPRESSION.md, "Decode time, earlier runs").
+than faulting it in page by page (docs/compression.md, "Decode time, earlier runs").
 
 On Linux 5.14 and later the kernel populates it a chunk at a time (``madvise(MADV_POPULATE_WRITE)``,
 called through ctypes, which lets go of the GIL), so that other threads go on meanwhile:
 :func:`.codec.read_with_gaussians` faults the SH in while its strands decode on another thread.
 ``mmap.madvise`` keeps the GIL (so does the ``mmap`` call itself in some Python versions), and one
 populate of the whole mapping (``MAP_POPULATE``) holds the process's memory-map lock throughout, so
-that a thread that maps memory meanwhile waits; either slows that decode down (COMPRESSION.md,
+that a thread that maps memory meanwhile waits; either slows that decode down (docs/compression.md,
 "Decode straight to Gaussians"). Older kernels get ``MAP_POPULATE``; other systems a
 plain mapping.
 """
@@ -103,7 +103,7 @@ def without_huge_pages() -> Iterator[None]:
     stalls, so a process's first encode is quicker without them and only a later one, with the pages
     the first freed at hand, gains from them. The encoder does without, for the first encode (the
     command line's only one) and the slowest; a decode keeps them, as it is a little quicker with
-    them (COMPRESSION.md, "Encode time" and "Decode straight to Gaussians")."""
+    them (docs/compression.md, "Encode time" and "Decode straight to Gaussians")."""
     global _huge_pages_users, _huge_pages_were
     if _set_madvise_hugepage is None:
         yield

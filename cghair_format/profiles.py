@@ -16,7 +16,7 @@ class Profile:
     lossless: bool = False
     position_tolerance: float = 2e-4  # max point error / bounding-box diagonal
     # opacity = round(o * scale) / scale: max error 0.5 / scale (compact: 1/15; on four trained files 0.01-0.06 dB
-    # held out against 1/63, 31-55 % fewer opacity bytes; training/ABLATION.md, "The trained file")
+    # held out against 1/63, 31-55 % fewer opacity bytes; docs/ablation.md, "The trained file")
     opacity_scale: float = 7.5
     logit_levels: int = 63  # soft logits stored as round(levels * exp((logit - max) / temperature)) ...
     logit_floor: float = -16.0  # ... and a stored 0 decodes to this logit
@@ -62,7 +62,7 @@ PROFILES: dict[str, Profile] = {
 DEFAULT_PROFILE = "compact"
 # what a trained file's quantized opacities may give up: the Gaussians that together carry this share of the
 # training views' blend weight may be stored less opaque (training/visibility.py; on the paper-scale model
-# 0.1 takes 42-48 % off OPAC for 0.01-0.05 dB held out: training/ABLATION.md, "Negligible opacities")
+# 0.1 takes 42-48 % off OPAC for 0.01-0.05 dB held out: docs/ablation.md, "Negligible opacities")
 DEFAULT_OPACITY_BUDGET = 0.1
 
 

@@ -171,11 +171,11 @@ def softmax_levels_decode(q: np.ndarray, temperature: float, levels: int, floor:
 # The last MLP layer's rows come in colour triples (R, G, B of one SH coefficient of one Gaussian).
 # They are stored in this orthonormal basis: grey, red - blue, and green against the two. A trained
 # model's triples are mostly grey (their R, G and B rows correlate strongly), so the other two rows are
-# small and cost few bits at the same step (spec 4.4; COMPRESSION.md, "MLP colour basis and steps").
+# small and cost few bits at the same step (spec 4.4; docs/compression.md, "MLP colour basis and steps").
 COLOUR_BASIS = np.array([[1.0, 1.0, 1.0], [1.0, 0.0, -1.0], [1.0, -2.0, 1.0]]) / np.sqrt([[3.0], [2.0], [6.0]])
 # A bias's step is its layer's over this: a bias's error reaches every output of its row alike, while
 # the weights' errors, times varied activations, partly cancel; on a sixteenth of the step the biases'
-# error no longer shows in the render (COMPRESSION.md, "MLP colour basis and steps")
+# error no longer shows in the render (docs/compression.md, "MLP colour basis and steps")
 BIAS_STEP_DIVISOR = 16
 
 

@@ -72,7 +72,7 @@ def pack_bits(width: np.ndarray, value: np.ndarray) -> np.ndarray:
 # A table is stored as one byte per token (spec 4.3.2): 0 for a token the table never codes, 1 ..
 # MAX_CODE for a frequency of round(2^((code - 1) / LOG_STEPS)), and REST for the one token that takes
 # what the others leave of TOTAL. Frequencies on a log scale, 4 steps an octave (19 % apart), take much
-# less room than 12-bit counts and code the tokens almost as tightly (COMPRESSION.md, "Log-scale token
+# less room than 12-bit counts and code the tokens almost as tightly (docs/compression.md, "Log-scale token
 # tables").
 LOG_STEPS = 4
 MAX_CODE = 1 + LOG_STEPS * PROB_BITS  # a frequency of TOTAL: more than any but a REST entry can take

@@ -29,7 +29,7 @@ CONTEXTS = PREV_CLASSES * OTHER_CLASSES
 # Classes of the card neighbour's token (META quant.neighbour_classes, 1..8; 1: no such context; class 0
 # is for strands with no card neighbour before them). The writer takes 5 or 1, whichever its cost
 # estimate finds smaller: 5 pays on large files of many alike strands; on small files the larger tables
-# cost more than the context saves (COMPRESSION.md, "Neighbour classes").
+# cost more than the context saves (docs/compression.md, "Neighbour classes").
 NEIGHBOUR_CLASSES = 5
 MAX_NEIGHBOUR_CLASSES = 8
 

@@ -29,17 +29,17 @@ from .quantize import base_prediction, level_plan
 
 # At most this many Newton steps per refinement sample; most samples stop after one, within a
 # hundredth of a step (spec 4.3). 4 rather than 2: smaller files on wavy hair at no decoding cost, as
-# most samples take one step (COMPRESSION.md, "Newton steps on the card map").
+# most samples take one step (docs/compression.md, "Newton steps on the card map").
 NEWTON_STEPS = 4
 # Halving a Newton step that overshoots (the card map is only piecewise smooth: a full step from one
 # triangle can land where another bends away): 4 keeps a wavy model's finest samples from residuals of
-# thousands of steps; more halvings save little more (COMPRESSION.md, "Newton steps on the card map").
+# thousands of steps; more halvings save little more (docs/compression.md, "Newton steps on the card map").
 NEWTON_HALVINGS = 4
 # A refinement residual's step on u and v follows the card's local scale, up to this many times the
 # card-wide one (spec 4.3): the card-wide scale is the longest rail segment and the widest point, so
 # elsewhere a step moves a point less than the tolerance allows. 1.5 makes wavy hair's files smaller and
 # leaves flat, even cards as they were; 2 or more leaves a few points beyond the bound, and the writer's
-# smaller step then costs more than the stretch saves (COMPRESSION.md, "Stretched steps").
+# smaller step then costs more than the stretch saves (docs/compression.md, "Stretched steps").
 STRETCH_MAX = 1.5
 
 

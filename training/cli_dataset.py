@@ -1,7 +1,7 @@
 """``cgh render-dataset STRANDS -o DIR --views N --res R --engine cycles|splat``.
 
 Writes a NeRF-synthetic dataset (transforms_train/test.json + RGBA PNGs, alpha = hair mask). The
-paper's scale (training/ABLATION.md): ``--resample 100 --densify 25000 --engine cycles --views 64
+paper's scale (docs/ablation.md): ``--resample 100 --densify 25000 --engine cycles --views 64
 --res 256 --denoise``, and ``--multitone 3`` for its multi-tone synthetic case.
 """
 

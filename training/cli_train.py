@@ -32,7 +32,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--geometry-frozen-iters", type=int_at_least(0), metavar="ITERS", default=None,
                    help="iterations before the strand points start to move (default: 7/30 of --iters, the paper's "
                         "proportion); as many as --iters keeps the given strands as they are, and the file small "
-                        "(training/ABLATION.md, 'The trained file')")
+                        "(docs/ablation.md, 'The trained file')")
     p.add_argument("--variant", choices=VARIANTS, default=None,
                    help="appearance model (default: latents, the paper's); others are the ablation's")
     p.add_argument("--config", help="a JSON config (as saved in <out>.train.json's 'config'); flags override it")
@@ -59,7 +59,7 @@ def add_opacity_budget_argument(p: argparse.ArgumentParser) -> None:
                    help="the Gaussians that together carry this share of the training views' blend weight, the "
                         "least used, may be stored less opaque, down to 0, which codes them for almost nothing "
                         f"(default: {DEFAULT_OPACITY_BUDGET}; 0 keeps every opacity within the profile's bound; "
-                        "quantized profiles only; training/ABLATION.md, 'Negligible opacities')")
+                        "quantized profiles only; docs/ablation.md, 'Negligible opacities')")
 
 
 def add_backend_argument(p: argparse.ArgumentParser) -> None:

@@ -112,7 +112,7 @@ def project(means: Tensor, quats: Tensor, scales: Tensor, camera: Camera) -> Pro
     fx, fy = float(camera.fx), float(camera.fy)
     m = quat_to_rotmat(quats[index]) * scales[index][:, None, :]  # R_q S, [V, 3, 3]
     # rows of J W (the Jacobian's zeros written out), then A = J W R_q S and Sigma2 = A A^T + 0.3 I;
-    # explicit rows instead of batched 2x3 @ 3x3 products: faster on CPU (training/ABLATION.md)
+    # explicit rows instead of batched 2x3 @ 3x3 products: faster on CPU (docs/ablation.md)
     jw0 = (fx / z)[:, None] * rot[0] - (fx * x / (z * z))[:, None] * rot[2]
     jw1 = (fy / z)[:, None] * rot[1] - (fy * y / (z * z))[:, None] * rot[2]
     a0 = torch.einsum("vk,vkj->vj", jw0, m)

@@ -247,7 +247,7 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
     torch.manual_seed(config.seed)
     model = HairModel(base, config, mean_hair_colour(ds.train)).to(device)
     # fused: one kernel per parameter for the whole update, several times faster than the loop on the
-    # CPU (training/ABLATION.md, "Around the rasterizer")
+    # CPU (docs/ablation.md, "Around the rasterizer")
     optimizer = torch.optim.Adam(model.param_groups(config, _scene_scale(base)), eps=1e-15, fused=True)
     base_lr = {g["name"]: g["lr"] for g in optimizer.param_groups}
     history: list[dict] = []

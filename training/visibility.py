@@ -3,7 +3,7 @@
 A Gaussian's blend weight at a pixel is ``T * alpha``, its share of the pixel's colour
 (spec/rendering.md). Summed over the training views it says how much of the pictures rests on it.
 In trained hair most Gaussians sit inside the volume or behind others: on the paper-scale model 93 %
-of them carry 10 % of the training views' weight (training/ABLATION.md, "Negligible opacities").
+of them carry 10 % of the training views' weight (docs/ablation.md, "Negligible opacities").
 
 Lowering a Gaussian's opacity changes a pixel by at most twice its weight there (it gives up part
 of its own colour, and what lies behind it can show by no more than that), and never makes anything

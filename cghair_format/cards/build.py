@@ -226,6 +226,51 @@ def build_cards(strands: Strands, n_cards: int = 800, n_groups: int = 64, segmen
         return _build(strands, n_cards, n_groups, segments, points, keep, seed, progress, sh_degree, log)
 
 
+@dataclass
+class _Points:
+    """The strands' points as the build's stages see them (each array float64)."""
+
+    flat: np.ndarray  # [N, 3] the points stored: each strand's own count, or P after resampling
+    offsets: np.ndarray  # [S + 1] strand i is flat[offsets[i]:offsets[i + 1]]
+    shape: np.ndarray  # [S, P, 3] evenly spaced along each strand: what k-means and the guides compare
+    padded: np.ndarray  # [S, P, 3] the stored points, a shorter strand repeating its last
+    colors: np.ndarray | None  # [S, P, 3] as ``padded``
+    looks: tuple  # (points, colours, widths) [S, P, ...] the default appearance is read from
+    diag: float  # the bbox diagonal of ``flat``
+    resampling: Resampling | None  # None: the input's own points were kept
+
+
+def _prepare_points(strands: Strands, points: int, keep: bool) -> _Points:
+    """The stage "resample": the input's own points (``keep``) or every strand resampled to ``points``."""
+    if keep:
+        # k-means and the guides compare strands point by point, so they see evenly spaced points;
+        # the normals, widths and stored points are the user's own, of each strand's own count
+        offsets = strands.offsets
+        flat = strands.points.astype(np.float64)
+        even = resample_strands(strands, points)
+        shape = even.to_array().astype(np.float64)
+        pts = _padded(flat, offsets, points)
+        colors = None if strands.colors is None else _padded(strands.colors.astype(np.float64).clip(0, 1),
+                                                              offsets, points)
+        variable = bool((strands.point_counts < points).any())
+        # a shorter strand's repeated last point would skew the root / tip colours and the mid points
+        looks = (resample(even, points) if variable else
+                 (pts, colors, None if strands.widths is None else _padded(strands.widths, offsets, points)))
+    else:
+        pts, colors, widths = resample(strands, points)
+        offsets = np.arange(strands.count + 1, dtype=np.int64) * points
+        flat, shape = pts.reshape(-1, 3), pts
+        looks = (pts, colors, widths)
+    diag = float(np.linalg.norm(flat.max(0) - flat.min(0)))
+    if not diag > 0:
+        raise CardBuildError("all strand points coincide: nothing to build cards from")
+    resampling = None
+    if not keep:
+        counts = strands.point_counts
+        resampling = Resampling(int(counts.min()), int(counts.max()), int(points), shape_error(strands, pts) / diag)
+    return _Points(flat, offsets, shape, pts, colors, looks, diag, resampling)
+
+
 def _build(strands: Strands, n_cards: int, n_groups: int, segments: int, points: int, keep: bool, seed: int,
            progress: bool, sh_degree: int, log) -> CardBuild:
     log = log if log is not None else (sys.stderr if progress else None)
@@ -235,45 +280,20 @@ def _build(strands: Strands, n_cards: int, n_groups: int, segments: int, points:
         if log is not None:
             print(f"cards: {stage:<11}{timings[stage]:8.2f} s", file=log, flush=True)
 
+    s_count = strands.count
     with timed(timings, "resample"):
-        s_count = strands.count
-        resampling = None
-        if keep:
-            # k-means and the guides compare strands point by point, so they see evenly spaced points;
-            # the normals, widths and stored points are the user's own, of each strand's own count
-            offsets = strands.offsets
-            flat = strands.points.astype(np.float64)
-            even = resample_strands(strands, points)
-            shape = even.to_array().astype(np.float64)
-            pts = _padded(flat, offsets, points)
-            colors = None if strands.colors is None else _padded(strands.colors.astype(np.float64).clip(0, 1),
-                                                                  offsets, points)
-            variable = bool((strands.point_counts < points).any())
-            # a shorter strand's repeated last point would skew the root / tip colours and the mid points
-            looks = (resample(even, points) if variable else
-                     (pts, colors, None if strands.widths is None else _padded(strands.widths, offsets, points)))
-        else:
-            pts, colors, widths = resample(strands, points)
-            offsets = np.arange(s_count + 1, dtype=np.int64) * points
-            flat, shape = pts.reshape(-1, 3), pts
-            looks = (pts, colors, widths)
-        diag = float(np.linalg.norm(flat.max(0) - flat.min(0)))
-        if not diag > 0:
-            raise CardBuildError("all strand points coincide: nothing to build cards from")
-        if not keep:
-            counts = strands.point_counts
-            resampling = Resampling(int(counts.min()), int(counts.max()), int(points),
-                                    shape_error(strands, pts) / diag)
+        p = _prepare_points(strands, points, keep)
+        flat, offsets = p.flat, p.offsets
         counts = np.diff(offsets)
     done("resample")
 
     with timed(timings, "cluster"):
-        labels = cluster_strands(shape, n_cards, seed)
+        labels = cluster_strands(p.shape, n_cards, seed)
         c = int(labels.max()) + 1
     done("cluster")
 
     with timed(timings, "guide"):
-        spine, s = guide_spines(shape, labels, c, segments, show_progress=progress)
+        spine, s = guide_spines(p.shape, labels, c, segments, show_progress=progress)
         if keep:
             s = _carry_by_arc_length(s.reshape(s_count, points), flat, offsets)
     done("guide")
@@ -282,7 +302,7 @@ def _build(strands: Strands, n_cards: int, n_groups: int, segments: int, points:
     with timed(timings, "normals"):
         normal = card_normals(spine, flat, point_card, s, hair_centre=flat[offsets[:-1]].mean(0),
                               show_progress=progress)
-        half = card_half_widths(spine, normal, flat, point_card, s, diag)
+        half = card_half_widths(spine, normal, flat, point_card, s, p.diag)
         cards = Cards(spine.astype(np.float32), normal.astype(np.float32), half.astype(np.float32),
                       np.zeros(c, np.int32))
     done("normals")
@@ -300,7 +320,7 @@ def _build(strands: Strands, n_cards: int, n_groups: int, segments: int, points:
     done("textures")
 
     with timed(timings, "appearance"):
-        look_points, look_colors, look_widths = looks
+        look_points, look_colors, look_widths = p.looks
         profiles = app.colour_profiles(look_colors, s_count, seed)
         appearance = app.default_appearance(profiles, groups[labels], n_t, points, sh_degree, seed)
         asset = HairAsset(
@@ -319,8 +339,8 @@ def _build(strands: Strands, n_cards: int, n_groups: int, segments: int, points:
         v = uvd[..., 1]
         outside = int(((v < -STRIP_TOLERANCE) | (v > 1 + STRIP_TOLERANCE)).sum())
     done("verify")
-    return CardBuild(asset=asset, timings=timings, error=error, points=pts.astype(np.float32),
-                     textures=textures, colors=None if colors is None else colors.astype(np.float32),
+    return CardBuild(asset=asset, timings=timings, error=error, points=p.padded.astype(np.float32),
+                     textures=textures, colors=None if p.colors is None else p.colors.astype(np.float32),
                      strip_rounds=rounds, unsolved_points=int((~solved).sum()),
-                     outside_strip=outside, resampling=resampling,
+                     outside_strip=outside, resampling=p.resampling,
                      info={"cards": c, "groups": n_t, "strands": s_count, "points": points})

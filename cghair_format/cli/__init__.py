@@ -1,6 +1,7 @@
-"""The ``cgh`` command line. Each verb lives in its own module with ``add_arguments`` and ``run``.
+"""The ``cgh`` command line. Each verb lives in its own module with ``add_arguments`` and ``run``; the
+format's verbs and those the packages above it register are listed by :mod:`.registry`.
 
-Verb modules are imported only when their verb is used, so ``cgh info`` never loads torch or GL.
+Verb modules import their heavy packages only when their verb runs, so ``cgh info`` never loads torch or GL.
 """
 
 from __future__ import annotations
@@ -15,32 +16,8 @@ from ..atomic import check_writable
 from ..errors import CghError
 from ..limits import ReadLimits, set_default_limits
 from .argtypes import int_at_least
+from .registry import Verb, verbs
 
-# verb -> (module defining add_arguments(parser) and run(args) -> int, one-line help)
-VERBS: dict[str, tuple[str, str]] = {
-    "demo": ("cghair_format.cli.demo", "run the main job end to end on built-in data"),
-    "info": ("cghair_format.cli.info", "show counts, chunk sizes and bits per Gaussian of a .cgh"),
-    "validate": ("cghair_format.cli.validate", "check a .cgh file; exit 0 if valid, 1 with the reason"),
-    "encode": ("cghair_format.cli.encode", "re-encode a .cgh with another precision profile"),
-    "synth": ("cghair_format.cli.synth", "grow a built-in procedural hairstyle"),
-    "convert": ("cghair_format.cli.convert", "convert strands between formats (.cgh accepted as input)"),
-    "export": ("cghair_format.cli.export", "export a .cgh or strands to USD, 3DGS PLY, Alembic or .blend"),
-    "cards": ("cghair_format.cli.cards", "build hair cards from strands and write a .cgh"),
-    "render-dataset": ("training.cli_dataset", "render a multi-view dataset of strands"),
-    "train": ("training.cli_train", "fit the compact appearance model to a multi-view dataset"),
-    "eval": ("training.cli_eval", "PSNR, SSIM and LPIPS of a .cgh on a dataset's held-out views"),
-    "ablation": ("training.ablation", "train the paper's appearance variants or codebook sweeps side by side"),
-    "reconstruct": ("training.cli_reconstruct", "reconstruct strands from a multi-view dataset with hair masks"),
-    "fit-strand-prior": ("training.cli_fit_prior", "fit a PCA basis of strand shapes for cgh reconstruct --prior"),
-    "eval-strands": ("training.cli_eval_strands", "position, curvature, F1 of strands vs ground truth"),
-    "view": ("viewer.cli", "open a .cgh in an interactive window"),
-    "render": ("viewer.cli_render", "render a .cgh to a PNG, GIF or MP4 without a display"),
-    "bench-viewer": ("viewer.cli_bench", "measure the viewer's load and frame times"),
-}
-# verbs whose --output is a folder (made as needed); every other verb's --output is a file
-FOLDER_OUTPUTS = {"demo", "render-dataset"}
-# verbs that make their --output file's missing folders
-PARENTS_MADE = {"train"}
 # other options that name a folder a verb writes into (cgh eval --out, cgh cards --debug-dir, cgh ablation --work)
 FOLDER_OPTIONS = ("out", "debug_dir", "work")
 
@@ -54,11 +31,11 @@ def build_parser() -> argparse.ArgumentParser:
                         metavar="MB", help="largest memory decoding a .cgh may take, in MiB (default: "
                         f"{limits.max_decoded_bytes >> 20:,})")
     sub = parser.add_subparsers(dest="verb", metavar="VERB")
-    for verb, (module, help_text) in VERBS.items():
-        p = sub.add_parser(verb, help=help_text, description=help_text)
-        p.set_defaults(_module=module)
+    for name, verb in verbs().items():
+        p = sub.add_parser(name, help=verb.help, description=verb.help)
+        p.set_defaults(_verb=verb)
         try:
-            importlib.import_module(module).add_arguments(p)
+            importlib.import_module(verb.module).add_arguments(p)
         except ImportError as exc:
             p.set_defaults(_unavailable=str(exc))
     return parser
@@ -75,7 +52,9 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, unknown = parser.parse_known_args(argv)  # a verb that cannot load has no arguments to know
+    if unknown and not getattr(args, "_unavailable", None):
+        parser.error(f"unrecognized arguments: {' '.join(unknown)}")  # as parse_args says it
     if args.verb is None:
         parser.print_help()
         return 2
@@ -84,14 +63,15 @@ def main(argv: list[str] | None = None) -> int:
         print(f"cgh {args.verb}: unavailable: {args._unavailable}", file=sys.stderr)
         return 2
     try:
+        verb: Verb = args._verb
         if getattr(args, "output", None) is not None:  # before any long work
-            check_writable(args.output, folder=args.verb in FOLDER_OUTPUTS, make_parents=args.verb in PARENTS_MADE)
+            check_writable(args.output, folder=verb.output_folder, make_parents=verb.make_parents)
         for option in FOLDER_OPTIONS:
             if getattr(args, option, None) is not None:
                 check_writable(getattr(args, option), folder=True)
         with warnings.catch_warnings():  # restores the default hook when main returns (tests call it in-process)
             warnings.showwarning = _show_warning
-            return int(importlib.import_module(args._module).run(args) or 0)
+            return int(importlib.import_module(verb.module).run(args) or 0)
     except CghError as exc:
         print(f"cgh {args.verb}: error: {exc}", file=sys.stderr)
         return 1 if args.verb == "validate" else 2

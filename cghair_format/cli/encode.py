@@ -1,6 +1,6 @@
 """``cgh encode IN.cgh -o OUT.cgh --profile P [--views DATASET]``: re-encode with another precision
 profile; with a dataset, the opacities of the Gaussians its training views hardly use may be stored
-lower (``training.visibility``)."""
+lower (measured by the training package, which registers that step: ``training.cli_encode_views``)."""
 
 from __future__ import annotations
 
@@ -10,6 +10,10 @@ from ..errors import CghError, MissingDependencyError
 from ..profiles import DEFAULT_OPACITY_BUDGET, PROFILES
 from .argtypes import share
 from .info import opacity_line
+from .registry import registered
+
+# entry point (group, name) of the step that measures which Gaussians a dataset's views hardly use
+VIEWS_STEP = ("cgh.negligible", "views")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -65,10 +69,11 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _negligible(asset, dataset: str, budget: float):
+    """The step ``--views`` takes, registered by the package that renders views (the training extra's)."""
     try:
-        from training.dataset import read_dataset
-        from training.visibility import negligible_segments
-    except ImportError as exc:
-        raise MissingDependencyError(exc.name or "torch", "training", "cgh encode --views") from None
-    views = read_dataset(dataset).train
-    return negligible_segments(asset, views, budget)
+        step = registered(*VIEWS_STEP)
+    except ImportError as exc:  # registered, but its package is not there
+        raise MissingDependencyError(exc.name or "training", "training", "cgh encode --views") from None
+    if step is None:
+        raise MissingDependencyError("training", "training", "cgh encode --views")
+    return step(asset, dataset, budget)

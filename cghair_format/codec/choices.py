@@ -2,7 +2,7 @@
 codes a sample of the file's strands every way it allows and keeps the smallest.
 
 They are made once, on the first step the writer tries, and kept for the others (they hardly depend on
-the step); META records them, so that a reader needs none of this (COMPRESSION.md, "The writer's
+the step); META records them, so that a reader needs none of this (docs/compression.md, "The writer's
 per-file choices").
 """
 
@@ -86,7 +86,7 @@ def choose_base_samples(asset: HairAsset, q: dict, zone: DeadZone, strides: tupl
     chosen). Wavy strands want base samples closer together, straighter ones fewer, and straight
     strands of unequal lengths the scaled guide. The sample is coded with the neighbour's residual in
     the dead zone, as the file is: without it the sample can rank the strides the wrong way round
-    (COMPRESSION.md, "The writer's per-file choices")."""
+    (docs/compression.md, "The writer's per-file choices")."""
     cmap = CardMap(asset.cards)
     scale = uvd_scale(*card_scales(asset.cards, q["step"]), asset.strand_card, q["step"])
     y = asset.uvd * scale[:, None, :]
@@ -138,7 +138,7 @@ def choose_neighbour_zone(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray,
                           plan: Prediction, zone: DeadZone) -> bool:
     """Whether the dead zone first tries the card neighbour's residual: whichever codes the strands of
     a sample of cards smaller. It pays where a card's strands are much alike (strands densified from
-    fewer) and costs a little where they are not (COMPRESSION.md, "Dead zone")."""
+    fewer) and costs a little where they are not (docs/compression.md, "Dead zone")."""
     tried = [True, False]
     sizes = map_threads(lambda neighbour: sum(map(rans.estimate_bytes, sample_residuals(
         cmap, strand_card, y, scale, plan, zone._replace(neighbour=neighbour), 64))), tried)
@@ -154,7 +154,7 @@ def choose_level_taps(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, sca
     the coarsest level, whose neighbours lie B points apart, is often best linear. The widths
     interact (the dead zone leaves a coarser level's reconstruction on its prediction, from which
     the finer levels predict) and the estimate ignores the coder's contexts, so close calls can come
-    out the other way: hence the check (COMPRESSION.md, "The writer's per-file choices")."""
+    out the other way: hence the check (docs/compression.md, "The writer's per-file choices")."""
     levels = len(level_plan(y.shape[1], plan.base_stride)[1])
     widths = (2, 4, 6)
     trial = dict(zip(widths, map_threads(lambda t: sample_residuals(
@@ -172,7 +172,7 @@ def choose_level_guide(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, sc
     """Whether each base segment's refinement residuals are stored as differences from those of the
     most alike strand before it on the card (spec 4.3, ``level_guide``) rather than the card
     neighbour's: whichever codes the strands of a sample of cards smaller. Wavy strands densified from
-    fewer gain most, real strands a little, and some models lose (COMPRESSION.md, "The most alike
+    fewer gain most, real strands a little, and some models lose (docs/compression.md, "The most alike
     strand")."""
     unguided, guided = map_threads(lambda g: coded_bytes(sample_residuals(
         cmap, strand_card, y, scale, replace(plan, level_guide=g), zone, BASE_SAMPLE_CARDS)), [False, True])

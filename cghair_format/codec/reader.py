@@ -45,7 +45,7 @@ def decode(data: bytes, limits: ReadLimits | None = None) -> HairAsset:
 def read_with_gaussians(source: Source, limits: ReadLimits | None = None) -> tuple[HairAsset, Gaussians]:
     """``read(source)`` and its ``decode_gaussians``, in one go and quicker: while a quantized file's
     strands decode, the kernel faults in the memory for their SH (hundreds of MB for a large asset;
-    COMPRESSION.md, "Decode straight to Gaussians")."""
+    docs/compression.md, "Decode straight to Gaussians")."""
     asset, sh_out = _decode(read_bytes(source), sh_ahead=True, limits=limits)
     return asset, decode_gaussians(asset, sh_out)
 

@@ -32,7 +32,7 @@ from .chunks import OpacityMarks, appearance_chunks, geometry_chunks, lossless_c
 from .layout import Family, prediction, uvd_scale
 
 MIN_CHILD_SHARE = 0.1  # interpolated strands are stored where at least this share of the strands are (below
-# it the guides' chains lose more than the few children save; COMPRESSION.md, "Interpolated strands")
+# it the guides' chains lose more than the few children save; docs/compression.md, "Interpolated strands")
 CARD_STEP_FRACTION = 4  # card geometry is quantized this much coarser than strand points (which are coded
 # on the quantized cards, so the cards' error does not reach them) ...
 CARD_MISS_SHARE = 0.25  # ... and finer (halved) while some point has no card coordinates within this x tol
@@ -43,7 +43,7 @@ TIGHTEN_TARGET = 0.97  # a retry aims the measured error at this fraction of the
 GROW_BELOW = 0.9  # ... and a first step whose error is below this fraction is retried larger, once
 NUDGE, NUDGE_RARE = 0.99, 100_000  # where one point, or one in NUDGE_RARE, misses the tolerance, the step is
 # first made 1 % smaller instead: the lattices align anew, and isolated misses seldom recur, while shrinking
-# the step with the error would cost the whole file for one point (COMPRESSION.md, "The writer's per-file choices")
+# the step with the error would cost the whole file for one point (docs/compression.md, "The writer's per-file choices")
 DEAD_ZONE = 0.97  # a refinement residual stays zero where the prediction is this close to the input (x tol)
 
 

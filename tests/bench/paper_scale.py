@@ -9,7 +9,7 @@ tips. Built assets are cached (lossless .cgh) in the pytest cache, keyed by the 
 parameters.
 
 Beside it, :func:`trained_paper_scale_asset` reads the trained file `make paper-trained` writes
-(harolongo, a Cycles dataset, the latents variant; training/ABLATION.md) from ``CGH_PAPER_DATA``
+(harolongo, a Cycles dataset, the latents variant; docs/ablation.md) from ``CGH_PAPER_DATA``
 (default ``~/.cache/cghair/paper``), outside the repository like every file derived from ../shared.
 """
 

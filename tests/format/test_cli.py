@@ -157,9 +157,9 @@ def test_missing_file_and_not_a_cgh(tmp_path, capsys):
 
 
 def test_every_verb_has_help():
-    from cghair_format.cli import VERBS
+    from cghair_format.cli.registry import verbs
 
-    for verb in VERBS:
+    for verb in verbs():
         r = subprocess.run([sys.executable, "-m", "cghair_format", verb, "--help"], capture_output=True, text=True)
         assert r.returncode == 0, f"cgh {verb} --help failed: {r.stderr}"
         assert "usage: cgh" in r.stdout

@@ -11,6 +11,8 @@ import argparse
 import time
 from pathlib import Path
 
+from training.cli_train import add_backend_argument
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("-o", "--output", default="demo_out", help="folder for everything the demo writes")
@@ -19,8 +21,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--iters", type=int, default=300, help="training iterations (default 300)")
     p.add_argument("--views", type=int, default=24, help="dataset views (default 24)")
     p.add_argument("--res", type=int, default=128, help="dataset resolution (default 128)")
-    from training.cli_train import add_backend_argument
-
     add_backend_argument(p)
 
 
@@ -30,10 +30,10 @@ def _step(title: str) -> float:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .. import CghError, read_info, read_with_gaussians
-    from ..exchange import export_usd, save_strands, write_3dgs_ply
-    from ..synth import synthesize
-    from .info import format_info
+    from cghair_format import CghError, read_info, read_with_gaussians
+    from cghair_format.cli.info import format_info
+    from cghair_format.exchange import export_usd, save_strands, write_3dgs_ply
+    from cghair_format.synth import synthesize
 
     out = Path(args.output)
     out.mkdir(parents=True, exist_ok=True)
@@ -79,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"   wrote {out / 'hair.usda'}")
 
     t = _step("7. render a picture with the viewer (headless EGL)")
-    from viewer.render_jobs import RenderJob, render_job
+    from .render_jobs import RenderJob, render_job
 
     try:
         path = render_job(asset, RenderJob(width=512, height=512, azimuth=30, elevation=10), out / "hair.png")
