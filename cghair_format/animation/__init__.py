@@ -1,0 +1,14 @@
+"""Hair that moves: a strand solver for the card guides, head motion, and cards driven frame by frame.
+
+The rest pose is the asset as stored; motion moves its cards, and every strand point and Gaussian
+follows through the format's own decoding (spec 6.1, 6.2).
+"""
+
+from .clip import Animation, frame_asset, frame_points
+from .drive import Scene, card_frames, carried_normals, simulate
+from .solver import Capsules, SolverSettings, StrandState, UnstableSimulation
+from .tracks import MOTIONS, Head, HeadTrack, builtin_track, fit_head
+
+__all__ = ["MOTIONS", "Animation", "Capsules", "Head", "HeadTrack", "Scene", "SolverSettings", "StrandState",
+           "UnstableSimulation", "builtin_track", "card_frames", "carried_normals", "fit_head", "frame_asset",
+           "frame_points", "simulate"]

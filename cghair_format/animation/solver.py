@@ -1,0 +1,199 @@
+"""A strand solver in the style of the game engines' (TressFX): Verlet integration, then small,
+separate passes over plain arrays, each tested alone.
+
+Strands are ``[N, P, 3]`` float64 points whose first point (the root) rides the head rigidly. A step:
+
+1. :func:`integrate`: Verlet with damping, gravity and wind;
+2. :func:`global_shape`: the points near the root are pulled toward the rest pose carried by the head;
+3. :func:`local_shape`: each segment is pulled toward its rest direction seen from its parent segment
+   (bending stiffness);
+4. :func:`collide` and :func:`keep_lengths`, alternately: points pushed out of the head's capsules, then
+   every segment given its rest length, root to tip (follow the leader: exact after each pass).
+
+Gravity acts as it does: the shape constraints are what hold a groom's style up, as in the game
+engines, so a styled groom settles a little under its own weight when the simulation starts.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import CghError
+
+GRAVITY = 9.81  # m/s^2
+
+
+class UnstableSimulation(CghError, ValueError):
+    """The solver met a non-finite point or a setting outside its stable range."""
+
+
+@dataclass(frozen=True)
+class SolverSettings:
+    """What the solver does each step; the defaults suit hair at 30-60 frames a second."""
+
+    damping: float = 0.04  # share of the velocity lost every substep
+    global_stiffness: float = 0.1  # pull toward the rest pose per substep, near the root
+    global_range: float = 0.3  # share of each strand (from the root) the global shape holds
+    local_stiffness: float = 0.9  # pull toward the rest bend per substep
+    length_iterations: int = 2  # collide + keep_lengths rounds per substep
+    length_damping: float = 0.9  # follow-the-leader velocity correction (Mueller et al. 2012)
+    substeps: int = 4
+    settle: float = 1.0  # seconds simulated with the head still before the first frame
+    gravity: bool = True
+    wind: tuple[float, float, float] = (0.0, 0.0, 0.0)  # m/s^2 on a segment held across it
+    wind_gust: float = 0.0  # relative strength of the seeded gusts, 0..1
+
+    def check(self) -> None:
+        """A setting outside the solver's stable range raises :class:`UnstableSimulation`."""
+        for name in ("damping", "global_stiffness", "global_range", "local_stiffness", "length_damping",
+                     "wind_gust"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and 0 <= value <= 1):
+                raise UnstableSimulation(f"{name} must lie in [0, 1], got {value}")
+        if not 1 <= self.length_iterations <= 16 or not 1 <= self.substeps <= 64:
+            raise UnstableSimulation("length_iterations must lie in 1..16 and substeps in 1..64")
+        if not (np.isfinite(self.settle) and 0 <= self.settle <= 60):
+            raise UnstableSimulation(f"settle must lie in [0, 60] seconds, got {self.settle}")
+        if not np.isfinite(self.wind).all() or np.abs(self.wind).max() > 1e3:
+            raise UnstableSimulation(f"wind must be finite and under 1000 m/s^2, got {self.wind}")
+
+
+@dataclass
+class StrandState:
+    """Points now and one substep ago (their difference is the Verlet velocity), and the rest pose."""
+
+    x: np.ndarray  # [N, P, 3] float64
+    x_prev: np.ndarray  # [N, P, 3] float64
+    rest: np.ndarray  # [N, P, 3] float64, the pose at the head's rest transform
+    rest_length: np.ndarray  # [N, P-1] float64
+
+    @classmethod
+    def at_rest(cls, rest: np.ndarray) -> StrandState:
+        rest = np.array(rest, np.float64)
+        seg = np.diff(rest, axis=1)
+        return cls(rest.copy(), rest.copy(), rest, np.sqrt((seg * seg).sum(-1)))
+
+
+def rotate_between(a: np.ndarray, b: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``v`` turned by the smallest rotation taking unit ``a`` onto unit ``b`` (all ``[..., 3]``; Rodrigues
+    without the angle). Opposite ``a`` and ``b`` have no smallest rotation: ``v`` is returned as it is."""
+    c = (a * b).sum(-1, keepdims=True)
+    k = np.cross(a, b)
+    opposite = c < -1 + 1e-9
+    scale = 1.0 / np.where(opposite, 1.0, 1.0 + c)
+    turned = v * c + np.cross(k, v) + k * (k * v).sum(-1, keepdims=True) * scale
+    return np.where(opposite, v, turned)
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.maximum(np.sqrt((v * v).sum(-1, keepdims=True)), 1e-30)
+
+
+def integrate(state: StrandState, accel: np.ndarray, damping: float, dt: float) -> None:
+    """Verlet: every point but the root moves by its damped velocity and ``accel`` (``[N, P, 3]`` or
+    broadcastable) times ``dt^2``."""
+    x, prev = state.x[:, 1:], state.x_prev[:, 1:]
+    moved = x + (x - prev) * (1.0 - damping) + np.broadcast_to(accel, state.x.shape)[:, 1:] * (dt * dt)
+    prev[...] = x
+    x[...] = moved
+
+
+def global_shape(state: StrandState, target: np.ndarray, stiffness: float, reach: int) -> None:
+    """Points ``1 .. reach-1`` move ``stiffness`` of the way to ``target`` (the rest pose on the head)."""
+    if reach > 1 and stiffness > 0:
+        x = state.x[:, 1:reach]
+        x += stiffness * (target[:, 1:reach] - x)
+
+
+def local_shape(state: StrandState, target: np.ndarray, stiffness: float) -> None:
+    """Root to tip, each point moves ``stiffness`` of the way to where its rest segment (on the head,
+    ``target``) would put it, turned as its parent segment has turned from rest; the first segment's
+    parent is the scalp, which turns with the head (without it a stiff strand swings about its root as
+    a rod)."""
+    if stiffness <= 0:
+        return
+    x = state.x
+    rest_seg = np.diff(target, axis=1)
+    x[:, 1] += stiffness * (x[:, 0] + rest_seg[:, 0] - x[:, 1])
+    for k in range(1, x.shape[1] - 1):
+        parent_now = _unit(x[:, k] - x[:, k - 1])
+        parent_rest = _unit(rest_seg[:, k - 1])
+        want = x[:, k] + rotate_between(parent_rest, parent_now, rest_seg[:, k])
+        x[:, k + 1] += stiffness * (want - x[:, k + 1])
+
+
+def keep_lengths(state: StrandState, length_damping: float) -> None:
+    """Follow the leader: root to tip, each point is put back at its rest length from its parent, along
+    the segment; its parent's velocity loses ``length_damping`` of that correction (Mueller et al. 2012),
+    which takes out the energy the projection would otherwise add."""
+    x, prev = state.x, state.x_prev
+    for k in range(x.shape[1] - 1):
+        seg = x[:, k + 1] - x[:, k]
+        placed = x[:, k] + _unit(seg) * state.rest_length[:, k, None]
+        correction = placed - x[:, k + 1]
+        x[:, k + 1] = placed
+        if k > 0:
+            prev[:, k] += length_damping * correction
+
+
+@dataclass(frozen=True)
+class Capsules:
+    """Collision capsules in the head's rest frame: segment ``a -> b``, radius ``r`` (a sphere: ``a = b``)."""
+
+    a: np.ndarray  # [Q, 3]
+    b: np.ndarray  # [Q, 3]
+    radius: np.ndarray  # [Q]
+
+    def moved(self, rotation: np.ndarray, translation: np.ndarray) -> Capsules:
+        return Capsules(self.a @ rotation.T + translation, self.b @ rotation.T + translation, self.radius)
+
+
+def collide(state: StrandState, capsules: Capsules) -> None:
+    """Points inside a capsule are pushed out to its surface along the way from its axis (roots stay)."""
+    x = state.x[:, 1:]
+    for a, b, r in zip(capsules.a, capsules.b, capsules.radius, strict=True):
+        ab = b - a
+        denom = float(ab @ ab)
+        t = np.clip(((x - a) @ ab) / denom, 0.0, 1.0) if denom > 0 else np.zeros(x.shape[:-1])
+        closest = a + t[..., None] * ab
+        away = x - closest
+        dist = np.sqrt((away * away).sum(-1))
+        inside = dist < r
+        if inside.any():
+            x[inside] = closest[inside] + _unit(away[inside]) * r
+
+
+def wind_accel(state: StrandState, wind: np.ndarray) -> np.ndarray:
+    """Wind on each point: the part of ``wind`` across the point's segment (a strand feels no wind
+    blowing along it), ``[N, P, 3]``."""
+    seg = np.empty_like(state.x)
+    seg[:, 1:] = state.x[:, 1:] - state.x[:, :-1]
+    seg[:, 0] = seg[:, 1]
+    t = _unit(seg)
+    return wind - t * (t @ wind)[..., None]
+
+
+def step(state: StrandState, settings: SolverSettings, rotation: np.ndarray, translation: np.ndarray,
+         gravity: np.ndarray, wind: np.ndarray, capsules: Capsules | None, dt: float) -> None:
+    """One substep of ``dt`` seconds with the head at ``x -> rotation x + translation``; ``gravity`` and
+    ``wind`` in scene units per s^2."""
+    target = state.rest @ rotation.T + translation
+    state.x[:, 0] = target[:, 0]
+    state.x_prev[:, 0] = target[:, 0]
+    accel = gravity if settings.gravity else np.zeros(3)
+    if np.any(wind):
+        accel = accel + wind_accel(state, wind)
+    integrate(state, accel, settings.damping, dt)
+    reach = int(round(settings.global_range * state.x.shape[1]))
+    global_shape(state, target, settings.global_stiffness, reach)
+    local_shape(state, target, settings.local_stiffness)
+    moved = capsules.moved(rotation, translation) if capsules is not None else None
+    for _ in range(settings.length_iterations):
+        if moved is not None:
+            collide(state, moved)
+        keep_lengths(state, settings.length_damping)
+    if not np.isfinite(state.x).all():
+        raise UnstableSimulation("the simulation produced non-finite points; lower the wind, raise the "
+                                 "damping or the substeps")
