@@ -12,13 +12,13 @@ tests/bench/paper_scale.py does, 800 cards, N_T 64, K 10, D 64, SH degree 3, 256
         --iters 20 [--reference-iters 2] [--res 256] [--backend ...] [--json paper.json]
 
 Renders a splat dataset into the work folder if it has none, builds the cards (timed apart; cached
-in the work folder at paper scale; the work folder is ``~/.cache/cghair/bench`` unless ``--work`` or
-``$CGH_BENCH_DIR`` moves it, so no cache lands in the repository), trains the latents variant and prints iterations per second,
-milliseconds per stage, peak memory (resident set; on CUDA also the GPU's peak allocation) and
-the GPU's name. The small config then evaluates the written .cgh on the held-out views; the
-paper scale trains the first N of N + 1 scheduled iterations (so nothing is exported) and then a
-few iterations of the ``reference`` backend on the same scene, for the speed-up. ``--json``
-writes every figure. It reports figures only; it asserts nothing about time.
+in the work folder at paper scale; the work folder is ``~/.cache/cghair/bench`` unless ``--work``
+or ``$CGH_BENCH_DIR`` moves it, so no cache lands in the repository), trains the latents variant
+and prints iterations per second, milliseconds per stage, peak memory (resident set; on CUDA also
+the GPU's peak allocation) and the GPU's name. The small config then evaluates the written .cgh on
+the held-out views; the paper scale trains the first N of N + 1 scheduled iterations (so nothing
+is exported) and then a few iterations of the ``reference`` backend on the same scene, for the
+speed-up. ``--json`` writes every figure. It reports figures only; it asserts nothing about time.
 """
 
 from __future__ import annotations
