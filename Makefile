@@ -5,7 +5,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 TORCH  ?= torch==2.13.0
 
-.PHONY: demo test check bench bench-tables paper-trained lint clean venv blender splat-transform fuzz
+.PHONY: demo test check bench bench-tables paper-trained lint clean venv blender splat-transform fuzz gpu-check
 
 venv: $(VENV)/.installed
 
@@ -88,6 +88,18 @@ FUZZ_SECONDS ?= 600
 fuzz: venv
 	mkdir -p fuzz/corpus
 	PYTHONPATH=. $(PY) tests/fuzz/fuzz_decode.py fuzz/corpus -max_total_time=$(FUZZ_SECONDS) -artifact_prefix=fuzz/
+
+# The GPU check (issue 33; docs/install.md): on a machine with an NVIDIA driver whose GPU_PYTHON has a CUDA
+# build of torch, from a fresh copy of the tree, in at most 8 minutes: installs .venv-gpu over that torch, then
+# gsplat's kernels (compile timed, cached in ~/.cache/cghair), every CUDA test, training at the paper's scale,
+# the viewer at 1920 x 1080 and gsplat against native, into GPU_CHECK_OUT (gpu_check.json, summary.txt).
+# It must not depend on `venv`, whose CPU torch pin would replace the machine's CUDA build. DRY=1 runs the same
+# stages here with tiny sizes, CPU backends and .venv's Python, installing nothing (tests/test_gpu_check.py).
+GPU_PYTHON    ?= python3
+GPU_CHECK_OUT ?= gpu_check_out
+
+gpu-check:
+	$(if $(DRY),$(PY),$(GPU_PYTHON)) tools/gpu_check.py --out $(GPU_CHECK_OUT) $(if $(DRY),--dry-run)
 
 lint: venv
 	$(VENV)/bin/ruff check .

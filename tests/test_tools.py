@@ -165,6 +165,62 @@ def test_committed_pages_agree_with_the_committed_benchmark_json():
     assert run.returncode == 0, run.stderr
 
 
+GPU = {"schema": "cghair-gpu-check/1", "dry_run": False, "started_utc": "2026-12-01 10:00 UTC", "commit": "abc123",
+       "machine": {"gpu": "NVIDIA H100 80GB HBM3", "driver": "550.54", "torch_cuda": "12.4", "torch": "2.5.1",
+                   "gsplat": "1.4.0"},
+       "stages": {"cuda_tests": {"status": "ok", "seconds": 31.5, "error": None},
+                  "viewer": {"status": "timeout", "seconds": 180.0, "error": "stopped after its limit of 180 s"}},
+       "figures": {"train_gsplat": {"backend": "gsplat", "device": "cuda", "iterations": 100,
+                                    "iterations_per_second": 61.5, "ms_per_iteration": 16.3,
+                                    "cuda_peak_allocated_gib": 12.5, "held_out_psnr": None,
+                                    "scene": {"gaussians": 2475000, "res": 512},
+                                    "stage_ms_per_iteration": {"render": 10.1, "backward": 6.2}},
+                   "cuda_tests": {"passed": 9, "failures": 1, "errors": 0, "skipped": 0},
+                   "speedup_over_reference": 20.4, "held_out_psnr_delta_db": 0.02, "viewer": None},
+       "targets": {"gsplat_iterations_per_second": {"measured": 61.5, "target": 50.0, "met": True},
+                   "viewer_full_quality_fps": {"measured": None, "target": 200.0, "met": None}}}
+
+
+def _tables(tmp_path, gpu: dict | None) -> subprocess.CompletedProcess:
+    src, page, readme = tmp_path / "benchmarks.json", tmp_path / "b.md", tmp_path / "README.md"
+    src.write_text(json.dumps(BENCH))
+    readme.write_text("GPU: <!-- bench: @gpu -->old<!-- /bench -->\n")
+    if gpu is not None:
+        (tmp_path / "gpu_check.json").write_text(json.dumps(gpu))
+    return subprocess.run([sys.executable, str(ROOT / "tools" / "bench_tables.py"), str(src), "-o", str(page),
+                           "--fill", str(readme)], capture_output=True, text=True)
+
+
+def test_bench_tables_says_the_gpu_paths_are_unmeasured_without_a_gpu_json(tmp_path):
+    run = _tables(tmp_path, None)
+    assert run.returncode == 0, run.stderr
+    unmeasured = "are unmeasured: no `make gpu-check` JSON is committed"
+    assert unmeasured in (tmp_path / "b.md").read_text().split("## GPU: make gpu-check")[1]
+    assert unmeasured in (tmp_path / "README.md").read_text() and "old" not in (tmp_path / "README.md").read_text()
+
+
+def test_bench_tables_fills_the_gpu_section_from_the_gpu_json(tmp_path):
+    run = _tables(tmp_path, GPU)
+    assert run.returncode == 0, run.stderr
+    section = (tmp_path / "b.md").read_text().split("## GPU: make gpu-check")[1]
+    assert "NVIDIA H100 80GB HBM3 (driver 550.54, CUDA 12.4, torch 2.5.1, gsplat 1.4.0), 2026-12-01 10:00 UTC" \
+        in section
+    assert "| viewer | timeout | 180 | stopped after its limit of 180 s |" in section
+    assert ("| train_gsplat | gsplat | cuda | 100 | 61.5 | 16.3 | 12.5 | - | 2,475,000 | 512 | "
+            "render 10.1, backward 6.2 |") in section
+    assert "| speed-up over the reference | 20.4 |" in section
+    assert "| CUDA tests passed / failed / skipped | 9 / 1 / 0 |" in section
+    assert "| viewer_full_quality_fps | - | 200 | - |" in section and "unmeasured" not in section
+    readme = (tmp_path / "README.md").read_text()
+    assert "gsplat training at the paper's scale 61.5 it/s, the viewer at full quality unmeasured" in readme
+
+
+def test_bench_tables_refuses_a_dry_run_gpu_json_in_one_line_and_writes_nothing(tmp_path):
+    run = _tables(tmp_path, {**GPU, "dry_run": True})
+    assert run.returncode == 2 and run.stderr.count("\n") == 1 and "is a dry run's" in run.stderr
+    assert not (tmp_path / "b.md").exists() and "old" in (tmp_path / "README.md").read_text()
+
+
 def test_baseline_coder_keeps_the_bound_on_strands_of_unequal_lengths():
     rng = np.random.default_rng(0)
     offsets = np.array([0, 5, 12, 40, 41])

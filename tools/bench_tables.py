@@ -1,6 +1,7 @@
 """Figures in the docs from a pytest-benchmark JSON file (``make bench`` writes one).
 
-    python tools/bench_tables.py docs/benchmarks.json [-o docs/benchmarks.md] [--fill PAGE.md ...] [--check]
+    python tools/bench_tables.py docs/benchmarks.json [-o docs/benchmarks.md] [--fill PAGE.md ...] [--gpu FILE]
+        [--check]
 
 ``-o``: a page with a section per benchmark: its ``extra_info["rows"]`` (a list of dicts) as a
 table, else its ``extra_info["table"]`` (printed lines) as a block, else its scalar ``extra_info``
@@ -22,6 +23,11 @@ back on the benchmarks' scalar ``extra_info`` values when no row has the field; 
 each benchmark's median, min and max seconds and rounds to its rows. The pattern ``@run`` with
 ``field=date``, ``machine`` or ``load`` gives the run's. A pattern that matches nothing
 gives "not measured: run `make bench`", so a page never shows a stale figure as a fresh one.
+
+``--gpu FILE`` (default ``gpu_check.json`` beside the benchmark JSON): the JSON of ``make gpu-check``
+(tools/gpu_check.py) on a GPU machine. The page of ``-o`` ends with a GPU section from it, and a
+region ``<!-- bench: @gpu -->`` becomes one sentence of its headline figures; with no such file both
+say plainly that the GPU paths are unmeasured. A dry run's JSON is refused: its figures are the CPU's.
 
 ``--check`` writes nothing and fails (exit 1) when a page differs from what the JSON gives: the
 committed pages agree with the committed JSON (tests/test_tools.py runs it).
@@ -111,7 +117,86 @@ def section(bench: dict) -> list[str]:
     return [*out, ""]
 
 
-def render(data: dict, source: str) -> str:
+GPU_UNMEASURED = ("The GPU paths (gsplat training, the reference splatter on CUDA, the viewer on an NVIDIA driver) "
+                  "are unmeasured: no `make gpu-check` JSON is committed ({source}).")
+
+
+class GpuJsonError(ValueError):
+    """A GPU check JSON that cannot fill the docs."""
+
+
+def read_gpu(path: Path) -> dict | None:
+    """``make gpu-check``'s JSON, or None where there is none; a dry run's or an unreadable one is an error."""
+    if not path.exists():
+        return None
+    try:
+        gpu = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise GpuJsonError(f"cannot read {path}: {exc}") from None
+    if not isinstance(gpu, dict) or gpu.get("schema") != "cghair-gpu-check/1":
+        raise GpuJsonError(f"{path} is not a `make gpu-check` JSON (schema cghair-gpu-check/1)")
+    if gpu.get("dry_run"):
+        raise GpuJsonError(f"{path} is a dry run's: its figures are the CPU's; run `make gpu-check` on a GPU machine")
+    return gpu
+
+
+def _gpu_machine(gpu: dict) -> str:
+    m = gpu.get("machine") or {}
+    return (f"{m.get('gpu', '?')} (driver {m.get('driver', '?')}, CUDA {m.get('torch_cuda', '?')}, torch "
+            f"{m.get('torch', '?')}, gsplat {m.get('gsplat', '?')}), {gpu.get('started_utc', '?')}, commit "
+            f"{gpu.get('commit', '?')}")
+
+
+def gpu_sentence(gpu: dict | None, source: str) -> str:
+    """One sentence of the GPU check's headline figures (the README's ``@gpu`` region)."""
+    if gpu is None:
+        return GPU_UNMEASURED.format(source=f"`{source}`")
+    t = gpu.get("targets", {})
+
+    def measured(name: str, unit: str) -> str:
+        value = t.get(name, {}).get("measured")
+        return "unmeasured" if value is None else f"{_cell(value)} {unit}"
+
+    return (f"On {_gpu_machine(gpu)}: gsplat training at the paper's scale "
+            f"{measured('gsplat_iterations_per_second', 'it/s')}, the viewer at full quality "
+            f"{measured('viewer_full_quality_fps', 'fps')} at 1920 x 1080 "
+            "([docs/benchmarks.md](docs/benchmarks.md#gpu-make-gpu-check)).")
+
+
+def gpu_section(gpu: dict | None, source: str) -> list[str]:
+    """The GPU section of the page: stages, figures, the viewer's runs and the targets, or 'unmeasured'."""
+    out = ["## GPU: make gpu-check", ""]
+    if gpu is None:
+        return [*out, GPU_UNMEASURED.format(source=f"`{source}`"), ""]
+    fig = gpu.get("figures", {})
+    out += [f"From `{source}` (tools/gpu_check.py) on {_gpu_machine(gpu)}.", ""]
+    out += _table([{"stage": k, **{c: v.get(c) for c in ("status", "seconds", "error")}}
+                   for k, v in gpu.get("stages", {}).items()])
+    runs = [{"run": name, **{k: x.get(k) for k in ("backend", "device", "iterations", "iterations_per_second",
+                                                   "ms_per_iteration", "cuda_peak_allocated_gib", "held_out_psnr")},
+             "Gaussians": x["scene"]["gaussians"], "res": x["scene"]["res"],
+             "ms per stage": ", ".join(f"{k} {v}" for k, v in x.get("stage_ms_per_iteration", {}).items())}
+            for name in ("train_gsplat", "train_reference", "train_native", "train_cuda") if (x := fig.get(name))]
+    if runs:
+        out += ["", *_table(runs)]
+    tests = fig.get("cuda_tests")
+    scalars = {"speed-up over the reference": fig.get("speedup_over_reference"),
+               "held-out PSNR difference, gsplat - native (dB)": fig.get("held_out_psnr_delta_db"),
+               "gsplat kernels' first use (s)": (fig.get("gsplat_kernels") or {}).get("seconds"),
+               "CUDA tests passed / failed / skipped": tests and (f"{tests['passed']} / "
+                                                                 f"{tests['failures'] + tests['errors']} / "
+                                                                 f"{tests['skipped']}")}
+    out += ["", *_table([{"figure": k, "value": v} for k, v in scalars.items()])]
+    viewer = fig.get("viewer")
+    if viewer:
+        out += ["", f"Viewer: {viewer.get('gaussians', 0):,} Gaussians at {viewer.get('width')} x "
+                    f"{viewer.get('height')} on {viewer.get('renderer')}:", "",
+                *_table([{**r, "fps": round(r["fps"])} for r in viewer["runs"]])]
+    out += ["", *_table([{"issue 33's target": k, **v} for k, v in gpu.get("targets", {}).items()])]
+    return [*out, ""]
+
+
+def render(data: dict, source: str, gpu: dict | None = None, gpu_source: str = "docs/gpu_check.json") -> str:
     commit = data.get("commit_info", {})
     text = HEADER.format(source=source, when=data.get("datetime", "?")[:19].replace("T", " "),
                          machine=machine_line(data), load=load_line(data),
@@ -119,6 +204,7 @@ def render(data: dict, source: str) -> str:
     lines = [text]
     for bench in sorted(data.get("benchmarks", []), key=lambda b: b["fullname"]):
         lines += section(bench)
+    lines += gpu_section(gpu, gpu_source)
     return "\n".join(lines)
 
 
@@ -180,7 +266,7 @@ def _value(rows: list[dict], field: str) -> str:
     return _cell(values[0]) if len(set(map(_cell, values))) == 1 else " / ".join(map(_cell, values))
 
 
-def fill(text: str, data: dict, source: str) -> str:
+def fill(text: str, data: dict, source: str, gpu: dict | None = None, gpu_source: str = "docs/gpu_check.json") -> str:
     """``text`` with every marked region replaced from ``data``; the rest of it byte for byte."""
     caption = (f"_Generated by `make bench` (`{source}`) on {machine_line(data)}, "
                f"{data.get('datetime', '?')[:16].replace('T', ' ')} UTC, load average {load_line(data)}; "
@@ -191,6 +277,8 @@ def fill(text: str, data: dict, source: str) -> str:
 
     def replace(m: re.Match) -> str:
         pattern, opts = _options(m["spec"])
+        if pattern == "@gpu":
+            return f"<!-- bench: {m['spec']} -->{gpu_sentence(gpu, gpu_source)}<!-- /bench -->"
         rows = [run] if pattern == "@run" else _rows(matching(data, pattern), opts)
         if "field" in opts and not any(opts["field"] in r for r in rows):  # a scalar of extra_info
             rows = _rows(matching(data, pattern), {**opts, "table": None})
@@ -211,17 +299,24 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("-o", "--out", type=Path, help="write the page of every benchmark here")
     p.add_argument("--fill", type=Path, nargs="+", default=[], metavar="PAGE",
                    help="replace the marked regions of these pages in place")
+    p.add_argument("--gpu", type=Path, default=None, metavar="FILE",
+                   help="`make gpu-check`'s JSON (default: gpu_check.json beside the benchmark JSON; absent: the GPU "
+                        "paths are said to be unmeasured)")
     p.add_argument("--check", action="store_true", help="write nothing; exit 1 if a page would change")
     args = p.parse_args(argv)
+    gpu_path = args.gpu or args.json.with_name("gpu_check.json")
     try:
         data = json.loads(args.json.read_text())
+        gpu = read_gpu(gpu_path)
     except (OSError, ValueError) as exc:
-        print(f"bench_tables: error: cannot read {args.json}: {exc}", file=sys.stderr)
+        why = exc if isinstance(exc, GpuJsonError) else f"cannot read {args.json}: {exc}"
+        print(f"bench_tables: error: {why}", file=sys.stderr)
         return 2
+    gpu_args = (gpu, gpu_path.as_posix())
     try:
-        pages = {page: fill(page.read_text(), data, args.json.as_posix()) for page in args.fill}
+        pages = {page: fill(page.read_text(), data, args.json.as_posix(), *gpu_args) for page in args.fill}
         if args.out:
-            pages[args.out] = render(data, args.json.as_posix())
+            pages[args.out] = render(data, args.json.as_posix(), *gpu_args)
         if args.check:
             stale = [str(page) for page, text in pages.items() if not page.exists() or page.read_text() != text]
             if stale:

@@ -7,13 +7,17 @@ one is held to the reference's image contract (:mod:`training.splatter`): EWA pr
 0.01, front-to-back compositing; early termination at T < 1e-4 is allowed. ``reference`` is the
 source of truth; the others are tested against it (tests/training/test_backends.py).
 
-gsplat (``pip install 'cghair[cuda]'``) differs from the contract in two documented places, both
-handled here: its alpha cap is 0.999, so opacities are clamped to 0.99 before the call (identical
-wherever o <= 0.99; above it alpha differs by at most 0.01 at a Gaussian's core); and colours are
-evaluated here from our SH exactly as the reference does (direction camera -> mean, + 0.5, clamp at
-0) and passed as RGB, so no SH convention of gsplat's has to match ours. Its projection also
-clamps the screen-space Jacobian to 1.3 x the field of view (as 3DGS does), which changes only
-Gaussians centred well outside the image.
+gsplat (``pip install 'cghair[cuda]'``) differs from the contract in three documented places, all
+handled here. Its alpha cap is 0.999, so opacities are clamped to 0.99 before the call (identical
+wherever o <= 0.99; above it alpha differs by at most 0.01 at a Gaussian's core), and the clamp passes
+the gradient straight through (``o - (o - min(o, 0.99)).detach()``): a Gaussian above 0.99 keeps the
+gradient it would have at 0.99, as the reference's per-pixel cap leaves one wherever o exp(-q/2) < 0.99,
+instead of none at all, which would freeze every opaque Gaussian. Its kernels take float32 only, so
+inputs are cast to float32 at the call and the outputs back to the inputs' dtype (gradients follow
+the casts). Colours are evaluated here from our SH exactly as the reference does (direction camera ->
+mean, + 0.5, clamp at 0) and passed as RGB, so no SH convention of gsplat's has to match ours. Its
+projection also clamps the screen-space Jacobian to 1.3 x the field of view (as 3DGS does), which
+changes only Gaussians centred well outside the image.
 """
 
 from __future__ import annotations
@@ -63,6 +67,9 @@ def _gsplat_rasterization():
     except ImportError:
         raise BackendError(f"the gsplat backend needs the gsplat package: {GSPLAT_INSTALL} "
                            "(it compiles its CUDA kernels with nvcc on first use)") from None
+    except Exception as exc:  # an installed gsplat that breaks on import: a torch or CUDA library mismatch
+        raise BackendError(f"gsplat is installed but fails to import ({type(exc).__name__}: {exc}); reinstall "
+                           f"it against this torch ({GSPLAT_INSTALL}), or use --backend reference") from None
     try:  # a prebuilt wheel carries the kernels; otherwise gsplat compiles them now, and leaves None without nvcc
         kernels = importlib.import_module("gsplat.cuda._backend")._C
     except Exception as exc:  # a failed nvcc build surfaces as any of several exception types
@@ -134,18 +141,25 @@ def gsplat_colours(means: Tensor, sh: Tensor, camera: Camera) -> Tensor:
     return eval_sh(sh, dirs / dirs.norm(dim=-1, keepdim=True).clamp_min(1e-12))
 
 
+def capped_opacities(opacities: Tensor) -> Tensor:
+    """``min(o, ALPHA_MAX)`` forward, the identity backward: the straight-through cap for gsplat."""
+    return opacities - (opacities - torch.clamp_max(opacities, ALPHA_MAX)).detach()
+
+
 def render_gsplat(means, quats, scales, opacities, sh, camera, background=(0.0, 0.0, 0.0)) -> RenderOutput:
-    """The reference's :func:`training.splatter.render` through ``gsplat.rasterization`` (CUDA)."""
+    """The reference's :func:`training.splatter.render` through ``gsplat.rasterization`` (CUDA, float32)."""
     rasterization = _gsplat_rasterization()
-    viewmats, ks = gsplat_camera(camera, means)
+    f32 = torch.float32
+    viewmats, ks = gsplat_camera(camera, means.to(f32))
     colours, alphas, _ = rasterization(
-        means, quats, scales, torch.clamp_max(opacities, ALPHA_MAX), gsplat_colours(means, sh, camera),
-        viewmats, ks, int(camera.width), int(camera.height), near_plane=NEAR_PLANE, eps2d=DILATION,
-        sh_degree=None, packed=False, rasterize_mode="classic", render_mode="RGB+D")
+        means.to(f32), quats.to(f32), scales.to(f32), capped_opacities(opacities).to(f32),
+        gsplat_colours(means, sh, camera).to(f32), viewmats, ks, int(camera.width), int(camera.height),
+        near_plane=NEAR_PLANE, eps2d=DILATION, sh_degree=None, packed=False, rasterize_mode="classic",
+        render_mode="RGB+D")
+    colours, alpha = colours[0].to(means.dtype), alphas[0, ..., 0].to(means.dtype)
     bg = torch.as_tensor(background, dtype=means.dtype, device=means.device).reshape(3)
-    alpha = alphas[0, ..., 0]
-    rgb = colours[0, ..., :3] + (1.0 - alpha[..., None]) * bg
-    return RenderOutput(rgb, alpha, colours[0, ..., 3])
+    rgb = colours[..., :3] + (1.0 - alpha[..., None]) * bg
+    return RenderOutput(rgb, alpha, colours[..., 3])
 
 
 # --- one entry point ---------------------------------------------------------------------------------------

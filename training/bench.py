@@ -12,12 +12,13 @@ tests/bench/paper_scale.py does, 800 cards, N_T 64, K 10, D 64, SH degree 3, 256
         --iters 20 [--reference-iters 2] [--res 256] [--backend ...] [--json paper.json]
 
 Renders a splat dataset into the work folder if it has none, builds the cards (timed apart; cached
-in the work folder at paper scale), trains the latents variant and prints iterations per second,
-milliseconds per stage, peak memory (resident set; on CUDA also the GPU's peak allocation) and
-the GPU's name. The small config then evaluates the written .cgh on the held-out views; the
-paper scale trains the first N of N + 1 scheduled iterations (so nothing is exported) and then a
-few iterations of the ``reference`` backend on the same scene, for the speed-up. ``--json``
-writes every figure. It reports figures only; it asserts nothing about time.
+in the work folder at paper scale; the work folder is ``~/.cache/cghair/bench`` unless ``--work``
+or ``$CGH_BENCH_DIR`` moves it, so no cache lands in the repository), trains the latents variant
+and prints iterations per second, milliseconds per stage, peak memory (resident set; on CUDA also
+the GPU's peak allocation) and the GPU's name. The small config then evaluates the written .cgh on
+the held-out views; the paper scale trains the first N of N + 1 scheduled iterations (so nothing
+is exported) and then a few iterations of the ``reference`` backend on the same scene, for the
+speed-up. ``--json`` writes every figure. It reports figures only; it asserts nothing about time.
 """
 
 from __future__ import annotations
@@ -51,7 +52,8 @@ def main(argv: list[str] | None = None) -> int:
                    f"scale default ../shared/data/hair/{PAPER_SCALE_DEFAULT_MODEL})")
     p.add_argument("--paper-scale", action="store_true",
                    help="25,000 strands x 100 points, 800 cards, N_T 64, K 10, D 64, SH 3 (tests/bench/paper_scale.py)")
-    p.add_argument("--work", default="bench_out", help="folder for the dataset, cards and outputs")
+    p.add_argument("--work", default=None, help="folder for the dataset, cards and outputs, kept between runs "
+                   "(default: $CGH_BENCH_DIR, else ~/.cache/cghair/bench, outside the repository)")
     p.add_argument("--iters", type=int, default=None, help="training iterations (default: 2000; paper scale 20)")
     p.add_argument("--reference-iters", type=int, default=2,
                    help="paper scale: iterations of the reference backend for the speed-up (default 2; 0 skips "
@@ -134,55 +136,82 @@ def _train_run(ds_dir: Path, base, cfg, backend: str, device, out: Path | None, 
             "final": result.history[-1] if result.history else None, **_peak_memory(device)}
 
 
-def _run(args: argparse.Namespace) -> None:
-    import torch
+def cache_dir() -> Path:
+    """``$CGH_BENCH_DIR``, else ``$XDG_CACHE_HOME/cghair/bench`` (``~/.cache/cghair/bench``): the default work folder,
+    outside the repository, where the cards and datasets are cached between runs."""
+    if os.environ.get("CGH_BENCH_DIR"):
+        return Path(os.environ["CGH_BENCH_DIR"])
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "cghair" / "bench"
 
+
+def _paper_scene(args: argparse.Namespace, work: Path):
+    """The paper-scale strands, their cards (cached in ``work``), the config for N iterations and a tag."""
+    from .ablation import scaled_config
+    from .train import base_asset
+
+    ps = _paper_scale_module()
+    path = Path(args.strands or REPO.parent / "shared" / "data" / "hair" / PAPER_SCALE_DEFAULT_MODEL)
+    if not path.is_file():
+        raise BenchError(f"hair model {path} not found (give --strands)")
+    strands = ps.paper_scale_strands(path)
+
+    def config(iters: int):
+        return scaled_config("latents", iters, n_cards=ps.CARDS, n_groups=ps.GROUPS, points_per_strand=ps.POINTS,
+                             codebook_size=ps.K, latent_dim=ps.D, mlp_hidden=[ps.HIDDEN], sh_degree=ps.SH_DEGREE)
+
+    tag = f"{path.stem}_{ps.STRANDS}x{ps.POINTS}_{ps.CARDS}c{ps.GROUPS}g"
+    cards_file = work / f"{tag}_cards.cgh"
+    if cards_file.is_file():
+        from cghair_format import read
+
+        return strands, read(cards_file), config, tag
+    from cghair_format import write
+
+    base = base_asset(config(args.iters + 1), strands, progress=False)
+    write(base, cards_file, "lossless")
+    return strands, base, config, tag
+
+
+def _small_scene(args: argparse.Namespace, work: Path):
+    """The small config's strands, cards, config for N iterations and tag (nothing cached)."""
     from cghair_format.exchange import load_strands
 
     from .ablation import scaled_config
+    from .train import base_asset
+
+    strands = load_strands(args.strands)
+
+    def config(iters: int):
+        return scaled_config("latents", iters, n_cards=args.n_cards, points_per_strand=args.points)
+
+    return strands, base_asset(config(args.iters), strands, progress=False), config, \
+        f"{Path(args.strands).stem}_{args.points}p"
+
+
+def _work_dir(args: argparse.Namespace) -> Path:
+    work = Path(args.work) if args.work else cache_dir()
+    try:
+        work.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise BenchError(f"cannot create the work folder {work} ({exc.strerror}); give another with --work") from None
+    return work
+
+
+def _run(args: argparse.Namespace) -> None:
+    import torch
+
     from .backends import resolve_backend
     from .dataset import render_dataset
     from .splatter import torch_device
-    from .train import base_asset
 
     if args.threads:
         torch.set_num_threads(args.threads)
     device = torch_device(args.device)
     backend = resolve_backend(args.backend, device)
-    work = Path(args.work)
-    work.mkdir(parents=True, exist_ok=True)
+    work = _work_dir(args)
     load_start = os.getloadavg()[0]
     t = time.perf_counter()
-    if args.paper_scale:
-        ps = _paper_scale_module()
-        path = Path(args.strands or REPO.parent / "shared" / "data" / "hair" / PAPER_SCALE_DEFAULT_MODEL)
-        if not path.is_file():
-            raise BenchError(f"hair model {path} not found (give --strands)")
-        strands = ps.paper_scale_strands(path)
-
-        def config(iters: int):
-            return scaled_config("latents", iters, n_cards=ps.CARDS, n_groups=ps.GROUPS, points_per_strand=ps.POINTS,
-                                 codebook_size=ps.K, latent_dim=ps.D, mlp_hidden=[ps.HIDDEN], sh_degree=ps.SH_DEGREE)
-
-        tag = f"{path.stem}_{ps.STRANDS}x{ps.POINTS}_{ps.CARDS}c{ps.GROUPS}g"
-        cards_file = work / f"{tag}_cards.cgh"
-        if cards_file.is_file():
-            from cghair_format import read
-
-            base = read(cards_file)
-        else:
-            from cghair_format import write
-
-            base = base_asset(config(args.iters + 1), strands, progress=False)
-            write(base, cards_file, "lossless")
-    else:
-        strands = load_strands(args.strands)
-        tag = f"{Path(args.strands).stem}_{args.points}p"
-
-        def config(iters: int):
-            return scaled_config("latents", iters, n_cards=args.n_cards, points_per_strand=args.points)
-
-        base = base_asset(config(args.iters), strands, progress=False)
+    strands, base, config, tag = (_paper_scene if args.paper_scale else _small_scene)(args, work)
     cards_s = time.perf_counter() - t
     ds_dir = Path(args.dataset) if args.dataset else work / f"dataset_{tag}_{args.engine}_{args.res}"
     t = time.perf_counter()
@@ -197,38 +226,52 @@ def _run(args: argparse.Namespace) -> None:
         "scene": {"model": args.strands or str(PAPER_SCALE_DEFAULT_MODEL), "paper_scale": args.paper_scale,
                   "strands": base.n_strands, "points": base.points_per_strand, "gaussians": base.n_gaussians,
                   "cards": base.cards.count, "views": args.views, "res": args.res, "engine": args.engine},
-        "cards_seconds": round(cards_s, 2), "dataset_seconds": round(time.perf_counter() - t, 2) if rendered else None,
+        "work": str(work), "cards_seconds": round(cards_s, 2),
+        "dataset_seconds": round(time.perf_counter() - t, 2) if rendered else None,
     }
+    _emit(report, args, _header_lines(report))
+    if args.paper_scale:
+        _paper_runs(report, args, ds_dir, base, config, backend, device)
+    else:
+        _small_run(report, args, ds_dir, base, config(args.iters), backend, device, work / f"{tag}_{backend}.cgh")
+    print(f"load average at end {os.getloadavg()[0]:.2f}")
+
+
+def _header_lines(report: dict) -> list[str]:
     m, s = report["machine"], report["scene"]
     gpu = f", {m['gpu']}" if m["gpu"] else ""
-    _emit(report, args, [
-        f"machine: {m['cores']} cores{gpu}, torch threads {m['torch_threads']}, load average at start "
-        f"{m['load_average_start']:.2f}",
-        f"scene: {s['strands']} strands x {s['points']} points = {s['gaussians']} Gaussians, {s['cards']} cards, "
-        f"{s['views']} views at {s['res']} x {s['res']} ({s['engine']})",
-        f"cards: {cards_s:.1f} s" + (f"; dataset: {report['dataset_seconds']:.1f} s" if rendered else "")])
-    if args.paper_scale:
-        report["run"] = _train_run(ds_dir, base, config(args.iters + 1), backend, device, None, args.iters)
-        _emit(report, args, _run_lines("", report["run"]))
-        if args.reference_iters > 0 and backend != "reference":
-            ref = _train_run(ds_dir, base, config(args.reference_iters + 1), "reference", device, None,
-                             args.reference_iters)
-            report["reference"] = ref
-            report["speedup_over_reference"] = round(ref["ms_per_iteration"] / report["run"]["ms_per_iteration"], 2)
-            _emit(report, args, _run_lines("reference ", ref)
-                  + [f"speed-up over reference: {report['speedup_over_reference']:.1f} x"])
-    else:
-        from .evaluate import evaluate
+    dataset = f"; dataset: {report['dataset_seconds']:.1f} s" if report["dataset_seconds"] is not None else ""
+    return [f"machine: {m['cores']} cores{gpu}, torch threads {m['torch_threads']}, load average at start "
+            f"{m['load_average_start']:.2f}",
+            f"scene: {s['strands']} strands x {s['points']} points = {s['gaussians']} Gaussians, {s['cards']} cards, "
+            f"{s['views']} views at {s['res']} x {s['res']} ({s['engine']}); work folder {report['work']}",
+            f"cards: {report['cards_seconds']:.1f} s{dataset}"]
 
-        out = work / f"{tag}_{backend}.cgh"
-        report["run"] = _train_run(ds_dir, base, config(args.iters), backend, device, out, None)
-        ev = evaluate(out, ds_dir, use_lpips=False, device=str(device), backend=backend)
-        h = report["held_out"] = {"psnr": round(ev.psnr, 3), "ssim": round(ev.ssim, 4), "views": len(ev.per_view),
-                                  "ground_truth": args.engine}
-        _emit(report, args, _run_lines("", report["run"]) + [
-            f"held-out: PSNR {h['psnr']:.2f} dB, SSIM {h['ssim']:.4f} ({h['views']} views, {h['ground_truth']} "
-            "ground truth)"])
-    print(f"load average at end {os.getloadavg()[0]:.2f}")
+
+def _paper_runs(report: dict, args, ds_dir: Path, base, config, backend: str, device) -> None:
+    """The first N of N + 1 iterations (nothing exported), then a few of the reference for the speed-up."""
+    report["run"] = _train_run(ds_dir, base, config(args.iters + 1), backend, device, None, args.iters)
+    _emit(report, args, _run_lines("", report["run"]))
+    if args.reference_iters > 0 and backend != "reference":
+        ref = _train_run(ds_dir, base, config(args.reference_iters + 1), "reference", device, None,
+                         args.reference_iters)
+        report["reference"] = ref
+        report["speedup_over_reference"] = round(ref["ms_per_iteration"] / report["run"]["ms_per_iteration"], 2)
+        _emit(report, args, _run_lines("reference ", ref)
+              + [f"speed-up over reference: {report['speedup_over_reference']:.1f} x"])
+
+
+def _small_run(report: dict, args, ds_dir: Path, base, cfg, backend: str, device, out: Path) -> None:
+    """The whole run, exported to ``out``, then its held-out scores."""
+    from .evaluate import evaluate
+
+    report["run"] = _train_run(ds_dir, base, cfg, backend, device, out, None)
+    ev = evaluate(out, ds_dir, use_lpips=False, device=str(device), backend=backend)
+    h = report["held_out"] = {"psnr": round(ev.psnr, 3), "ssim": round(ev.ssim, 4), "views": len(ev.per_view),
+                              "ground_truth": args.engine}
+    _emit(report, args, _run_lines("", report["run"]) + [
+        f"held-out: PSNR {h['psnr']:.2f} dB, SSIM {h['ssim']:.4f} ({h['views']} views, {h['ground_truth']} "
+        "ground truth)"])
 
 
 def _run_lines(label: str, x: dict) -> list[str]:

@@ -97,15 +97,28 @@ def _config(args: argparse.Namespace):
     return cfg.validate()
 
 
+def _resolve_backend(name: str | None, device: str) -> str:
+    """The backend to train with; on CUDA without ``--backend``, says why gsplat is not the one."""
+    from .backends import BackendError, check_backend, resolve_backend
+    from .splatter import torch_device
+
+    backend = resolve_backend(name, device)
+    if name is None and backend == "reference" and torch_device(device).type == "cuda":
+        try:
+            check_backend("gsplat", device)
+        except BackendError as exc:
+            print(f"note: training with the reference backend, not gsplat: {exc}", file=sys.stderr)
+    return backend
+
+
 def run(args: argparse.Namespace) -> int:
-    from .backends import resolve_backend
     from .capture import detect_layout
     from .train import TrainError, train
 
     if not (args.strands or args.cards or args.resume):
         raise TrainError("give --strands (to build cards) or --cards (a .cgh), or --resume a checkpoint")
     cfg = _config(args)
-    resolve_backend(args.backend, args.device)  # a backend that cannot run here fails before the dataset is read
+    _resolve_backend(args.backend, args.device)  # a backend that cannot run here fails before the dataset is read
     print(f"reading {args.dataset}: {detect_layout(args.dataset).describe()}")
     result = train(args.dataset, strands=args.strands, cards=args.cards, out=args.output, config=cfg,
                    resume=args.resume, profile=args.profile, progress=not args.no_progress,
