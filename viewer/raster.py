@@ -20,6 +20,13 @@ RECORD_BYTES = 16 * RECORD_VEC4S  # per sorted splat (splat_records.comp.glsl)
 PRIMITIVES = ("triangles", "quads")
 
 
+def check_primitive(primitive: str) -> str:
+    """``primitive`` if it names one of :data:`PRIMITIVES`; raises ``ValueError`` otherwise."""
+    if primitive not in PRIMITIVES:
+        raise ValueError(f"primitive must be one of {PRIMITIVES}, got {primitive!r}")
+    return primitive
+
+
 class RecordRasterizer:
     """The raster path of one renderer (a :class:`viewer.rasterizer.Rasterizer`).
 
@@ -30,11 +37,9 @@ class RecordRasterizer:
     name = "raster"
 
     def __init__(self, ctx: Any, programs: Programs, splats: int, primitive: str = "triangles"):
-        if primitive not in PRIMITIVES:
-            raise ValueError(f"primitive must be one of {PRIMITIVES}, got {primitive!r}")
         self.ctx = ctx
         self.programs = programs
-        self.primitive = primitive
+        self.primitive = check_primitive(primitive)
         self.splats = n = max(splats, 1)
         # what the preprocess writes per splat: centre (mx, my, z, radius), conic and opacity,
         # colour, the primitive's half-axes

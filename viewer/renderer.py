@@ -21,6 +21,7 @@ and colour.
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -32,14 +33,19 @@ from .decode import GpuScene, SceneTooLargeError, block_limit, sh_texels, upload
 from .frame import SplatRenderer, Stage, ViewSettings, run_stage
 from .lod import LodPlan, StrandLod
 from .pipeline import Programs, bind, dispatch, set_uniforms, use_textures
-from .raster import RecordRasterizer
+from .raster import RecordRasterizer, check_primitive
 from .rasterizer import Rasterizer
 from .shader_constants import SOFTWARE_RENDERERS
 from .sort import SORT_MODES, GpuRadixSort, stable_order
 from .tiles import TileRasterizer, max_splats
 
 NEAR, FAR = 0.01, 1.0e4  # clip planes of the overlays (the splats use the contract's near plane)
-RASTERIZERS = ("compute", "raster")  # TileRasterizer, RecordRasterizer (see Renderer._make_rasterizer)
+# the rasterizers by their --rasterizer names, each made from its renderer on first use
+RASTERIZERS: dict[str, Callable[[Renderer], Rasterizer]] = {
+    "compute": lambda r: TileRasterizer(r.ctx, r.programs, max(r.count, 1), capacity=block_limit(r.ctx) // 4,
+                                        sort_mode=r.sort_mode),
+    "raster": lambda r: RecordRasterizer(r.ctx, r.programs, max(r.count, 1), r.primitive),
+}
 
 
 def default_sort_mode(ctx: Any) -> str:
@@ -77,8 +83,9 @@ class Renderer(SplatRenderer):
     ``sort``: ``"gpu"``, ``"cpu"`` or ``"auto"``; ``rasterizer``: ``"compute"`` (tiles, early
     termination), ``"raster"`` or ``"auto"`` (compute, unless the scene exceeds its record image);
     it may change between frames. ``primitive`` (raster path): ``"triangles"`` or ``"quads"``
-    (:class:`viewer.raster.RecordRasterizer`). ``budget``: at most this many Gaussians per frame
-    (level of detail), ``None`` for all; it may change between frames.
+    (:class:`viewer.raster.RecordRasterizer`), fixed when the raster path is first used.
+    ``budget``: at most this many Gaussians per frame (level of detail), ``None`` for all; it may
+    change between frames.
     """
 
     supports_budget = True
@@ -95,9 +102,10 @@ class Renderer(SplatRenderer):
             raise SceneTooLargeError(
                 f"the compute rasterizer's record image holds {max_splats(ctx):,} Gaussians (GL_MAX_TEXTURE_SIZE); "
                 f"this asset has {scene.count:,}: use --rasterizer raster")
+        self.primitive = check_primitive(primitive)
         super().__init__(ctx, programs or Programs(ctx))
         n = max(scene.count, 1)
-        self.rasterizers: dict[str, Rasterizer] = {"raster": RecordRasterizer(ctx, self.programs, n, primitive)}
+        self.rasterizers: dict[str, Rasterizer] = {}  # made on first use (RASTERIZERS)
         self.rasterizer = ("compute" if fits else "raster") if rasterizer == "auto" else rasterizer
         self.scene = scene
         self.sort_mode = default_sort_mode(ctx) if sort == "auto" else sort
@@ -116,10 +124,9 @@ class Renderer(SplatRenderer):
     def rasterizer_named(self, name: str) -> Rasterizer:
         """The renderer's rasterizer of that name, made on first use."""
         if name not in self.rasterizers:
-            if name != "compute":
-                raise ValueError(f"rasterizer must be one of {RASTERIZERS}, got {name!r}")
-            self.rasterizers[name] = TileRasterizer(self.ctx, self.programs, max(self.scene.count, 1),
-                                                    capacity=block_limit(self.ctx) // 4, sort_mode=self.sort_mode)
+            if name not in RASTERIZERS:
+                raise ValueError(f"rasterizer must be one of {tuple(RASTERIZERS)}, got {name!r}")
+            self.rasterizers[name] = RASTERIZERS[name](self)
         return self.rasterizers[name]
 
     @classmethod
