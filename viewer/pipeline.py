@@ -3,8 +3,8 @@
 Shaders are ``.glsl`` files shipped in ``viewer/shaders``; a line ``#include "NAME"`` is replaced
 by that file's text (GLSL has no includes), and the constants of :mod:`viewer.shader_constants`
 are ``#define``d after the ``#version`` line. Programs are cached per context. Storage buffers,
-images and samplers are bound by the names the shaders declare (the binding points are read
-from the compiled program), never by position.
+images and samplers are bound by the names the shaders declare, never by position: a storage
+block's binding point is read from the compiled program, an image's unit from its declaration.
 """
 
 from __future__ import annotations
