@@ -14,7 +14,8 @@ from cghair_format.atomic import atomic_path
 
 from .camera_control import HELP, BudgetControl, OrbitController, ViewerState
 from .context import create_window
-from .fallback import FallbackRenderer, create_renderer
+from .frame import SplatRenderer
+from .renderer import create_renderer
 
 IDLE_WAIT_S = 0.05  # how long a resting window waits for input before looking again
 
@@ -48,6 +49,67 @@ def window_title(title: str, fps: float, drawn: str, budget: str, file_size: int
     return f"{title} | {fps:.1f} fps | {drawn} | budget {budget} | {file_size / 1e6:.2f} MB | {status}"
 
 
+class WindowInput:
+    """Key and mouse state from glfw's callbacks: keys held (for flying), presses not yet handled,
+    and mouse drags applied to the orbit controller (left: orbit; right, middle or shift: pan)."""
+
+    def __init__(self, glfw: Any, window: Any, state: ViewerState, press: tuple[str, ...] = ()):
+        self.glfw, self.window, self.state = glfw, window, state
+        self.held: set[str] = set()
+        self.pending: list[str] = list(press)
+        self.buttons: set[int] = set()
+        self.pos: tuple[float, float] | None = None
+        self.shift = False
+        glfw.set_key_callback(window, self.on_key)
+        glfw.set_mouse_button_callback(window, self.on_button)
+        glfw.set_cursor_pos_callback(window, self.on_move)
+        glfw.set_scroll_callback(window, lambda _w, _dx, dy: state.controller.zoom(dy))
+
+    @property
+    def active(self) -> bool:
+        """Whether a key or button is held (the view may change without an event)."""
+        return bool(self.held or self.buttons)
+
+    def on_key(self, _w, key, _scancode, action, mods) -> None:
+        name = _key_name(self.glfw, key)
+        self.shift = bool(mods & self.glfw.MOD_SHIFT)
+        if action == self.glfw.PRESS:
+            self.held.add(name)
+            self.pending.append(name)
+        elif action == self.glfw.RELEASE:
+            self.held.discard(name)
+
+    def on_button(self, _w, button, action, mods) -> None:
+        self.shift = bool(mods & self.glfw.MOD_SHIFT)
+        (self.buttons.add if action == self.glfw.PRESS else self.buttons.discard)(button)
+
+    def on_move(self, _w, x, y) -> None:
+        glfw, ctl = self.glfw, self.state.controller
+        if self.pos is not None and self.buttons:
+            dx, dy = x - self.pos[0], y - self.pos[1]
+            if glfw.MOUSE_BUTTON_RIGHT in self.buttons or glfw.MOUSE_BUTTON_MIDDLE in self.buttons or self.shift:
+                ctl.pan(dx, dy, glfw.get_framebuffer_size(self.window)[1])
+            else:
+                ctl.orbit(dx, dy)
+        self.pos = (x, y)
+
+
+def _draw(renderer: SplatRenderer, camera: Any, settings: Any, budget: int | None) -> float:
+    """Draw one frame of splats at ``budget``; returns its seconds (to the end of the GPU's work)."""
+    renderer.budget = budget
+    t0 = time.perf_counter()
+    renderer.frame(camera, settings)
+    renderer.ctx.finish()
+    return time.perf_counter() - t0
+
+
+def _screenshot(ctx: Any, width: int, height: int, path: Path) -> None:
+    """Save what the window shows, overlays included."""
+    raw = np.frombuffer(ctx.screen.read(viewport=(0, 0, width, height), components=3), np.uint8)
+    save_png(raw.reshape(height, width, 3)[::-1] / 255.0, path)
+    print(f"screenshot: {path}")
+
+
 def run_viewer(asset: HairAsset, *, title: str, file_size: int, width: int = 1280, height: int = 720,
                sort: str = "auto", rasterizer: str = "auto", budget: int | None = None,
                screenshot_dir: str | Path = ".", max_frames: int | None = None, press: tuple[str, ...] = ()) -> int:
@@ -64,63 +126,26 @@ def run_viewer(asset: HairAsset, *, title: str, file_size: int, width: int = 128
     window, ctx = create_window(width, height, title)
     try:
         renderer = create_renderer(ctx, asset, sort=sort, rasterizer=rasterizer, budget=budget)
-        lo, hi = renderer.scene.bounds
-        state = ViewerState(OrbitController.framing(lo, hi, asset.up_axis), max_sh_degree=asset.appearance.sh_degree)
-        budgets = BudgetControl(renderer.scene.count, fixed=budget)
-        has_lod = not isinstance(renderer, FallbackRenderer)  # OpenGL 3.3 draws every splat
-        drawn = None  # what the accumulation target holds: (view, budget)
-        last_view = None
-        held: set[str] = set()
-        mouse = {"pos": None, "buttons": set(), "shift": False}
-        pending: list[str] = list(press)
-        frames = 0
-        shot: Path | None = None
-
-        def on_key(_w, key, _scancode, action, mods):
-            name = _key_name(glfw, key)
-            mouse["shift"] = bool(mods & glfw.MOD_SHIFT)
-            if action == glfw.PRESS:
-                held.add(name)
-                pending.append(name)
-            elif action == glfw.RELEASE:
-                held.discard(name)
-
-        def on_button(_w, button, action, mods):
-            mouse["shift"] = bool(mods & glfw.MOD_SHIFT)
-            (mouse["buttons"].add if action == glfw.PRESS else mouse["buttons"].discard)(button)
-
-        def on_move(_w, x, y):
-            if mouse["pos"] is not None and mouse["buttons"]:
-                dx, dy = x - mouse["pos"][0], y - mouse["pos"][1]
-                pan = (glfw.MOUSE_BUTTON_RIGHT in mouse["buttons"] or glfw.MOUSE_BUTTON_MIDDLE in mouse["buttons"]
-                       or mouse["shift"])
-                if pan:
-                    state.controller.pan(dx, dy, glfw.get_framebuffer_size(window)[1])
-                else:
-                    state.controller.orbit(dx, dy)
-            mouse["pos"] = (x, y)
-
-        glfw.set_key_callback(window, on_key)
-        glfw.set_mouse_button_callback(window, on_button)
-        glfw.set_cursor_pos_callback(window, on_move)
-        glfw.set_scroll_callback(window, lambda _w, _dx, dy: state.controller.zoom(dy))
+        state = ViewerState(OrbitController.framing(*renderer.bounds, asset.up_axis),
+                            max_sh_degree=asset.appearance.sh_degree)
+        budgets = BudgetControl(renderer.count, fixed=budget)
+        keys = WindowInput(glfw, window, state, press)
+        drawn = last_view = shot = None  # drawn: what the accumulation target holds, (view, budget)
+        frames, fps, idle, last = 0, 0.0, False, time.perf_counter()  # fps: of the frames that drew splats
         print(HELP)
-        last = time.perf_counter()
-        fps = 0.0  # of the frames that drew the splats
-        idle = False
         while not glfw.window_should_close(window) and (max_frames is None or frames < max_frames):
             if idle:  # nothing changed last time: sleep until an event (or a moment) instead of spinning
                 glfw.wait_events_timeout(IDLE_WAIT_S)
             else:
                 glfw.poll_events()
             now = time.perf_counter()
-            dt, last = now - last, now
-            state.fly(held, dt)
+            state.fly(keys.held, now - last)
+            last = now
             fb_w, fb_h = glfw.get_framebuffer_size(window)
             if fb_w == 0 or fb_h == 0:
                 continue
             camera = state.controller.camera(fb_w, fb_h)
-            for key in pending:
+            for key in keys.pending:
                 action = state.press(key)
                 if action == "quit":
                     glfw.set_window_should_close(window, True)
@@ -128,31 +153,20 @@ def run_viewer(asset: HairAsset, *, title: str, file_size: int, width: int = 128
                     budgets.cycle()
                 elif action == "screenshot":
                     shot = Path(screenshot_dir) / f"cgh_view_{time.strftime('%Y%m%d_%H%M%S')}_{frames}.png"
-            pending.clear()
+            keys.pending.clear()
             s = state.settings
             view = (fb_w, fb_h, camera.world_to_camera.tobytes(), s)
-            moving = last_view is not None and view != last_view
-            last_view = view
-            frame_budget = budgets.budget(moving) if has_lod else None
-            idle = (view, frame_budget) == drawn and not held and not mouse["buttons"]
+            moving, last_view = last_view is not None and view != last_view, view
+            frame_budget = budgets.budget(moving) if renderer.supports_budget else None  # OpenGL 3.3: every splat
+            idle = (view, frame_budget) == drawn and not keys.active
             if not s.hide_splats and (view, frame_budget) != drawn:
-                renderer.budget = frame_budget
-                t0 = time.perf_counter()
-                renderer.preprocess(camera, s)
-                renderer.sort()
-                renderer.gather()
-                renderer.draw(fb_w, fb_h)
-                ctx.finish()
-                seconds = time.perf_counter() - t0
+                seconds = _draw(renderer, camera, s, frame_budget)
                 budgets.record(seconds, renderer.drawn, moving)
-                fps = 1.0 / max(seconds, 1e-6)
-                drawn = (view, frame_budget)
+                fps, drawn = 1.0 / max(seconds, 1e-6), (view, frame_budget)
             ctx.screen.viewport = (0, 0, fb_w, fb_h)
             renderer.composite(camera, s, target=ctx.screen, flip_y=True)
-            if shot is not None:  # what the window shows, overlays included
-                raw = np.frombuffer(ctx.screen.read(viewport=(0, 0, fb_w, fb_h), components=3), np.uint8)
-                save_png(raw.reshape(fb_h, fb_w, 3)[::-1] / 255.0, shot)
-                print(f"screenshot: {shot}")
+            if shot is not None:
+                _screenshot(ctx, fb_w, fb_h, shot)
                 shot = None
             glfw.set_window_title(window, window_title(title, fps, renderer.describe(), budgets.label(), file_size,
                                                       state.status()))

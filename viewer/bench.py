@@ -10,8 +10,10 @@ triangle per splat; compute: per-tile blending). Quality: the PSNR (RGB) of each
 the same rasterizer's full-quality image, and against the reference splatter's full-quality render
 of the same view at ``reference_size`` (the torch reference takes minutes for millions of Gaussians
 at 1080p on a CPU, so it is compared at a smaller size, the viewer rendering that size too).
-The raster path's baselines: the same splats as instanced quads, a bare instanced-quad draw with
-a constant-colour fragment shader straight from the preprocess buffers, and one from the records.
+The raster path's baselines (:class:`Baselines`): the same splats as instanced quads, a bare
+instanced-quad draw with a constant-colour fragment shader straight from the preprocess buffers,
+and one from the records. Every frame is drawn by :meth:`viewer.frame.SplatRenderer.frame`, timed
+stage by stage through a :class:`StageClock`.
 """
 
 from __future__ import annotations
@@ -24,6 +26,9 @@ from typing import Any
 
 import numpy as np
 
+from .frame import STAGES
+from .pipeline import bind, set_uniforms
+from .rasterizer import Target
 from .sort import GpuRadixSort, cpu_sort
 
 BUDGET_FRACTIONS = (1 / 4, 1 / 8, 1 / 16)  # default budgets, as fractions of the Gaussians
@@ -36,6 +41,23 @@ def _timed(ctx: Any, fn) -> float:
     fn()
     ctx.finish()
     return time.perf_counter() - t0
+
+
+class StageClock:
+    """A frame's ``stage`` (:data:`viewer.frame.Stage`) that times each stage between ``glFinish``
+    calls; a stage run twice in a frame (the raster re-run of an overflowing view) adds up."""
+
+    def __init__(self, ctx: Any):
+        self.ctx = ctx
+        self.seconds: dict[str, float] = {}
+
+    def __call__(self, name: str, fn):
+        self.ctx.finish()
+        t0 = time.perf_counter()
+        result = fn()
+        self.ctx.finish()
+        self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - t0
+        return result
 
 
 def psnr(a: np.ndarray, b: np.ndarray) -> float:
@@ -60,28 +82,20 @@ def benchmark(path: str | None = None, synthetic: int | None = None, points: int
               rasterizers: tuple[str, ...] = ("compute", "raster"),
               budgets: tuple[int, ...] | None = None, reference_size: tuple[int, int] | None = REFERENCE_SIZE,
               ctx: Any = None) -> dict:
-    """Figures in seconds (medians over ``frames``) and dB, plus counts and the GL renderer's name.
+    """Figures in seconds (medians over ``frames``) and dB, plus counts, the OpenGL driver and
+    device, and the work-group sizes.
 
     ``budgets``: Gaussians per frame of the level-of-detail runs (default: 1/4, 1/8 and 1/16 of
     the asset's); ``reference_size``: ``None`` skips the reference splatter.
     """
-    import cghair_format
     from cghair_format.camera import Camera
 
     from .camera_control import OrbitController
-    from .context import create_headless_context
-    from .renderer import Renderer, ViewSettings
+    from .context import create_headless_context, gl_info
+    from .frame import ViewSettings
+    from .renderer import Renderer
 
-    t0 = time.perf_counter()
-    if path is not None:
-        asset = cghair_format.read(path)
-        source, file_bytes = str(path), Path(path).stat().st_size
-    else:
-        from .synthetic import synthetic_asset
-
-        asset = synthetic_asset(synthetic, points=points)
-        source, file_bytes = f"synthetic {synthetic} x {points}", None
-    t_read = time.perf_counter() - t0
+    asset, source, file_bytes, t_read = _load(path, synthetic, points)
     own_ctx = ctx is None
     ctx = ctx or create_headless_context()
     ctx.__enter__()  # make it current: another context may have been created since
@@ -90,53 +104,77 @@ def benchmark(path: str | None = None, synthetic: int | None = None, points: int
 
         raise GLContextError("bench-viewer measures the GPU pipeline, which needs OpenGL 4.3 compute shaders; "
                              f"this context offers {ctx.version_code / 100:.1f}")
-    renderer: Renderer | None = None
-
-    def load():
-        nonlocal renderer
-        renderer = Renderer.from_asset(ctx, asset, sort=sort)
-
-    t_upload = _timed(ctx, load)
-    scene = renderer.scene
+    made: list[Renderer] = []
+    t_upload = _timed(ctx, lambda: made.append(Renderer.from_asset(ctx, asset, sort=sort)))
+    renderer = made[0]
     if budgets is None:
-        budgets = tuple(max(1, int(scene.count * f)) for f in BUDGET_FRACTIONS)
-    lo, hi = scene.bounds
-    ctl = OrbitController.framing(lo, hi, asset.up_axis)
+        budgets = tuple(max(1, int(renderer.count * f)) for f in BUDGET_FRACTIONS)
+    ctl = OrbitController.framing(*renderer.bounds, asset.up_axis)
     cam = Camera.orbit(ctl.target, ctl.distance, 0.0, 10.0, width, height, asset.up_axis)
-    settings = ViewSettings()
-    reference = small = None
+    small = reference = t_reference = None
     if reference_size is not None:
         small = Camera.orbit(ctl.target, ctl.distance, 0.0, 10.0, *reference_size, asset.up_axis)
         t0 = time.perf_counter()
         reference = _reference_rgb(asset, small)
         t_reference = time.perf_counter() - t0
+    settings = ViewSettings()
     for rasterizer in rasterizers:  # warm-up, untimed: shader compilation, buffers' first use
         renderer.rasterizer, renderer.budget = rasterizer, None
         renderer.render(cam, settings)
+    runs = _timed_runs(renderer, cam, settings, rasterizers, (None, *budgets), frames, (small, reference))
+    result = {
+        "source": source, "file_bytes": file_bytes, "gaussians": renderer.count, "strands": renderer.lod.n_strands,
+        "width": width, "height": height, "frames": frames, "renderer": ctx.info.get("GL_RENDERER"),
+        "sort_mode": renderer.sort_mode, "read_s": t_read, "decode_upload_s": t_upload,
+        "reference_size": list(reference_size) if reference is not None else None,
+        "reference_s": t_reference if reference is not None else None,
+        "runs": runs, "gl": gl_info(ctx), "workgroups": renderer.programs.workgroups.record(),
+    }
+    full = {run["rasterizer"]: run["frame_s"] for run in runs if run["budget"] is None}
+    if "compute" in full and "raster" in full:
+        result["compute_over_raster"] = full["compute"] / full["raster"]  # full quality, same run
+    if "raster" in rasterizers:
+        result.update(_raster_baselines(renderer, cam, settings, frames))
+    renderer.release()
+    if own_ctx:
+        ctx.release()
+    return result
+
+
+def _load(path: str | None, synthetic: int | None, points: int) -> tuple[Any, str, int | None, float]:
+    """The asset (read from ``path`` or built in memory), its name, file size and read time."""
+    import cghair_format
+
+    t0 = time.perf_counter()
+    if path is not None:
+        asset = cghair_format.read(path)
+        return asset, str(path), Path(path).stat().st_size, time.perf_counter() - t0
+    from .synthetic import synthetic_asset
+
+    asset = synthetic_asset(synthetic, points=points)
+    return asset, f"synthetic {synthetic} x {points}", None, time.perf_counter() - t0
+
+
+def _timed_runs(renderer: Any, cam: Any, settings: Any, rasterizers: tuple[str, ...], budgets: tuple,
+                frames: int, reference: tuple[Any, np.ndarray | None]) -> list[dict]:
+    """Per rasterizer and budget: stage medians, what was drawn, and the PSNRs. The rasterizers
+    take turns frame by frame, so a change of the machine's load between them (llvmpipe shares
+    the CPU) weighs on both alike."""
     runs: dict[str, list[dict]] = {r: [] for r in rasterizers}
-    full_images = {}
-    for budget in (None, *budgets):
-        # the rasterizers take turns frame by frame, so a change of the machine's load between
-        # them (llvmpipe shares the CPU) weighs on both alike
-        rows = {r: {k: [] for k in ("preprocess", "sort", "gather", "draw")} for r in rasterizers}
+    full_images: dict[str, np.ndarray] = {}
+    small, reference_rgb = reference
+    for budget in budgets:
+        rows = {r: {k: [] for k in STAGES} for r in rasterizers}
         images, drawn = {}, {}
         for frame in range(frames):
             for rasterizer in rasterizers:
                 renderer.rasterizer, renderer.budget = rasterizer, budget
-                row = rows[rasterizer]
-                row["preprocess"].append(_timed(ctx, lambda: renderer.preprocess(cam, settings)))
-                row["sort"].append(_timed(ctx, renderer.sort))
-                row["gather"].append(_timed(ctx, renderer.gather))
-                row["draw"].append(_timed(ctx, lambda: renderer.draw(width, height)))
+                clock = StageClock(renderer.ctx)
+                renderer.frame(cam, settings, clock)
+                for k in STAGES:
+                    rows[rasterizer][k].append(clock.seconds[k])
                 if frame == frames - 1:
-                    renderer.composite(cam, settings)
-                    image = np.frombuffer(renderer._target(width, height)[2].read(), np.float32)
-                    images[rasterizer] = image.reshape(height, width, 4)[..., :3].copy()
-                    drawn[rasterizer] = {
-                        "rasterizer": renderer.frame_rasterizer, "budget": budget,
-                        "gaussians_drawn": renderer.drawn, "strands_drawn": renderer.plan.strands,
-                        "visible": renderer.visible,
-                        "tile_entries": renderer.binner.entries if renderer.frame_rasterizer == "compute" else None}
+                    images[rasterizer], drawn[rasterizer] = _last_frame(renderer, cam, settings, budget)
         for rasterizer in rasterizers:
             med = {k: statistics.median(v) for k, v in rows[rasterizer].items()}
             image = images[rasterizer]
@@ -144,33 +182,62 @@ def benchmark(path: str | None = None, synthetic: int | None = None, points: int
             run = {**drawn[rasterizer], **{f"{k}_s": v for k, v in med.items()}, "frame_s": sum(med.values()),
                    "psnr_vs_full_db": psnr(image, full) if budget is not None else None,
                    "psnr_vs_reference_db": None}
-            if reference is not None:
+            if reference_rgb is not None:
                 renderer.rasterizer, renderer.budget = rasterizer, budget
-                run["psnr_vs_reference_db"] = psnr(renderer.render(small, settings)[..., :3], reference)
+                run["psnr_vs_reference_db"] = psnr(renderer.render(small, settings)[..., :3], reference_rgb)
             runs[rasterizer].append(run)
-    result = {
-        "source": source, "file_bytes": file_bytes, "gaussians": scene.count, "strands": renderer.lod.n_strands,
-        "width": width, "height": height, "frames": frames, "renderer": ctx.info.get("GL_RENDERER"),
-        "sort_mode": renderer.sort_mode, "read_s": t_read, "decode_upload_s": t_upload,
-        "reference_size": list(reference_size) if reference is not None else None,
-        "reference_s": t_reference if reference is not None else None,
-        "runs": [run for r in rasterizers for run in runs[r]],
-    }
-    full = {run["rasterizer"]: run["frame_s"] for run in result["runs"] if run["budget"] is None}
-    if "compute" in full and "raster" in full:
-        result["compute_over_raster"] = full["compute"] / full["raster"]  # full quality, same run
-    if "raster" in rasterizers:
-        result.update(_raster_baselines(ctx, renderer, cam, settings, frames))
-    renderer.release()
-    if own_ctx:
-        ctx.release()
-    return result
+    return [run for r in rasterizers for run in runs[r]]
 
 
-def _raster_baselines(ctx: Any, renderer: Any, cam: Any, settings: Any, frames: int) -> dict:
+def _last_frame(renderer: Any, cam: Any, settings: Any, budget: int | None) -> tuple[np.ndarray, dict]:
+    """The RGB image of the frame just drawn, and what it drew."""
+    renderer.composite(cam, settings)
+    image = np.frombuffer(renderer.output(cam.width, cam.height).texture.read(), np.float32)
+    tiles = renderer.rasterizers.get("compute")
+    return image.reshape(cam.height, cam.width, 4)[..., :3].copy(), {
+        "rasterizer": renderer.frame_rasterizer, "budget": budget, "gaussians_drawn": renderer.drawn,
+        "strands_drawn": renderer.plan.strands, "visible": renderer.visible,
+        "tile_entries": tiles.entries if renderer.frame_rasterizer == "compute" else None}
+
+
+class Baselines:
+    """Cheaper draws of the splats of the renderer's last raster frame, to put its draw time in
+    scale: instanced quads at the splats' positions and sizes with a constant-colour fragment
+    shader, read through the sort order from the preprocess buffers (no gather needed), or from
+    the gathered records, read sequentially (the cheapest instanced-quad draw of these splats)."""
+
+    def __init__(self, renderer: Any):
+        self.renderer = renderer
+        self.raster = renderer.rasterizer_named("raster")
+        programs = renderer.programs
+        self.quads = programs.render("bare_quad", "bare_quad")
+        self.record_quads = programs.render("splat", "bare_quad")
+        self._vao = renderer.ctx.vertex_array(self.quads, [])
+
+    def draw_sorted(self, target: Target, width: int, height: int) -> None:
+        ctx, r = self.renderer.ctx, self.renderer
+        target.framebuffer.use()
+        target.framebuffer.clear(0.0, 0.0, 0.0, 0.0)
+        ctx.enable_only(ctx.BLEND)
+        ctx.blend_func = ctx.SRC_ALPHA, ctx.ONE_MINUS_SRC_ALPHA
+        set_uniforms(self.quads, u_viewport=(float(width), float(height)))
+        bind(self.quads, Order=r.values, Center=self.raster.center, Axes=self.raster.axes)
+        self._vao.render(mode=ctx.TRIANGLE_STRIP, vertices=4, instances=r.count)
+
+    def draw_records(self, target: Target, width: int, height: int) -> None:
+        ctx = self.renderer.ctx
+        self.raster.draw_records(target, width, height, self.record_quads, False,
+                                 (ctx.SRC_ALPHA, ctx.ONE_MINUS_SRC_ALPHA))
+
+    def release(self) -> None:
+        self._vao.release()
+
+
+def _raster_baselines(renderer: Any, cam: Any, settings: Any, frames: int) -> dict:
     """The raster path at full quality against cheaper draws of the same splats, and both sorts."""
+    ctx, count, (width, height) = renderer.ctx, renderer.count, (cam.width, cam.height)
     renderer.rasterizer, renderer.budget = "raster", None
-    count, (width, height) = renderer.scene.count, (cam.width, cam.height)
+    raster, baselines, target = renderer.rasterizer_named("raster"), Baselines(renderer), renderer.accum(width, height)
     gpu_sorter = renderer.sorter or GpuRadixSort(ctx, renderer.programs, count)
     rows: dict[str, list[float]] = {k: [] for k in ("sort_gpu", "sort_cpu", "draw", "bare", "bare_records",
                                                     "draw_quads")}
@@ -179,11 +246,15 @@ def _raster_baselines(ctx: Any, renderer: Any, cam: Any, settings: Any, frames: 
                          ("cpu", lambda: cpu_sort(renderer.keys, renderer.values, count))):
             renderer.preprocess(cam, settings)
             rows["sort_" + mode].append(_timed(ctx, fn))
-        renderer.gather()
-        rows["draw"].append(_timed(ctx, lambda: renderer.draw(width, height)))
-        rows["bare"].append(_timed(ctx, lambda: renderer.draw(width, height, bare="sorted")))
-        rows["bare_records"].append(_timed(ctx, lambda: renderer.draw(width, height, bare="records")))
-        rows["draw_quads"].append(_timed(ctx, lambda: renderer.draw(width, height, triangles=False)))
+        clock = StageClock(ctx)
+        renderer.frame(cam, settings, clock)
+        rows["draw"].append(clock.seconds["draw"])
+        rows["bare"].append(_timed(ctx, lambda: baselines.draw_sorted(target, width, height)))
+        rows["bare_records"].append(_timed(ctx, lambda: baselines.draw_records(target, width, height)))
+        primitive, raster.primitive = raster.primitive, "quads"
+        rows["draw_quads"].append(_timed(ctx, lambda: raster.draw(target, width, height)))
+        raster.primitive = primitive
+    baselines.release()
     if gpu_sorter is not renderer.sorter:
         gpu_sorter.release()
     med = {k: statistics.median(v) for k, v in rows.items()}
@@ -196,11 +267,16 @@ def format_report(r: dict) -> str:
     ms = lambda s: f"{1000 * s:8.1f}" if s is not None else "     n/a"  # noqa: E731
     db = lambda x: "       -" if x is None else ("     inf" if math.isinf(x) else f"{x:8.2f}")  # noqa: E731
     size = f", {r['file_bytes'] / 1e6:.2f} MB" if r["file_bytes"] else ""
+    egl = r["gl"]["egl_device"]
+    device = f", EGL device {egl['index']} ({egl['kind']})" if egl else ""
     ref = (f"reference splatter at {r['reference_size'][0]}x{r['reference_size'][1]} "
            f"({r['reference_s']:.1f} s)" if r["reference_size"] else "no reference splatter (needs torch)")
     lines = [
         f"viewer benchmark: {r['source']}{size}, {r['gaussians']:,} Gaussians, {r['width']}x{r['height']}, "
         f"{r['renderer']}, default view, median of {r['frames']} frames, sort {r['sort_mode']}",
+        f"device   {r['gl']['vendor']}, OpenGL {r['gl']['version']}{device}; work groups: {r['workgroups']['profile']} "
+        f"(tile blend {r['workgroups']['blend'][0]} x {r['workgroups']['blend'][1]})",
+        *([f"hint     {r['gl']['hint']}"] if r["gl"]["hint"] else []),
         f"load     read {ms(r['read_s'])} ms   decode+upload (GPU) {ms(r['decode_upload_s'])} ms",
         f"quality  PSNR (RGB) against the same rasterizer at full quality, and against the {ref}",
         "rasterizer     budget      drawn  preproc     sort gath/bin draw/blnd    frame ms    fps  vs full  vs ref",

@@ -15,7 +15,7 @@ import numpy as np
 
 from cghair_format.camera import Camera
 
-from .renderer import ViewSettings
+from .frame import ViewSettings
 
 ORBIT_DEG_PER_PIXEL = 0.3
 ZOOM_PER_STEP = 0.9  # distance factor per scroll step

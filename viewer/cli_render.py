@@ -39,6 +39,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sort", choices=("auto", "gpu", "cpu"), default="auto", help="depth sort (default auto)")
     add_raster_arguments(parser, budget_help="draw at most N Gaussians (whole strands, compensated; e.g. 500k); "
                                              "default: all")
+    parser.add_argument("-v", "--verbose", action="store_true",
+                        help="say which OpenGL driver and device render (GL_RENDERER, GL_VENDOR, GL_VERSION)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -68,6 +70,6 @@ def run(args: argparse.Namespace) -> int:
                     sh_degree=args.sh_degree, splat_scale=args.splat_scale,
                     color_by_group=args.color_by_group, cards=args.cards, strands=args.strands, sort=args.sort,
                     rasterizer=args.rasterizer, budget=args.budget)
-    written = render_job(asset, job, out)
+    written = render_job(asset, job, out, log=print if args.verbose else None)
     print(f"wrote {written}")
     return 0

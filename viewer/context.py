@@ -1,4 +1,5 @@
-"""The one place that creates OpenGL contexts: a glfw window, or a headless EGL context.
+"""The one place that creates OpenGL contexts: a glfw window, or a headless EGL context (on the
+NVIDIA device where there is one, :mod:`viewer.egl_devices`).
 
 Both ask for OpenGL 4.3 core (compute shaders, storage buffers) and settle for 3.3 core, which
 the compute-free fallback renderer needs. Mesa's llvmpipe provides 4.5 without a GPU or a
@@ -12,6 +13,8 @@ import warnings
 from typing import Any
 
 from cghair_format.errors import CghError, require
+
+from .egl_devices import device_order, egl_devices, forced_index, graphics_hint
 
 GL_REQUIRE = 430  # compute shaders and storage buffers: the GPU pipeline
 GL_FALLBACK = 330  # without them: numpy decode, projection and sort (viewer.fallback)
@@ -33,18 +36,47 @@ def check_gl(ctx: Any, where: str) -> None:
 
 
 def create_headless_context() -> Any:
-    """A standalone OpenGL 4.3 context without a window (EGL, e.g. Mesa llvmpipe on a CPU)."""
+    """A standalone OpenGL 4.3 context without a window: on the NVIDIA EGL device where there is
+    one, else another GPU, else Mesa's llvmpipe on the CPU (:mod:`viewer.egl_devices`). The EGL
+    device used is kept in ``ctx.extra["egl_device"]`` (``None``: the backend's default)."""
     moderngl = require("moderngl", "viewer", "headless rendering")
+    devices = egl_devices()
+    forced = forced_index()
+    order = [forced] if forced is not None else device_order(devices)
+    attempts = [({"backend": "egl", "device_index": i}, i) for i in order] + [({"backend": "egl"}, None), ({}, None)]
     errors = []
     for version in (GL_REQUIRE, GL_FALLBACK):
-        for kwargs in ({"backend": "egl"}, {}):
+        for kwargs, index in attempts:
             try:
-                return moderngl.create_standalone_context(require=version, **kwargs)
+                ctx = moderngl.create_standalone_context(require=version, **kwargs)
             except Exception as exc:  # moderngl raises plain Exception subclasses from its loaders
-                errors.append(f"GL {version / 100:.1f} {kwargs.get('backend', 'default')}: {exc}")
+                where = f"EGL device {index}" if index is not None else kwargs.get("backend", "default")
+                errors.append(f"GL {version / 100:.1f} {where}: {exc}")
+                continue
+            ctx.extra = {"egl_device": next((d for d in devices if d.index == index), None)}
+            return ctx
+    hint = graphics_hint(None)
     raise GLContextError(
         "could not create a headless OpenGL 4.3 context (" + "; ".join(errors) + "). Install Mesa's "
-        "EGL and software renderer (Debian/Ubuntu: apt-get install libegl1 libgl1-mesa-dri) or a GPU driver.")
+        "EGL and software renderer (Debian/Ubuntu: apt-get install libegl1 libgl1-mesa-dri) or a GPU driver"
+        + (f"; {hint}" if hint else "") + ".")
+
+
+def gl_info(ctx: Any) -> dict:
+    """The driver and device a context runs on (GL_RENDERER, GL_VENDOR, GL_VERSION, the EGL device),
+    and a hint where an NVIDIA GPU is present but unused (for ``--verbose`` and benchmark JSON)."""
+    renderer = ctx.info.get("GL_RENDERER")
+    device = ctx.extra.get("egl_device") if isinstance(ctx.extra, dict) else None
+    return {"renderer": renderer, "vendor": ctx.info.get("GL_VENDOR"), "version": ctx.info.get("GL_VERSION"),
+            "egl_device": device.record() if device is not None else None, "hint": graphics_hint(renderer)}
+
+
+def describe_gl(info: dict) -> str:
+    """:func:`gl_info` as lines for a terminal."""
+    device = info["egl_device"]
+    where = f", EGL device {device['index']} ({device['kind']})" if device else ""
+    lines = [f"OpenGL: {info['renderer']} | {info['vendor']} | {info['version']}{where}"]
+    return "\n".join(lines + ([f"hint: {info['hint']}"] if info["hint"] else []))
 
 
 def create_window(width: int, height: int, title: str) -> tuple[Any, Any]:

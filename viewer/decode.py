@@ -19,7 +19,8 @@ import numpy as np
 from cghair_format import Gaussians, HairAsset
 from cghair_format.errors import CghError
 
-from .pipeline import TEXELS_PER_ROW, Programs, bind, data_image, dispatch, max_texture_size, set_uniforms
+from .pipeline import Programs, bind, bind_images, data_image, dispatch, max_texture_size, set_uniforms
+from .shader_constants import LATENT_LOCAL_SIZE, TEXELS_PER_ROW
 
 DEFAULT_BLOCK_LIMIT = 128 << 20
 
@@ -92,8 +93,8 @@ def _sh_image(ctx: Any, programs: Programs, sh: Any, count: int, coeffs: int) ->
     texels = count * sh_texels(coeffs)
     image = data_image(ctx, texels, 4, "f4")
     prog = programs.compute("sh_texture")
-    bind(sh)
-    image.bind_to_image(0, read=False, write=True)
+    bind(prog, Sh=sh)
+    bind_images(prog, u_image=image)
     set_uniforms(prog, u_count=texels, u_floats=3 * coeffs, u_stride=sh_texels(coeffs))
     dispatch(ctx, prog, texels)
     sh.release()
@@ -142,7 +143,7 @@ def upload_asset(ctx: Any, programs: Programs, asset: HairAsset) -> GpuScene:
     mesh_pos = _buffer(ctx, nbytes=c * 2 * m1 * 16)
     mesh_nrm = _buffer(ctx, nbytes=c * 2 * m1 * 16)
     prog = programs.compute("card_mesh")
-    bind(spine, normal, half_width, mesh_pos, mesh_nrm)
+    bind(prog, Spine=spine, Normal=normal, HalfWidth=half_width, MeshPos=mesh_pos, MeshNrm=mesh_nrm)
     set_uniforms(prog, u_count=c * m1, u_points=m1)
     dispatch(ctx, prog, c * m1)
 
@@ -153,9 +154,8 @@ def upload_asset(ctx: Any, programs: Programs, asset: HairAsset) -> GpuScene:
     means, rotations, scales = (data_image(ctx, g, 4, "f4") for _ in range(3))
     points = _buffer(ctx, nbytes=s * p * 16)
     prog = programs.compute("decode_geometry")
-    bind(mesh_pos, mesh_nrm, strand_card, uvd, opacity, points)
-    for unit, image in enumerate((means, rotations, scales)):
-        image.bind_to_image(unit, read=False, write=True)
+    bind(prog, MeshPos=mesh_pos, MeshNrm=mesh_nrm, StrandCard=strand_card, Uvd=uvd, Opacity=opacity, Points=points)
+    bind_images(prog, u_means=means, u_rotations=rotations, u_scales=scales)
     set_uniforms(prog, u_count=g, u_points=p, u_segments=m1 - 1, u_thickness=float(asset.thickness))
     dispatch(ctx, prog, g)
 
@@ -209,16 +209,17 @@ def _decode_appearance(ctx: Any, programs: Programs, asset: HairAsset, strand_ca
     chunks = []
     for first in range(0, s, per_chunk):
         n = min(per_chunk, s - first)
-        bind(logits, codebooks, strand_card, card_group, hidden[0])
+        bind(latent_prog, Logits=logits, Codebooks=codebooks, StrandCard=strand_card, CardGroup=card_group,
+             Latents=hidden[0])
         set_uniforms(latent_prog, u_first=first, u_count=n, u_k=app.k, u_d=app.latent_dim,
                      u_temperature=float(app.temperature), u_hard=app.weight_mode == "hard")
-        dispatch(ctx, latent_prog, n, local_size=64)
+        dispatch(ctx, latent_prog, n, local_size=LATENT_LOCAL_SIZE)
         src = 0
         out = None
         for i, (w, b, relu, n_in, n_out) in enumerate(layers):
             last = i == len(layers) - 1
             out = _buffer(ctx, nbytes=n * out_width * 4) if last else hidden[1 - src]
-            bind(hidden[src], w, b, out)
+            bind(layer_prog, Input=hidden[src], Weight=w, Bias=b, Output=out)
             out4 = -(-n_out // 4)
             count = -(-n // 4) * out4
             set_uniforms(layer_prog, u_strands=n, u_count=count, u_in=n_in, u_out=n_out, u_out4=out4,

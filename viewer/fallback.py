@@ -3,12 +3,11 @@
 Decode (:func:`cghair_format.decode_gaussians`), projection, colour, culling and the depth sort
 run in numpy; each frame's sorted splat records are uploaded as per-instance attributes and
 drawn with the same fragment shader and blending as the GPU path. Overlays need storage
-buffers and are not drawn here.
+buffers and are not drawn here; there are no splat budgets.
 """
 
 from __future__ import annotations
 
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -17,8 +16,8 @@ from cghair_format import Gaussians, HairAsset, decode_gaussians
 from cghair_format.camera import Camera
 from cghair_format.gaussians import eval_sh
 
+from .frame import SplatRenderer, Stage, ViewSettings, run_stage
 from .pipeline import Programs
-from .renderer import Renderer, ViewSettings
 from .sort import stable_order
 
 NEAR_PLANE = 0.01
@@ -101,29 +100,36 @@ def splat_records(g: Gaussians, camera: Camera, settings: ViewSettings,
     return rec
 
 
-class FallbackRenderer(Renderer):
-    """:class:`Renderer`'s API on OpenGL 3.3: numpy projection and sort, instanced draw."""
+class FallbackRenderer(SplatRenderer):
+    """A :class:`viewer.frame.SplatRenderer` on OpenGL 3.3: numpy projection and sort, instanced draw."""
+
+    sort_mode = "cpu"
 
     def __init__(self, ctx: Any, gaussians: Gaussians, groups: np.ndarray | None = None):
-        self.ctx = ctx
+        super().__init__(ctx, Programs(ctx, version=FALLBACK_GLSL))
         self.gaussians = gaussians
         self.groups = groups  # card group of each Gaussian, for colour by group
-        self.programs = Programs(ctx, version=FALLBACK_GLSL)
-        self.sort_mode = "cpu"
-        self.rasterizer = self.frame_rasterizer = "raster"
-        self.budget = None
-        self.triangles = True
-        lo, hi = gaussians.means.min(axis=0), gaussians.means.max(axis=0)
-        self.scene = SimpleNamespace(count=gaussians.count, points=None, bounds=(lo, hi),
-                                     sh_degree=gaussians.sh_degree)
         self.visible = 0
-        self._records = np.zeros((0, 16), np.float32)
+        self._bounds = (gaussians.means.min(axis=0), gaussians.means.max(axis=0))
         self._buffer = None
         self._vao_records = None
-        self._targets = {}
-        self._empty_vao = {}
-        self._camera: Camera | None = None
-        self._settings = ViewSettings()
+
+    @classmethod
+    def from_asset(cls, ctx: Any, asset: HairAsset) -> FallbackRenderer:
+        groups = np.repeat(asset.cards.group[asset.strand_card], asset.counts - 1)  # per real segment
+        return cls(ctx, decode_gaussians(asset), groups)
+
+    @classmethod
+    def from_gaussians(cls, ctx: Any, gaussians: Gaussians) -> FallbackRenderer:
+        return cls(ctx, gaussians)
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return self._bounds
+
+    @property
+    def count(self) -> int:
+        return self.gaussians.count
 
     @property
     def drawn(self) -> int:
@@ -132,26 +138,20 @@ class FallbackRenderer(Renderer):
     def describe(self) -> str:
         return f"raster (OpenGL 3.3) | {self.gaussians.count:,} Gaussians"
 
-    @classmethod
-    def from_asset(cls, ctx: Any, asset: HairAsset, sort: str = "cpu", primitive: str = "triangles"):
-        groups = np.repeat(asset.cards.group[asset.strand_card], asset.counts - 1)  # per real segment
-        return cls(ctx, decode_gaussians(asset), groups)
+    def frame(self, camera: Camera, settings: ViewSettings | None = None, stage: Stage = run_stage) -> None:
+        """Project, colour, cull and sort in numpy (the records come out in draw order), upload the
+        records as per-instance attributes and draw them."""
+        s = settings or ViewSettings()
+        records = stage("preprocess", lambda: splat_records(self.gaussians, camera, s, self.groups))
+        self.visible = len(records)
+        stage("gather", lambda: self._upload(records))
+        stage("draw", lambda: self._draw(camera.width, camera.height))
 
-    @classmethod
-    def from_gaussians(cls, ctx: Any, gaussians: Gaussians, sort: str = "cpu", primitive: str = "triangles"):
-        return cls(ctx, gaussians)
+    def overlays(self, camera: Camera, settings: ViewSettings, flip_y: bool) -> None:
+        """None: the overlays read strand points from storage buffers, which OpenGL 3.3 lacks."""
 
-    def preprocess(self, camera: Camera, settings: ViewSettings | None = None) -> None:
-        self._camera, self._settings = camera, settings or ViewSettings()
-
-    def sort(self) -> None:
-        """Project, colour, cull and sort in numpy (the records come out in draw order)."""
-        self._records = splat_records(self.gaussians, self._camera, self._settings, self.groups)
-        self.visible = len(self._records)
-
-    def gather(self) -> None:
-        """Upload the records as per-instance attributes."""
-        data = self._records.tobytes() or bytes(64)
+    def _upload(self, records: np.ndarray) -> None:
+        data = records.tobytes() or bytes(64)
         if self._buffer is None or self._buffer.size < len(data):
             if self._buffer is not None:
                 self._buffer.release()
@@ -162,10 +162,8 @@ class FallbackRenderer(Renderer):
                 prog, [(self._buffer, "4f 4f 4f 4f/i", "a_r0", "a_r1", "a_r2", "a_r3")])
         self._buffer.write(data)
 
-    def draw(self, width: int, height: int, bare: str | None = None, triangles: bool | None = None) -> None:
-        if bare is not None:
-            raise ValueError("the fallback renderer has no benchmark baselines")
-        accum_fbo = self._target(width, height)[1]
+    def _draw(self, width: int, height: int) -> None:
+        accum_fbo = self.accum(width, height).framebuffer
         accum_fbo.use()
         accum_fbo.clear(0.0, 0.0, 0.0, 0.0)
         if self.visible == 0:
@@ -181,32 +179,4 @@ class FallbackRenderer(Renderer):
         if self._buffer is not None:
             self._vao_records.release()
             self._buffer.release()
-        if self._targets:
-            from .context import park_framebuffer
-
-            park_framebuffer(self.ctx)
-        for objs in self._targets.values():
-            for obj in objs:
-                obj.release()
-        self._targets.clear()
-
-
-def create_renderer(ctx: Any, asset: HairAsset, sort: str = "auto", primitive: str = "triangles",
-                    rasterizer: str = "auto", budget: int | None = None) -> Renderer:
-    """The GPU renderer where compute shaders exist (OpenGL 4.3), else the numpy fallback.
-
-    The compute rasterizer and splat budgets need compute shaders: asking for them on OpenGL 3.3
-    is a :class:`GLContextError` that says so.
-    """
-    if ctx.version_code >= 430:
-        return Renderer.from_asset(ctx, asset, sort=sort, primitive=primitive, rasterizer=rasterizer,
-                                   budget=budget)
-    from .context import GLContextError
-
-    offered = f"this OpenGL offers {ctx.version_code / 100:.1f}"
-    if rasterizer == "compute":
-        raise GLContextError(f"--rasterizer compute needs OpenGL 4.3 compute shaders; {offered}: "
-                             "use --rasterizer raster or auto")
-    if budget is not None:
-        raise GLContextError(f"--budget needs OpenGL 4.3 compute shaders; {offered}: leave --budget out")
-    return FallbackRenderer.from_asset(ctx, asset)
+        super().release()

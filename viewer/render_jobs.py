@@ -19,8 +19,8 @@ from cghair_format.camera import Camera
 from cghair_format.errors import CghError, require
 
 from .camera_control import OrbitController
-from .fallback import create_renderer
-from .renderer import ViewSettings
+from .frame import ViewSettings
+from .renderer import create_renderer
 
 DEFAULT_SIZE = 800
 MAX_SIZE = 16384
@@ -154,9 +154,10 @@ def write_images(frames: list[np.ndarray], out: Path, fps: float = 24.0) -> Path
     return out
 
 
-def render_job(asset: HairAsset, job: RenderJob, out: str | Path, ctx=None) -> Path:
-    """Render ``asset`` as ``job`` describes and write ``out``; creates an EGL context if none given."""
-    from .context import create_headless_context
+def render_job(asset: HairAsset, job: RenderJob, out: str | Path, ctx=None, log=None) -> Path:
+    """Render ``asset`` as ``job`` describes and write ``out``; creates an EGL context if none given.
+    ``log`` (e.g. ``print``) is told which OpenGL driver and device render."""
+    from .context import create_headless_context, describe_gl, gl_info
 
     out = Path(out)
     if job.fps <= 0 or not math.isfinite(job.fps):
@@ -166,10 +167,12 @@ def render_job(asset: HairAsset, job: RenderJob, out: str | Path, ctx=None) -> P
     own = ctx is None
     ctx = ctx or create_headless_context()
     ctx.__enter__()  # make it current: another context may have been created since
+    if log is not None:
+        log(describe_gl(gl_info(ctx)))
     try:
         renderer = create_renderer(ctx, asset, sort=job.sort, rasterizer=job.rasterizer, budget=job.budget)
         try:
-            cameras = job_cameras(job, renderer.scene.bounds, asset.up_axis)
+            cameras = job_cameras(job, renderer.bounds, asset.up_axis)
             settings = job.settings()
             frames = [renderer.render(cam, settings) for cam in cameras]
         finally:

@@ -14,9 +14,10 @@ from typing import Any
 import numpy as np
 
 from .pipeline import Programs, bind, set_uniforms
+from .shader_constants import RADIX_BITS, RADIX_ITEMS, RADIX_THREADS
 
-BITS_PER_PASS = 4
-BLOCK = 256 * 16  # keys per work group: 256 threads x 16 consecutive keys (radix_*.comp.glsl)
+DIGITS = 1 << RADIX_BITS
+BLOCK = RADIX_THREADS * RADIX_ITEMS  # keys per work group
 SORT_MODES = ("gpu", "cpu")
 
 
@@ -29,7 +30,7 @@ class GpuRadixSort:
         self.blocks = max(1, math.ceil(self.capacity / BLOCK))
         self.keys_tmp = ctx.buffer(reserve=max(16, 4 * self.capacity))
         self.values_tmp = ctx.buffer(reserve=max(16, 4 * self.capacity))
-        self.block_hist = ctx.buffer(reserve=16 * self.blocks * 4)
+        self.block_hist = ctx.buffer(reserve=DIGITS * self.blocks * 4)
         self.hist = programs.compute("radix_hist")
         self.scan = programs.compute("radix_scan")
         self.scatter = programs.compute("radix_scatter")
@@ -39,20 +40,21 @@ class GpuRadixSort:
         if count > self.capacity:
             raise ValueError(f"sort of {count} keys exceeds this sorter's capacity {self.capacity}")
         blocks = max(1, math.ceil(count / BLOCK))
-        passes = math.ceil(key_bits / BITS_PER_PASS)
+        passes = math.ceil(key_bits / RADIX_BITS)
         passes += passes % 2  # an even number of passes leaves the result in the input buffers
         src, dst = (keys, values), (self.keys_tmp, self.values_tmp)
         for p in range(passes):
-            shift = p * BITS_PER_PASS
-            bind(src[0], self.block_hist)
+            shift = p * RADIX_BITS
+            bind(self.hist, Keys=src[0], BlockHist=self.block_hist)
             set_uniforms(self.hist, u_count=count, u_shift=shift, u_blocks=blocks)
             self.hist.run(blocks, 1, 1)
             self.ctx.memory_barrier()
-            bind(self.block_hist)
-            set_uniforms(self.scan, u_count=16 * blocks)
+            bind(self.scan, BlockHist=self.block_hist)
+            set_uniforms(self.scan, u_count=DIGITS * blocks)
             self.scan.run(1, 1, 1)
             self.ctx.memory_barrier()
-            bind(src[0], src[1], dst[0], dst[1], self.block_hist)
+            bind(self.scatter, KeysIn=src[0], ValuesIn=src[1], KeysOut=dst[0], ValuesOut=dst[1],
+                 BlockHist=self.block_hist)
             set_uniforms(self.scatter, u_count=count, u_shift=shift, u_blocks=blocks)
             self.scatter.run(blocks, 1, 1)
             self.ctx.memory_barrier()

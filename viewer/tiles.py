@@ -1,7 +1,7 @@
 """The compute rasterizer: tile binning and per-tile front-to-back blending in compute shaders.
 
-After the preprocess and the depth sort (:class:`viewer.renderer.Renderer`), every visible splat
-is duplicated into the 16 x 16 tiles its oriented footprint touches (``tile_count``, a scan of the
+After the preprocess and the depth sort (:meth:`viewer.renderer.Renderer.frame`), every visible splat
+is duplicated into the TILE x TILE (16 x 16) tiles its oriented footprint touches (``tile_count``, a scan of the
 totals of runs of 16 splats, ``tile_emit``: entries in depth order), the entries are sorted by tile with the
 stable GPU radix sort (so each tile's entries stay in depth order), and each tile's range is
 found (``tile_ranges``, which also copies the entries into an image); where the renderer sorts on
@@ -12,8 +12,8 @@ blending does. The blend reads splats as texels (the preprocess writes a record 
 buffers): llvmpipe fetches texels as vectors but loads storage and shared memory one invocation
 at a time. Same image contract as the raster path and the reference splatter.
 
-The entry buffers grow on demand up to :attr:`TileBinner.capacity` entries (one storage block);
-a view that needs more (very close views of dense hair) is reported by :meth:`TileBinner.bin`
+The entry buffers grow on demand up to :attr:`TileRasterizer.capacity` entries (one storage block);
+a view that needs more (very close views of dense hair) is reported by :meth:`TileRasterizer.gather`
 returning ``False``, and the renderer draws that frame with the raster path.
 """
 
@@ -24,27 +24,29 @@ from typing import Any
 
 import numpy as np
 
-from .pipeline import TEXELS_PER_ROW, Programs, bind, data_image, dispatch, max_texture_size, set_uniforms
+from .pipeline import Programs, bind, bind_images, data_image, dispatch, max_texture_size, set_uniforms, use_textures
+from .rasterizer import Target
+from .shader_constants import RECORD_VEC4S, RUN, TEXELS_PER_ROW, TILE
 from .sort import GpuRadixSort, sort_order
 
-TILE = 16  # pixels per tile side (tile_common.glsl)
-RECORD_TEXELS = 4  # texels per splat record (preprocess.comp.glsl)
-RUN = 16  # consecutive sorted splats per binning invocation (tile_common.glsl ITEMS)
 MIN_ENTRIES = 1 << 20  # first allocation of the entry buffers
 GROWTH = 1.25  # head room when the entry buffers grow
 
 
 def max_splats(ctx: Any) -> int:
     """Most splats the record image of this context holds (GL_MAX_TEXTURE_SIZE rows)."""
-    return TEXELS_PER_ROW * max_texture_size(ctx) // RECORD_TEXELS
+    return TEXELS_PER_ROW * max_texture_size(ctx) // RECORD_VEC4S
 
 
 def tile_grid(width: int, height: int) -> tuple[int, int]:
     return math.ceil(width / TILE), math.ceil(height / TILE)
 
 
-class TileBinner:
-    """Buffers and passes of the compute rasterizer for one renderer."""
+class TileRasterizer:
+    """The compute rasterizer of one renderer (a :class:`viewer.rasterizer.Rasterizer`): its
+    buffers, the binning passes and the blend."""
+
+    name = "compute"
 
     def __init__(self, ctx: Any, programs: Programs, splats: int, capacity: int, sort_mode: str = "gpu"):
         self.ctx = ctx
@@ -57,8 +59,8 @@ class TileBinner:
         self.counts = ctx.buffer(reserve=4 * n)
         self.run_sums = ctx.buffer(reserve=4 * max(1, math.ceil(n / RUN)))
         self.total = ctx.buffer(reserve=4)
-        self.entries = 0  # entries of the last bin()
-        self.entries_needed = 0  # entries the last bin() needed (more than entries if over capacity)
+        self.entries = 0  # entries of the last gather()
+        self.entries_needed = 0  # entries the last gather() needed (more than entries if over capacity)
         self.allocated = 0
         self.keys = self.values = self.sorter = self.entry_image = None
         self.ranges = None
@@ -68,7 +70,7 @@ class TileBinner:
     def records(self) -> Any:
         """The splat record image the preprocess writes (allocated on first use: 64 bytes a splat)."""
         if self._records is None:
-            self._records = data_image(self.ctx, RECORD_TEXELS * self.splats, 4, "f4")
+            self._records = data_image(self.ctx, RECORD_VEC4S * self.splats, 4, "f4")
         return self._records
 
     def _reserve(self, entries: int) -> None:
@@ -94,7 +96,12 @@ class TileBinner:
             self.ranges = self.ctx.buffer(reserve=8 * tiles[0] * tiles[1])
             self.tiles = tiles
 
-    def bin(self, order: Any, visible: int, width: int, height: int) -> bool:
+    def preprocess_outputs(self, program: Any) -> None:
+        """The preprocess writes the record image (and not the raster path's buffers)."""
+        bind_images(program, u_records=self.records)
+        set_uniforms(program, u_write_records=True, u_write_buffers=False)
+
+    def gather(self, order: Any, visible: int, width: int, height: int) -> bool:
         """Tile entries of the first ``visible`` splats of ``order`` (their records written by the
         preprocess); ``False`` if over capacity."""
         self._ranges(width, height)
@@ -108,12 +115,12 @@ class TileBinner:
             return True
         viewport = (float(width), float(height))
         prog = self.programs.compute("tile_count")
-        bind(order, self.counts, self.run_sums, self.total)
-        self.records.use(0)
-        set_uniforms(prog, u_count=visible, u_viewport=viewport, u_tiles_x=tiles_x, u_records=0)
+        bind(prog, Order=order, Counts=self.counts, RunSums=self.run_sums, Total=self.total)
+        use_textures(prog, u_records=self.records)
+        set_uniforms(prog, u_count=visible, u_viewport=viewport, u_tiles_x=tiles_x)
         dispatch(self.ctx, prog, runs)
         scan = self.programs.compute("radix_scan")  # exclusive scan in place, one work group
-        bind(self.run_sums)
+        bind(scan, BlockHist=self.run_sums)
         set_uniforms(scan, u_count=runs)
         scan.run(1, 1, 1)
         self.ctx.memory_barrier()
@@ -123,9 +130,10 @@ class TileBinner:
         self._reserve(entries)
         self.entries = entries
         prog = self.programs.compute("tile_emit")
-        bind(order, self.counts, self.run_sums, self.keys, self.values)
-        self.records.use(0)
-        set_uniforms(prog, u_count=visible, u_viewport=viewport, u_tiles_x=tiles_x, u_records=0)
+        bind(prog, Order=order, Counts=self.counts, RunOffsets=self.run_sums, TileKeys=self.keys,
+             TileValues=self.values)
+        use_textures(prog, u_records=self.records)
+        set_uniforms(prog, u_count=visible, u_viewport=viewport, u_tiles_x=tiles_x)
         dispatch(self.ctx, prog, runs)
         key_bits = max(1, (tiles_x * tiles_y - 1).bit_length())
         if self.sorter is None:
@@ -134,8 +142,8 @@ class TileBinner:
         self.sorter.sort(self.keys, self.values, entries, key_bits=key_bits)
         self.ranges.clear()
         prog = self.programs.compute("tile_ranges")
-        bind(self.keys, self.ranges, self.values)
-        self.entry_image.bind_to_image(2, read=False, write=True)
+        bind(prog, TileKeys=self.keys, Ranges=self.ranges, TileValues=self.values)
+        bind_images(prog, u_entries=self.entry_image)
         set_uniforms(prog, u_count=entries)
         dispatch(self.ctx, prog, entries)
         return True
@@ -153,15 +161,14 @@ class TileBinner:
         image[:entries] = slots[sort_order(tiles, key_bits)]
         self.entry_image.write(image.tobytes(), viewport=(0, 0, TEXELS_PER_ROW, rows))
 
-    def blend(self, image: Any, width: int, height: int) -> None:
-        """Blend every tile into ``image`` (an RGBA32F texture of ``width`` x ``height``)."""
+    def draw(self, target: Target, width: int, height: int) -> None:
+        """Blend every tile into the target's RGBA32F texture (``width`` x ``height``, overwritten)."""
         tiles_x, tiles_y = self.tiles
         prog = self.programs.compute("tile_blend")
-        bind(None, self.ranges)
-        image.bind_to_image(0, read=False, write=True)
-        self.entry_image.use(0)
-        self.records.use(1)
-        set_uniforms(prog, u_size=(width, height), u_tiles_x=tiles_x, u_entries=0, u_records=1)
+        bind(prog, Ranges=self.ranges)
+        bind_images(prog, u_image=target.texture)
+        use_textures(prog, u_entries=self.entry_image, u_records=self.records)
+        set_uniforms(prog, u_size=(width, height), u_tiles_x=tiles_x)
         prog.run(tiles_x, tiles_y, 1)
         self.ctx.memory_barrier()
 

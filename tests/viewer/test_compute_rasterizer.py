@@ -17,7 +17,8 @@ from test_splat_vs_reference import MIN_PSNR, _random_gaussians, psnr
 from cghair_format import decode_gaussians
 from cghair_format.camera import Camera
 from cghair_format.examples import example_asset
-from viewer.renderer import Renderer, ViewSettings
+from viewer.frame import ViewSettings
+from viewer.renderer import Renderer
 
 splatter = pytest.importorskip("training.splatter", reason="the reference splatter needs torch")
 
@@ -44,7 +45,7 @@ def test_asset_matches_reference(gl_ctx, azimuth):
     lo, hi = renderer.scene.bounds
     cam = Camera.orbit((lo + hi) / 2, 0.45, azimuth, 15.0, 96, 72)  # 6 x 4.5 tiles: a partial row
     _check(renderer, decode_gaussians(asset), cam, background=(0.2, 0.3, 0.4))
-    assert renderer.binner.entries > renderer.visible > 0
+    assert renderer.rasterizers["compute"].entries > renderer.visible > 0
     renderer.release()
 
 
@@ -103,18 +104,24 @@ def test_over_capacity_falls_back_to_raster(gl_ctx):
     cam = Camera.orbit((0, 0, 0), 1.8, 30.0, 20.0, 64, 48)
     renderer = Renderer.from_gaussians(gl_ctx, g, rasterizer="compute")
     full = renderer.render(cam)
-    needed = renderer.binner.entries
-    renderer.binner.capacity = needed - 1
+    needed = renderer.rasterizers["compute"].entries
+    renderer.rasterizers["compute"].capacity = needed - 1
     with pytest.warns(RuntimeWarning, match=f"needs {needed:,} tile entries.*raster path"):
         fallback = renderer.render(cam)
     assert renderer.frame_rasterizer == "raster"
     assert psnr(fallback, full) >= AGREEMENT_PSNR
+    stages = []
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # warned once per renderer
-        renderer.render(cam)
-    renderer.binner.capacity = needed
+        renderer.frame(cam, stage=lambda name, fn: (stages.append(name), fn())[1])
+    # the raster re-run (preprocess, sort, gather) counts as the frame's gather
+    assert stages == ["preprocess", "sort", "gather", "gather", "draw"]
+    renderer.rasterizers["compute"].capacity = needed
     np.testing.assert_array_equal(renderer.render(cam), full)
     assert renderer.frame_rasterizer == "compute"
+    stages.clear()
+    renderer.frame(cam, stage=lambda name, fn: (stages.append(name), fn())[1])
+    assert stages == ["preprocess", "sort", "gather", "draw"]
     renderer.release()
 
 

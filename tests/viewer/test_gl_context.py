@@ -81,8 +81,8 @@ def test_context_falls_back_to_gl33(monkeypatch):
 
 def test_renderer_choice_follows_the_gl_version(gl_ctx, monkeypatch):
     from cghair_format.examples import example_asset
-    from viewer.fallback import FallbackRenderer, create_renderer
-    from viewer.renderer import Renderer
+    from viewer.fallback import FallbackRenderer
+    from viewer.renderer import Renderer, create_renderer
 
     asset = example_asset(strands=10, points=5)
     gpu = create_renderer(gl_ctx, asset)

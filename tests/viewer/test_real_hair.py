@@ -13,7 +13,8 @@ import cghair_format
 from cghair_format import decode_gaussians
 from cghair_format.camera import Camera
 from viewer.decode import read_gaussians
-from viewer.renderer import Renderer, ViewSettings
+from viewer.frame import ViewSettings
+from viewer.renderer import Renderer
 
 pytestmark = pytest.mark.gl
 

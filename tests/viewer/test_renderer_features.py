@@ -11,7 +11,8 @@ from PIL import Image
 from cghair_format import decode_gaussians
 from cghair_format.camera import Camera
 from cghair_format.examples import example_asset
-from viewer.renderer import Renderer, ViewSettings, default_sort_mode, projection_matrix
+from viewer.frame import ViewSettings
+from viewer.renderer import Renderer, default_sort_mode, projection_matrix
 
 splatter = pytest.importorskip("training.splatter", reason="the reference splatter needs torch")
 pytestmark = pytest.mark.gl
@@ -21,7 +22,7 @@ pytestmark = pytest.mark.gl
 def scene(gl_ctx):
     asset = example_asset(seed=4, strands=80, points=10, sh_degree=3, groups=3)
     renderer = Renderer.from_asset(gl_ctx, asset, rasterizer="raster")
-    lo, hi = renderer.scene.bounds
+    lo, hi = renderer.bounds
     cam = Camera.orbit((lo + hi) / 2, 0.45, 30.0, 10.0, 64, 64)
     yield asset, renderer, cam
     renderer.release()
@@ -57,8 +58,9 @@ def test_color_by_group_uses_one_colour_per_group(scene):
     img = renderer.render(cam, ViewSettings(color_by_group=True))
     assert not np.allclose(img, renderer.render(cam))
     renderer.preprocess(cam, ViewSettings(color_by_group=True))
-    colour = np.frombuffer(renderer.color.read(), np.float32).reshape(-1, 4)[:, :3]
-    radius = np.frombuffer(renderer.center.read(), np.float32).reshape(-1, 4)[:, 3]
+    raster = renderer.rasterizers["raster"]  # the buffers the preprocess writes for the raster path
+    colour = np.frombuffer(raster.color.read(), np.float32).reshape(-1, 4)[:, :3]
+    radius = np.frombuffer(raster.center.read(), np.float32).reshape(-1, 4)[:, 3]
     group = np.repeat(asset.cards.group[asset.strand_card], asset.points_per_strand - 1)
     seen = {}
     for gid in np.unique(group):
@@ -102,18 +104,20 @@ def test_sort_mode_choice(gl_ctx):
 
 
 def test_bare_baselines_cover_the_same_quads(scene, gl_ctx):
+    from viewer.bench import Baselines
+
     _, renderer, cam = scene
-    renderer.render(cam)  # preprocess, sort, gather
+    renderer.render(cam)  # a raster frame: preprocess, sort, gather, draw
+    baselines = Baselines(renderer)
+    target = renderer.accum(cam.width, cam.height)
     coverage = []
-    for bare in ("sorted", "records"):
-        renderer.draw(cam.width, cam.height, bare=bare)
-        accum = renderer._target(cam.width, cam.height)[0]
-        alpha = np.frombuffer(accum.read(), np.float32).reshape(cam.height, cam.width, 4)[..., 3]
+    for draw in (baselines.draw_sorted, baselines.draw_records):
+        draw(target, cam.width, cam.height)
+        alpha = np.frombuffer(target.texture.read(), np.float32).reshape(cam.height, cam.width, 4)[..., 3]
         coverage.append(alpha > 0)
+    baselines.release()
     assert coverage[0].sum() > 100
     np.testing.assert_array_equal(coverage[0], coverage[1])  # same quads, two data paths
-    with pytest.raises(ValueError, match="bare must be"):
-        renderer.draw(cam.width, cam.height, bare="fancy")
 
 
 def test_z_up_asset_renders_like_its_y_up_twin(gl_ctx, tmp_path):
@@ -153,6 +157,7 @@ def test_fallback_toggles_match_the_gpu_path(scene, gl_ctx):
                      ViewSettings(splat_scale=2.0, background=(0.5, 0.5, 0.5))):
         # numpy computes in float64, the GPU in float32
         np.testing.assert_allclose(fallback.render(cam, settings), renderer.render(cam, settings), atol=2e-4)
-    with pytest.raises(ValueError, match="no benchmark baselines"):
-        fallback.draw(8, 8, bare="sorted")
+    stages = []  # numpy projects and sorts in its preprocess; the gather uploads the records
+    fallback.frame(cam, stage=lambda name, fn: (stages.append(name), fn())[1])
+    assert stages == ["preprocess", "gather", "draw"] and fallback.drawn == fallback.visible > 0
     fallback.release()

@@ -15,7 +15,8 @@ from cghair_format import Gaussians, decode_gaussians
 from cghair_format.camera import Camera
 from cghair_format.examples import example_asset
 from cghair_format.gaussians import rgb_to_sh0
-from viewer.renderer import Renderer, ViewSettings
+from viewer.frame import ViewSettings
+from viewer.renderer import Renderer
 
 splatter = pytest.importorskip("training.splatter", reason="the reference splatter needs torch")
 
@@ -104,7 +105,7 @@ def test_empty_view_is_background(gl_ctx):
 
 def test_record_chunks_and_culling(gl_ctx, monkeypatch):
     """Draw records split over many buffers give the same image; culled splats are not drawn."""
-    from viewer import renderer as renderer_module
+    from viewer import raster
 
     g = _random_gaussians(500, seed=11)
     w2c = np.eye(4)
@@ -112,13 +113,13 @@ def test_record_chunks_and_culling(gl_ctx, monkeypatch):
     cam = Camera(48, 40, fx=50.0, fy=50.0, cx=24.0, cy=20.0, world_to_camera=w2c)
     whole = Renderer.from_gaussians(gl_ctx, g, rasterizer="raster")
     expected = whole.render(cam)
-    assert len(whole.records) == 1
+    assert len(whole.rasterizers["raster"].records) == 1
     assert 0 < whole.visible < g.count  # some Gaussians are behind the camera
     whole.release()
-    monkeypatch.setattr(renderer_module, "block_limit", lambda ctx: 37 * renderer_module.RECORD_BYTES)
+    monkeypatch.setattr(raster, "block_limit", lambda ctx: 37 * raster.RECORD_BYTES)
     split = Renderer.from_gaussians(gl_ctx, g, rasterizer="raster")
     image = split.render(cam)  # the records are allocated by the first raster gather
-    assert len(split.records) == 14  # ceil(500 / 37)
+    assert len(split.rasterizers["raster"].records) == 14  # ceil(500 / 37)
     np.testing.assert_array_equal(image, expected)
     split.release()
 
@@ -135,7 +136,7 @@ def test_fallback_without_compute_matches_reference(gl_ctx, scene):
         asset = with_point_counts(asset, seed=3) if scene == "variable" else asset
         g = decode_gaussians(asset)
         renderer = FallbackRenderer.from_asset(gl_ctx, asset)
-        lo, hi = renderer.scene.bounds
+        lo, hi = renderer.bounds
         cam = Camera.orbit((lo + hi) / 2, 0.45, 60.0, 15.0, 96, 72)
     else:
         g = _random_gaussians(600, seed=7)

@@ -151,6 +151,10 @@ def test_bench_viewer_small(gl_ctx, cgh_file, tmp_path, capsys):
     assert rc == 0
     assert "decode+upload" in stdout and "bare instanced quads" in stdout and "reference splatter at 48x36" in stdout
     figures = json.loads(out.read_text())
+    # the OpenGL driver and device, and the work-group sizes of this driver's table entry
+    assert figures["gl"]["renderer"] == gl_ctx.info["GL_RENDERER"] and figures["gl"]["version"]
+    assert figures["workgroups"]["profile"] == "llvmpipe" and figures["workgroups"]["blend"] == [16, 1]
+    assert f"OpenGL {figures['gl']['version']}" in stdout and "work groups: llvmpipe (tile blend 16 x 1)" in stdout
     assert figures["gaussians"] == 2000 and figures["strands"] == 200
     for key in ("read_s", "decode_upload_s", "bare_quads_s", "bare_quads_records_s", "sort_gpu_s", "sort_cpu_s",
                 "draw_instanced_quads_s", "reference_s"):
@@ -185,6 +189,18 @@ def test_render_rasterizers_and_budget(gl_ctx, cgh_file, tmp_path, capsys):
     assert np.abs(images["budget"] - images["raster"]).max() > 10  # fewer, thicker strands
 
 
+def test_render_verbose_names_the_driver_and_device(gl_ctx, cgh_file, tmp_path, capsys):
+    rc, stdout, _ = _run(capsys, "render", cgh_file, "-o", tmp_path / "v.png", "--width", 16, "--height", 16,
+                         "--verbose")
+    assert rc == 0
+    line = next(x for x in stdout.splitlines() if x.startswith("OpenGL: "))
+    # GL_RENDERER | GL_VENDOR | GL_VERSION, and the EGL device chosen (llvmpipe's software device here)
+    assert gl_ctx.info["GL_RENDERER"] in line and gl_ctx.info["GL_VENDOR"] in line
+    assert gl_ctx.info["GL_VERSION"] in line and "EGL device" in line
+    rc, stdout, _ = _run(capsys, "render", cgh_file, "-o", tmp_path / "q.png", "--width", 16, "--height", 16)
+    assert rc == 0 and "OpenGL: " not in stdout
+
+
 @pytest.mark.parametrize("command, args, message", [
     ("render", ["-o", "x.png", "--budget", "abc"], "a budget is a number of Gaussians"),
     ("render", ["-o", "x.png", "--budget", "0"], "at least 1 Gaussian"),
@@ -209,7 +225,7 @@ def test_compute_on_opengl_33_says_what_to_do(gl_ctx):
     from types import SimpleNamespace
 
     from viewer.context import GLContextError
-    from viewer.fallback import create_renderer
+    from viewer.renderer import create_renderer
 
     old = SimpleNamespace(version_code=330)
     asset = example_asset(seed=1, strands=4, points=4)

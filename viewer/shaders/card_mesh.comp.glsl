@@ -1,7 +1,7 @@
 #version 430
 // Rails and normals of every card strip vertex (cghair_format.geometry.card_mesh).
 // One invocation per spine point (card c, point k): writes vertices 2(c(M+1)+k) (left) and +1 (right).
-layout(local_size_x = 256) in;
+layout(local_size_x = LOCAL_SIZE) in;
 #include "common.glsl"
 
 layout(std430, binding = 0) readonly buffer Spine { vec4 spine[]; };      // [C*(M+1)] xyz

@@ -2,7 +2,7 @@
 // Strand points from card coordinates (cghair_format.geometry.strand_points) and the segment
 // Gaussians' means, rotations and scales (cghair_format.gaussians.segment_frames).
 // One invocation per Gaussian g = s (P-1) + i, for segment p_i -> p_i+1 of strand s.
-layout(local_size_x = 256) in;
+layout(local_size_x = LOCAL_SIZE) in;
 #include "common.glsl"
 
 layout(std430, binding = 0) readonly buffer MeshPos { vec4 mesh_pos[]; };

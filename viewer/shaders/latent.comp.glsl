@@ -2,7 +2,7 @@
 // Strand latents (cghair_format.gaussians.strand_latents): codebook weights of each strand
 // (softmax of logits / temperature, or one-hot argmax) over its card group's codebook.
 // One invocation per strand of the chunk [u_first, u_first + u_count).
-layout(local_size_x = 64) in;
+layout(local_size_x = LATENT_LOCAL_SIZE) in;
 #include "common.glsl"
 
 layout(std430, binding = 0) readonly buffer Logits { float logits[]; };        // [S*K]

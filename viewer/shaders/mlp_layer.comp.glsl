@@ -3,7 +3,7 @@
 // One invocation per (group of 4 strands, group of 4 outputs): weights are stored transposed
 // and padded as vec4s, w4[j * out4 + o4] = W[4 o4 .. 4 o4 + 3, j], so each input costs one vec4
 // load shared by 4 strands (a 4 x 4 register tile).
-layout(local_size_x = 256) in;
+layout(local_size_x = LOCAL_SIZE) in;
 #include "common.glsl"
 
 layout(std430, binding = 0) readonly buffer Input { float x[]; };     // [chunk * in]

@@ -8,7 +8,7 @@
 // with level of detail (viewer/lod.py), the first u_count Gaussians of the chunk's strands in
 // priority order (lod_strands[u_list_base...]), written to slots u_out_base + i, with opacity and
 // thickness compensated for the strands left out.
-layout(local_size_x = 256) in;
+layout(local_size_x = LOCAL_SIZE) in;
 #include "common.glsl"
 
 layout(std430, binding = 4) writeonly buffer Center { vec4 center[]; };      // mx, my, z, radius
@@ -21,7 +21,7 @@ layout(std430, binding = 10) readonly buffer CardGroup { uint card_group[]; };
 layout(std430, binding = 11) writeonly buffer Axes { vec4 axes[]; };  // quad half-axes, see below
 layout(std430, binding = 12) buffer Visible { uint visible; };  // number of Gaussians not culled
 layout(std430, binding = 13) readonly buffer LodStrands { uint lod_strands[]; };  // per chunk, by priority
-// The compute rasterizer's splat records, 4 texels from texel 4 * slot (viewer/tiles.py): llvmpipe
+// The compute rasterizer's splat records, RECORD_VEC4S texels from texel RECORD_VEC4S * slot: llvmpipe
 // fetches texels as vectors, but loads storage and shared memory one invocation at a time.
 layout(rgba32f, binding = 1) uniform writeonly image2D u_records;
 // The Gaussians, texel g (xyz and opacity; wxyz; scales), and this chunk's SH coefficients,
@@ -190,7 +190,7 @@ void main() {
     if (u_write_records) {
         // (mx, my, radius, opacity), conic, the half-axes over their squared lengths (|dot(d, .)|
         // <= 1 inside the rectangle they span), colour
-        int k = int(4u * slot);  // a record's 4 texels share a row
+        int k = int(RECORD_VEC4S * slot);  // a record's texels share a row
         imageStore(u_records, texel(k), vec4(m2, radius, mo.w));
         imageStore(u_records, texel(k + 1), vec4(cc / det, -cb / det, ca / det, 0.0));
         imageStore(u_records, texel(k + 2), vec4(ax.xy / dot(ax.xy, ax.xy), ax.zw / dot(ax.zw, ax.zw)));

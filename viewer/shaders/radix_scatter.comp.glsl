@@ -1,8 +1,8 @@
 #version 430
-// Radix sort, pass step 3: stable scatter of keys and values by their 4-bit digit. Thread t of a
-// block owns 16 consecutive keys; its rank among the block's keys with the same digit comes from
+// Radix sort, pass step 3: stable scatter of keys and values by their digit. Thread t of a
+// block owns RADIX_ITEMS consecutive keys; its rank among the block's keys with the same digit comes from
 // an exclusive scan of the (digit, thread) count table in shared memory.
-layout(local_size_x = 256) in;
+layout(local_size_x = RADIX_THREADS) in;
 
 layout(std430, binding = 0) readonly buffer KeysIn { uint keys[]; };
 layout(std430, binding = 1) readonly buffer ValuesIn { uint values_in[]; };
@@ -16,37 +16,37 @@ uniform uint u_blocks;
 
 #include "radix_common.glsl"
 
-shared uint table[16 * 256];  // table[digit * 256 + thread]
-const uint SCAN_THREADS = 256u;
+shared uint table[RADIX_DIGITS * RADIX_THREADS];  // table[digit * RADIX_THREADS + thread]
+const uint SCAN_THREADS = uint(RADIX_THREADS);
 shared uint sums[SCAN_THREADS];
 #include "workgroup_scan.glsl"
 
 void main() {
     uint t = gl_LocalInvocationID.x;
     uint block = gl_WorkGroupID.x;
-    uint start = block * BLOCK + t * ITEMS;
-    uint c[16];
+    uint start = block * BLOCK + t * RADIX_ITEMS;
+    uint c[RADIX_DIGITS];
     count_digits(start, c);
-    for (uint d = 0u; d < 16u; ++d) table[d * 256u + t] = c[d];
+    for (uint d = 0u; d < RADIX_DIGITS; ++d) table[d * RADIX_THREADS + t] = c[d];
     barrier();
-    // exclusive scan of the 4096-entry table: 16 serial entries per thread, then across threads
+    // exclusive scan of the table: RADIX_DIGITS serial entries per thread, then across threads
     uint s = 0u;
-    for (uint i = 0u; i < 16u; ++i) s += table[t * 16u + i];
+    for (uint i = 0u; i < RADIX_DIGITS; ++i) s += table[t * RADIX_DIGITS + i];
     uint run = exclusive_prefix(t, s);
-    for (uint i = 0u; i < 16u; ++i) {
-        uint v = table[t * 16u + i];
-        table[t * 16u + i] = run;
+    for (uint i = 0u; i < RADIX_DIGITS; ++i) {
+        uint v = table[t * RADIX_DIGITS + i];
+        table[t * RADIX_DIGITS + i] = run;
         run += v;
     }
     barrier();
-    for (uint d = 0u; d < 16u; ++d) {
-        c[d] = block_hist[d * u_blocks + block] + table[d * 256u + t] - table[d * 256u];
+    for (uint d = 0u; d < RADIX_DIGITS; ++d) {
+        c[d] = block_hist[d * u_blocks + block] + table[d * RADIX_THREADS + t] - table[d * RADIX_THREADS];
     }
-    for (uint i = 0u; i < ITEMS; ++i) {
+    for (uint i = 0u; i < RADIX_ITEMS; ++i) {
         uint idx = start + i;
         if (idx >= u_count) break;
         uint k = keys[idx];
-        uint d = (k >> u_shift) & 15u;
+        uint d = (k >> u_shift) & (RADIX_DIGITS - 1);
         uint dst = c[d];
         c[d] = dst + 1u;
         keys_out[dst] = k;

@@ -3,7 +3,7 @@
 // packed) into an RGBA32F image, each Gaussian starting on a texel (u_stride texels, the tail
 // zero), which the preprocess fetches as texels: llvmpipe fetches texels as vectors but loads
 // storage buffers one invocation and one component at a time.
-layout(local_size_x = 256) in;
+layout(local_size_x = LOCAL_SIZE) in;
 #include "common.glsl"
 
 layout(std430, binding = 0) readonly buffer Sh { float sh[]; };  // [count * floats]

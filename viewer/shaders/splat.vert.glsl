@@ -22,16 +22,16 @@ flat out vec3 v_color;
 
 void main() {
     uint slot = u_triangles ? uint(gl_VertexID) / 3u : uint(gl_InstanceID);
-    vec4 r0 = rec[4u * slot];
+    vec4 r0 = rec[RECORD_VEC4S * slot];
     if (r0.z <= 0.0) {  // culled: a degenerate primitive outside the clip volume
         gl_Position = vec4(2.0, 2.0, 2.0, 1.0);
         return;
     }
     vec2 corner = u_triangles ? TRIANGLE[uint(gl_VertexID) % 3u]
                               : vec2(float(gl_VertexID & 1), float(gl_VertexID >> 1)) * 2.0 - 1.0;
-    vec4 ax = rec[4u * slot + 1u];
+    vec4 ax = rec[RECORD_VEC4S * slot + 1u];
     v_center = r0;
-    v_conic = rec[4u * slot + 2u].xyz;
-    v_color = rec[4u * slot + 3u].rgb;
+    v_conic = rec[RECORD_VEC4S * slot + 2u].xyz;
+    v_color = rec[RECORD_VEC4S * slot + 3u].rgb;
     gl_Position = vec4(2.0 * (r0.xy + corner.x * ax.xy + corner.y * ax.zw) / u_viewport - 1.0, 0.0, 1.0);
 }

@@ -5,7 +5,7 @@
 //   [0] mean2d.xy, 1 / radius, opacity   [1] half-axes a1.xy, a2.xy (pixels)
 //   [2] conic a, b, c (Sigma2^-1 = [[a, b], [b, c]]), 0   [3] rgb, 0
 // Dispatched per record chunk: sorted slots [u_first, u_first + u_count).
-layout(local_size_x = 256) in;
+layout(local_size_x = LOCAL_SIZE) in;
 #include "common.glsl"
 
 layout(std430, binding = 0) readonly buffer Order { uint order[]; };
@@ -24,12 +24,12 @@ void main() {
     uint idx = order[u_first + i];
     vec4 c = center[idx];
     if (c.w <= 0.0) {  // culled (only reachable if the visible count was not used)
-        rec[4u * i] = vec4(0.0);
+        rec[RECORD_VEC4S * i] = vec4(0.0);
         return;
     }
     vec4 con = conic[idx];
-    rec[4u * i] = vec4(c.xy, 1.0 / c.w, con.w);
-    rec[4u * i + 1u] = axes[idx];
-    rec[4u * i + 2u] = vec4(con.xyz, 0.0);
-    rec[4u * i + 3u] = vec4(color[idx].rgb, 0.0);
+    rec[RECORD_VEC4S * i] = vec4(c.xy, 1.0 / c.w, con.w);
+    rec[RECORD_VEC4S * i + 1u] = axes[idx];
+    rec[RECORD_VEC4S * i + 2u] = vec4(con.xyz, 0.0);
+    rec[RECORD_VEC4S * i + 3u] = vec4(color[idx].rgb, 0.0);
 }

@@ -1,6 +1,8 @@
 #version 430
-// One work group of 16 invocations per 16 x 16 tile; each owns a column of it, so one fetch of a
-// splat serves 16 pixels (on llvmpipe quicker than 4 rows per invocation; docs/viewer.md).
+// One work group per TILE x TILE tile, of BLEND_GROUP_X (= TILE) x BLEND_GROUP_Y invocations, each
+// owning BLEND_ROWS pixels of a column (viewer/shader_constants.py, per driver): on llvmpipe 16
+// invocations of a 16-pixel column, so one fetch of a splat serves 16 pixels (quicker there than 4
+// rows per invocation; docs/viewer.md); on GPUs 256 invocations of one pixel (whole warps).
 // The tile's splats, front to back, are blended with the rendering contract's formula
 // (alpha = min(0.99, o exp(-q/2)) at the pixel centre, zero below 1/255, outside the 3-sigma
 // square or outside the rectangle spanned by the half-axes, which holds every alpha >= 1/255):
@@ -12,7 +14,7 @@
 // preprocess.comp.glsl): llvmpipe fetches texels as vectors but loads storage and shared memory
 // one invocation at a time, which made a shared-memory batch loop many times slower there.
 // Writes (C, 1 - T) to the accumulation image, row j = image row j.
-layout(local_size_x = 16, local_size_y = 1) in;
+layout(local_size_x = BLEND_GROUP_X, local_size_y = BLEND_GROUP_Y) in;
 
 layout(std430, binding = 1) readonly buffer Ranges { uvec2 ranges[]; };
 layout(rgba32f, binding = 0) uniform writeonly image2D u_image;
@@ -25,7 +27,6 @@ uniform uint u_tiles_x;
 const float ALPHA_MAX = 0.99;
 const float ALPHA_MIN = 1.0 / 255.0;
 const float T_MIN = 1e-4;
-const uint ROWS = 16u;  // pixels per invocation: the tile's column
 
 #include "tile_texel.glsl"
 
@@ -43,21 +44,22 @@ void slab(float u, float v, inout float lo, inout float hi) {
 void main() {
     uvec2 tile = gl_WorkGroupID.xy;
     uvec2 range = ranges[tile.y * u_tiles_x + tile.x];
-    uint x = tile.x * 16u + gl_LocalInvocationID.x;
-    uint y0 = tile.y * 16u;
-    vec3 rgb[ROWS];
-    float T[ROWS];  // pixels outside the image start at 0: T >= T_MIN marks the pixels still blending
+    uint x = tile.x * TILE + gl_LocalInvocationID.x;
+    uint y0 = tile.y * TILE;  // rows are numbered within the tile, whatever the layout: same arithmetic
+    uint r0 = gl_LocalInvocationID.y * BLEND_ROWS;  // this invocation's first row
+    vec3 rgb[BLEND_ROWS];
+    float T[BLEND_ROWS];  // pixels outside the image start at 0: T >= T_MIN marks the pixels still blending
     float t_max = 0.0;
-    for (uint r = 0u; r < ROWS; ++r) {
-        rgb[r] = vec3(0.0);
-        T[r] = x < u_size.x && y0 + r < u_size.y ? 1.0 : 0.0;
-        t_max = max(t_max, T[r]);
+    for (uint k = 0u; k < BLEND_ROWS; ++k) {
+        rgb[k] = vec3(0.0);
+        T[k] = x < u_size.x && y0 + r0 + k < u_size.y ? 1.0 : 0.0;
+        t_max = max(t_max, T[k]);
     }
     float px = float(x) + 0.5;
     float py0 = float(y0) + 0.5;
     for (uint i = range.x; i < range.y && t_max >= T_MIN; ++i) {
         int slot = int(texelFetch(u_entries, texel(int(i)), 0).r);
-        ivec2 at = texel(4 * slot);  // a record's 4 texels share a row
+        ivec2 at = texel(RECORD_VEC4S * slot);  // a record's texels share a row
         vec4 c = texelFetch(u_records, at, 0);                   // mx, my, radius, opacity
         vec4 con = texelFetch(u_records, at + ivec2(1, 0), 0);   // conic a, b, c
         vec4 ax = texelFetch(u_records, at + ivec2(2, 0), 0);
@@ -69,19 +71,20 @@ void main() {
         slab(dx * ax.z, ax.w, lo, hi);
         float r_lo = lo + c.y - py0, r_hi = hi + c.y - py0;
         t_max = 0.0;
-        for (uint r = 0u; r < ROWS; ++r) {
-            float dy = py0 + float(r) - c.y;
-            bool hit = T[r] >= T_MIN && float(r) >= r_lo && float(r) <= r_hi;
+        for (uint k = 0u; k < BLEND_ROWS; ++k) {
+            float r = float(r0 + k);
+            float dy = py0 + r - c.y;
+            bool hit = T[k] >= T_MIN && r >= r_lo && r <= r_hi;
             float power = -0.5 * (con.x * dx * dx + con.z * dy * dy) - con.y * dx * dy;
             float alpha = min(ALPHA_MAX, c.w * exp(power));
             alpha = hit && alpha >= ALPHA_MIN ? alpha : 0.0;  // selects, not branches: SIMD-friendly
-            rgb[r] += T[r] * alpha * col;
-            T[r] *= 1.0 - alpha;
-            t_max = max(t_max, T[r]);
+            rgb[k] += T[k] * alpha * col;
+            T[k] *= 1.0 - alpha;
+            t_max = max(t_max, T[k]);
         }
     }
-    for (uint r = 0u; r < ROWS; ++r) {
-        uint y = y0 + r;
-        if (x < u_size.x && y < u_size.y) imageStore(u_image, ivec2(x, y), vec4(rgb[r], 1.0 - T[r]));
+    for (uint k = 0u; k < BLEND_ROWS; ++k) {
+        uint y = y0 + r0 + k;
+        if (x < u_size.x && y < u_size.y) imageStore(u_image, ivec2(x, y), vec4(rgb[k], 1.0 - T[k]));
     }
 }

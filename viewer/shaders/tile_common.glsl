@@ -3,9 +3,8 @@
 // splat touches tile (tx, ty) when some pixel centre of the tile may lie in both its 3-sigma
 // support square (its bounding box) and the oriented rectangle spanned by its half-axes
 // (preprocess.comp.glsl), which contains every pixel where alpha >= 1/255: the tiles found below
-// are a superset of the tiles with a visible pixel.
-const uint TILE = 16u;
-const uint ITEMS = 16u;  // consecutive sorted splats per invocation (a run; viewer/tiles.py RUN)
+// are a superset of the tiles with a visible pixel. TILE, RUN and RECORD_VEC4S are #defined by the
+// shader loader from viewer/shader_constants.py.
 
 struct Footprint { ivec2 lo; ivec2 hi; vec2 m; vec2 u1; vec2 u2; float l1; float l2; };
 
@@ -13,7 +12,7 @@ struct Footprint { ivec2 lo; ivec2 hi; vec2 m; vec2 u1; vec2 u2; float l1; float
 #include "tile_texel.glsl"
 
 Footprint footprint(uint slot) {
-    ivec2 at = texel(4 * int(slot));
+    ivec2 at = texel(RECORD_VEC4S * int(slot));
     vec4 c = texelFetch(u_records, at, 0);  // mx, my, radius, opacity
     vec4 ax = texelFetch(u_records, at + ivec2(2, 0), 0);  // the half-axes over their squared lengths
     Footprint f;

@@ -1,9 +1,9 @@
 #version 430
 // Tile binning, step 1: how many tiles each visible splat touches, in depth order, and each run's
-// total (invocation t owns the ITEMS consecutive sorted splats of run t), plus the grand total.
+// total (invocation t owns the RUN consecutive sorted splats of run t), plus the grand total.
 // No shared memory or barriers: on llvmpipe a barrier switches between all of a work group's
 // SIMD batches, and shared memory is loaded one invocation at a time.
-layout(local_size_x = 256) in;
+layout(local_size_x = LOCAL_SIZE) in;
 #include "common.glsl"
 
 layout(std430, binding = 0) readonly buffer Order { uint order[]; };  // depth-sorted slots
@@ -20,10 +20,10 @@ uniform sampler2D u_records;  // 4 texels a slot (preprocess.comp.glsl)
 
 void main() {
     uint run = global_index();
-    uint start = run * ITEMS;
+    uint start = run * RUN;
     if (start >= u_count) return;
     uint s = 0u;
-    for (uint i = 0u; i < ITEMS; ++i) {
+    for (uint i = 0u; i < RUN; ++i) {
         uint idx = start + i;
         if (idx >= u_count) break;
         uint n = tiles_touched(footprint(order[idx]));

@@ -3,7 +3,7 @@
 // (tile, slot) entry per tile it touches, at its exclusive prefix position in depth order. A
 // stable sort by tile then leaves every tile's entries in depth order: (tile, depth) keys with
 // the depth rank implicit in the emission order.
-layout(local_size_x = 256) in;
+layout(local_size_x = LOCAL_SIZE) in;
 #include "common.glsl"
 
 layout(std430, binding = 0) readonly buffer Order { uint order[]; };
@@ -21,10 +21,10 @@ uniform sampler2D u_records;  // 4 texels a slot (preprocess.comp.glsl)
 
 void main() {
     uint run = global_index();
-    uint start = run * ITEMS;
+    uint start = run * RUN;
     if (start >= u_count) return;
     uint pos = run_offsets[run];
-    for (uint i = 0u; i < ITEMS; ++i) {
+    for (uint i = 0u; i < RUN; ++i) {
         uint idx = start + i;
         if (idx >= u_count) break;
         if (counts[idx] == 0u) continue;

@@ -2,7 +2,7 @@
 // Tile binning, step 3: the range [start, end) of each tile's entries in the tile-sorted keys
 // (tiles without entries keep the cleared (0, 0)), and the entries' splat slots copied into an
 // image, which the blend fetches as texels (vectorised on llvmpipe; storage loads are not).
-layout(local_size_x = 256) in;
+layout(local_size_x = LOCAL_SIZE) in;
 #include "common.glsl"
 
 layout(std430, binding = 0) readonly buffer TileKeys { uint tile_keys[]; };
