@@ -141,7 +141,7 @@ def _run(args: argparse.Namespace) -> None:
 
     from .ablation import scaled_config
     from .backends import resolve_backend
-    from .dataset import render_dataset
+    from .datasets.synthetic import render_dataset
     from .splatter import torch_device
     from .train import base_asset
 

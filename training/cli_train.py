@@ -99,7 +99,7 @@ def _config(args: argparse.Namespace):
 
 def run(args: argparse.Namespace) -> int:
     from .backends import resolve_backend
-    from .capture import detect_layout
+    from .datasets.layouts import detect_layout
     from .train import TrainError, train
 
     if not (args.strands or args.cards or args.resume):

@@ -30,7 +30,8 @@ from cghair_format.strands import Strands
 from . import losses
 from .backends import renderer, resolve_backend
 from .config import RunOptions, TrainConfig
-from .dataset import Dataset, View, read_dataset
+from .datasets.read import read_dataset
+from .datasets.types import Dataset, View
 from .model import HairModel, tau_at
 from .schedule import Schedule
 from .splatter import torch_device
@@ -254,7 +255,7 @@ def start_run(dataset: Dataset | str | Path, config: TrainConfig | None, options
     sit where the views see hair before any iteration runs."""
     from cghair_format.gaussians import decode_strands
 
-    from .capture import check_strands_in_views
+    from .datasets.alignment import check_strands_in_views
 
     device = torch_device(options.device)
     backend = resolve_backend(options.backend, device)

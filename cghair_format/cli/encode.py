@@ -59,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _negligible(asset, dataset: str, budget: float):
     try:
-        from training.dataset import read_dataset
+        from training.datasets.read import read_dataset
         from training.visibility import negligible_segments
     except ImportError as exc:
         raise MissingDependencyError(exc.name or "torch", "training", "cgh encode --views") from None

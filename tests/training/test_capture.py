@@ -13,10 +13,13 @@ from training_helpers import hair_cap, nerf_to_colmap
 
 from cghair_format.cli import main
 from cghair_format.exchange import save_strands
-from training.capture import check_strands_in_views, detect_layout, fraction_in_masks
-from training.colmap import ColmapError, read_model
 from training.config import TrainConfig
-from training.dataset import DatasetError, read_dataset, render_dataset
+from training.datasets.alignment import check_strands_in_views, fraction_in_masks
+from training.datasets.colmap import ColmapError, read_model
+from training.datasets.layouts import detect_layout
+from training.datasets.read import read_dataset
+from training.datasets.synthetic import render_dataset
+from training.datasets.types import DatasetError
 from training.evaluate import evaluate_model
 from training.train import train
 
