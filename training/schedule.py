@@ -14,7 +14,6 @@ from .model import HairModel, tau_at
 
 @dataclass(frozen=True)
 class Iteration:
-    index: int
     view: int  # index among the training views
     tau: float  # Gumbel-softmax temperature
     geometry_on: bool  # the strand points move
@@ -52,5 +51,5 @@ class Schedule:
         for g, base, decays, geometry in zip(self.optimizer.param_groups, self.base_lr, self.decays, self.geometry,
                                              strict=True):
             g["lr"] = 0.0 if geometry and not geometry_on else base * (factor if decays else 1.0)
-        return Iteration(iteration, view_at(self.config.seed, iteration, self.n_views),
+        return Iteration(view_at(self.config.seed, iteration, self.n_views),
                          tau_at(self.config, iteration), geometry_on)
