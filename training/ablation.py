@@ -158,7 +158,8 @@ def _start(setup: Setup, name: str, key: str, **settings):
     from cghair_format.exchange import load_strands
 
     from .backends import resolve_backend
-    from .dataset import read_dataset, render_dataset
+    from .datasets.read import read_dataset
+    from .datasets.synthetic import render_dataset
     from .lpips import Lpips
 
     if setup.threads:

@@ -201,7 +201,7 @@ def _run(args: argparse.Namespace) -> None:
     import torch
 
     from .backends import resolve_backend
-    from .dataset import render_dataset
+    from .datasets.synthetic import render_dataset
     from .splatter import torch_device
 
     if args.threads:

@@ -49,7 +49,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from cghair_format.exchange import load_strands
 
-    from .dataset import prepare_strands, render_dataset
+    from .datasets.synthetic import prepare_strands, render_dataset
 
     # densified with seed 0, as the benchmarks' paper-scale asset (tests/bench/paper_scale.py): --seed
     # changes colours and sampling, never the strands

@@ -11,7 +11,7 @@ def negligible_from_views(asset, dataset: str, budget: float):
     """The segments of ``asset`` (bool ``[S, P-1]``) whose Gaussians together carry at most ``budget`` of
     the blend weight of ``dataset``'s training views (:func:`training.visibility.negligible_segments`)."""
     try:
-        from .dataset import read_dataset
+        from .datasets.read import read_dataset
         from .visibility import negligible_segments
     except ImportError as exc:
         raise MissingDependencyError(exc.name or "torch", "training", "cgh encode --views") from None

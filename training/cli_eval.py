@@ -25,7 +25,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from .capture import detect_layout
+    from .datasets.layouts import detect_layout
     from .evaluate import evaluate
 
     if args.threads:

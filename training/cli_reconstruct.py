@@ -46,8 +46,8 @@ def run(args: argparse.Namespace) -> int:
 
     from cghair_format.exchange import UnsupportedFormatError, save_strands, writable_extensions
 
-    from .capture import detect_layout
-    from .dataset import read_dataset
+    from .datasets.layouts import detect_layout
+    from .datasets.read import read_dataset
     from .reconstruct.pipeline import ReconstructConfig, reconstruct
 
     if args.threads:

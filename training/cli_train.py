@@ -112,7 +112,7 @@ def _resolve_backend(name: str | None, device: str) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .capture import detect_layout
+    from .datasets.layouts import detect_layout
     from .train import TrainError, train
 
     if not (args.strands or args.cards or args.resume):

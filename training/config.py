@@ -12,8 +12,10 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TextIO
 
 from cghair_format.errors import CghError
 from cghair_format.profiles import DEFAULT_OPACITY_BUDGET
@@ -109,3 +111,25 @@ class TrainConfig:
             return cls.from_dict(json.loads(Path(path).read_text()))
         except json.JSONDecodeError as exc:
             raise ConfigError(f"{path}: not valid JSON ({exc})") from exc
+
+
+@dataclass
+class RunOptions:
+    """How one training run is carried out, beside what it trains (:class:`TrainConfig`): where it
+    writes, what it resumes, where it runs. :func:`training.train.train`'s keyword arguments."""
+
+    out: Path | None = None  # the .cgh (and <out>.train.json) to write; None: write nothing
+    checkpoint: Path | None = None  # default <out>.ckpt.pt
+    resume: Path | None = None  # a checkpoint to continue
+    profile: str = "compact"  # precision of the written .cgh
+    progress: bool = True  # a progress bar on ``log``
+    log: TextIO = field(default_factory=lambda: sys.stderr)
+    threads: int | None = None  # torch CPU threads (None: torch's choice)
+    stop_at: int | None = None  # end after this iteration as if interrupted (checkpoint, no export)
+    device: str = "cpu"  # torch device
+    backend: str | None = None  # rasterizer (training.backends; None: the fastest that runs on device)
+
+    def checkpoint_path(self) -> Path | None:
+        if self.checkpoint:
+            return Path(self.checkpoint)
+        return Path(self.out).with_suffix(".ckpt.pt") if self.out is not None else None

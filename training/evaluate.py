@@ -15,7 +15,8 @@ from cghair_format.asset import HairAsset
 from cghair_format.atomic import atomic_path, write_text
 
 from . import losses
-from .dataset import Dataset, View, read_dataset
+from .datasets.read import read_dataset
+from .datasets.types import Dataset, View
 
 DIFF_GAIN = 4.0
 

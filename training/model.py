@@ -32,7 +32,7 @@ from cghair_format.errors import CghError
 from cghair_format.gaussians import rgb_to_sh0
 from cghair_format.geometry import card_mesh
 
-from . import native_geometry
+from . import losses, native_geometry
 
 try:
     from training import _rows
@@ -108,9 +108,15 @@ def segment_gaussians(points: Tensor, thickness: float) -> tuple[Tensor, Tensor,
 class HairModel(nn.Module):
     """Trainable Gaussians of a card-built asset; see the module docstring for the variants."""
 
+    # the optimiser groups of :meth:`param_groups` whose learning rates decay over a run, and those of
+    # the strand points (frozen at first); training.schedule.Schedule reads them
+    DECAYING_GROUPS = ("mlp", "codebook", "sh")
+    GEOMETRY_GROUPS = ("uv", "delta")
+
     def __init__(self, asset: HairAsset, config: TrainConfig, base_rgb: tuple[float, float, float] | None = None):
         super().__init__()
         config.validate()
+        self._frozen_geometry: tuple[Tensor, Tensor, Tensor] | None = None  # see training_inputs
         self.variant = config.variant
         self.sh_degree = config.sh_degree
         self.thickness = float(asset.thickness)
@@ -191,6 +197,27 @@ class HairModel(nn.Module):
     def set_geometry_trainable(self, trainable: bool) -> None:
         self.uv.requires_grad_(trainable)
         self.delta.requires_grad_(trainable)
+        if trainable:
+            self._frozen_geometry = None
+
+    def training_inputs(self, tau: float) -> tuple[Tensor, Tensor, Tensor, Tensor, Callable[[Tensor | None], Tensor]]:
+        """``(means, quats, scales, opacities, sh_source)`` of one training step, the codebook weights
+        drawn by Gumbel-softmax at ``tau``. While the geometry is frozen (:meth:`set_geometry_trainable`)
+        the Gaussians' positions are computed once and reused. The SH come as :meth:`sh_source`: the
+        native backend runs it for the Gaussians it shows only."""
+        if self.uv.requires_grad:
+            geometry = self.gaussian_geometry()
+        else:
+            if self._frozen_geometry is None:
+                with torch.no_grad():
+                    self._frozen_geometry = self.gaussian_geometry()
+            geometry = self._frozen_geometry
+        sh = self.sh_source("gumbel", tau)
+        return (*geometry, self.gaussian_opacities(), sh)
+
+    def opacity_smoothness(self) -> Tensor:
+        """The opacity smoothness loss term (:func:`training.losses.opacity_smoothness`) of the real segments."""
+        return losses.opacity_smoothness(self.opacities(), self.real_segments)
 
     # --- forward ------------------------------------------------------------------------------------
 

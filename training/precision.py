@@ -29,7 +29,8 @@ from cghair_format.quantize import (
     weights_encode,
 )
 
-from .dataset import View, read_dataset
+from .datasets.read import read_dataset
+from .datasets.types import View
 from .losses import psnr
 from .splatter import render_gaussians
 

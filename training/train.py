@@ -1,4 +1,11 @@
-"""The training loop: dataset + cards -> trained model -> .cgh, with checkpoints and resume."""
+"""The training loop: dataset + cards -> trained model -> .cgh, with checkpoints and resume.
+
+A run is set up (:func:`start_run`: the dataset, the model from cards or from a checkpoint, the
+optimiser and its :class:`~training.schedule.Schedule`), stepped (:func:`train_step`: render one view,
+the loss, backward, the optimiser step) from its first to its last iteration (:func:`run_iterations`:
+the history, the progress bar, the checkpoints) and finished (:func:`finish`: the last checkpoint, the
+export, the summary and the files).
+"""
 
 from __future__ import annotations
 
@@ -6,7 +13,7 @@ import ctypes
 import json
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,9 +30,11 @@ from cghair_format.strands import Strands
 
 from . import losses
 from .backends import renderer, resolve_backend
-from .config import TrainConfig
-from .dataset import Dataset, View, read_dataset
+from .config import RunOptions, TrainConfig
+from .datasets.read import read_dataset
+from .datasets.types import Dataset, View
 from .model import HairModel, tau_at
+from .schedule import Schedule
 from .splatter import torch_device
 from .visibility import negligible_segments
 
@@ -102,18 +111,6 @@ def mean_hair_colour(views: list[View]) -> tuple[float, float, float]:
 def _scene_scale(asset: HairAsset) -> float:
     spine = asset.cards.spine.reshape(-1, 3)
     return float(np.linalg.norm(spine.max(0) - spine.min(0))) or 1.0
-
-
-def view_at(seed: int, iteration: int, n_views: int) -> int:
-    """The training view of an iteration: a fresh permutation of the views every epoch, derived
-    from the seed and the epoch alone so that a resumed run sees the same views."""
-    epoch, index = divmod(iteration, n_views)
-    return int(np.random.default_rng([seed, epoch]).permutation(n_views)[index])
-
-
-def _lr_factor(config: TrainConfig, iteration: int) -> float:
-    frac = min(1.0, iteration / max(1, config.iterations))
-    return config.lr_final_factor ** frac
 
 
 def save_checkpoint(path: Path, *, model: HairModel, optimizer: torch.optim.Optimizer, config: TrainConfig,
@@ -201,6 +198,228 @@ def heap_kept() -> Iterator[None]:
         trim(0)
 
 
+@dataclass
+class Run:
+    """What one run works with, from :func:`start_run` to :func:`finish`."""
+
+    config: TrainConfig
+    options: RunOptions
+    views: list[View]  # the training views
+    dataset_name: str
+    base: HairAsset
+    model: HairModel
+    optimizer: torch.optim.Optimizer
+    schedule: Schedule
+    render: Callable  # training.backends.renderer of ``backend``
+    backend: str
+    device: torch.device
+    targets: torch.Tensor  # [V, H, W, 3] the views composited over the background
+    masks: torch.Tensor  # [V, H, W] their alpha
+    start: int  # the first iteration of this run (after a resumed checkpoint's)
+    end: int  # one past its last
+    history: list[dict]
+    seconds_before: float  # training time of the runs before a resumed checkpoint
+    stage: dict = field(default_factory=lambda: dict.fromkeys(STAGES, 0.0))  # seconds per stage
+
+    def clock(self) -> float:
+        """Now; on a GPU after waiting for the kernels (they run asynchronously), so that each stage is timed."""
+        if self.device.type == "cuda":
+            torch.cuda.synchronize(self.device)
+        return time.perf_counter()
+
+    def save(self, iteration: int, seconds: float) -> None:
+        """Write the checkpoint (if the run has a path for one) after ``iteration`` and ``seconds`` of this run."""
+        path = self.options.checkpoint_path()
+        if path is not None:
+            save_checkpoint(path, model=self.model, optimizer=self.optimizer, config=self.config, base=self.base,
+                            iteration=iteration, history=self.history, dataset=self.dataset_name,
+                            seconds=self.seconds_before + seconds)
+
+
+def _starting_point(config: TrainConfig | None, options: RunOptions, strands, cards
+                    ) -> tuple[TrainConfig, HairAsset, dict | None]:
+    """The config, the card-built asset and the checkpoint (None: a fresh run) a run starts from. A
+    resumed run keeps its checkpoint's config, except how it ends (``iterations``, ``opacity_budget``)
+    when ``config`` is given."""
+    if options.resume is None:
+        config = (config or TrainConfig()).validate()
+        return config, base_asset(config, strands, cards, options.progress), None
+    from cghair_format import decode
+
+    state = load_checkpoint(options.resume)
+    saved = TrainConfig.from_dict(state["config"])
+    if config is not None:  # how the run ends is the caller's
+        saved.iterations, saved.opacity_budget = config.iterations, config.opacity_budget
+    return saved, decode(state["base_cgh"]), state
+
+
+def start_run(dataset: Dataset | str | Path, config: TrainConfig | None, options: RunOptions,
+              strands=None, cards=None) -> Run:
+    """Read the dataset, build (or resume) the model and its optimiser, and check that the strands
+    sit where the views see hair before any iteration runs."""
+    from cghair_format.gaussians import decode_strands
+
+    from .datasets.alignment import check_strands_in_views
+
+    device = torch_device(options.device)
+    backend = resolve_backend(options.backend, device)
+    if options.threads:
+        torch.set_num_threads(options.threads)
+    ds = dataset if isinstance(dataset, Dataset) else read_dataset(dataset)
+    config, base, state = _starting_point(config, options, strands, cards)
+    check_strands_in_views(decode_strands(base).points, ds.train)  # another frame: refuse now, not after hours
+    torch.manual_seed(config.seed)
+    model = HairModel(base, config, mean_hair_colour(ds.train)).to(options.device)
+    # fused: one kernel per parameter for the whole update, several times faster than the loop on the
+    # CPU (training/ABLATION.md, "Around the rasterizer")
+    optimizer = torch.optim.Adam(model.param_groups(config, _scene_scale(base)), eps=1e-15, fused=True)
+    schedule = Schedule(config, model, optimizer, len(ds.train))
+    start, history, seconds_before = 0, [], 0.0
+    if state is not None:
+        model.load_state_dict(state["model"])
+        optimizer.load_state_dict(state["optimizer"])  # moves the moments to the parameters' device
+        history, start = list(state["history"]), int(state["iteration"])
+        seconds_before = float(state.get("seconds", 0.0))  # (checkpoints before it was kept: unknown, 0)
+        torch.set_rng_state(state["rng"])
+    targets, masks = (t.to(options.device) for t in _targets(ds.train, config.background))
+    end = config.iterations if options.stop_at is None else max(start, min(options.stop_at, config.iterations))
+    return Run(config, options, ds.train, str(dataset) if not isinstance(dataset, Dataset) else "<in memory>",
+               base, model, optimizer, schedule, renderer(backend), backend, device, targets, masks, start, end,
+               history, seconds_before)
+
+
+def train_step(run: Run, iteration: int) -> tuple[float, float, float]:
+    """One iteration: render its view, the loss, backward, the optimiser step. Returns the loss, the
+    PSNR of the rendered view and the Gumbel temperature."""
+    it = run.schedule.apply(iteration)
+    config = run.config
+    t0 = run.clock()
+    means, quats, scales, opacities, sh = run.model.training_inputs(it.tau)
+    t1 = run.clock()
+    out = run.render(means, quats, scales, opacities, sh, run.views[it.view].camera, tuple(config.background))
+    t2 = run.clock()
+    target = run.targets[it.view]
+    loss = (losses.image_loss(out.rgb, target, config.lambda_dssim)
+            + config.lambda_alpha * losses.l1(out.alpha, run.masks[it.view])
+            + config.lambda_opacity_smooth * run.model.opacity_smoothness())
+    t3 = run.clock()
+    run.optimizer.zero_grad(set_to_none=True)
+    loss.backward()
+    t4 = run.clock()
+    run.optimizer.step()
+    t5 = run.clock()
+    for name, dt in zip(STAGES, (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4), strict=True):
+        run.stage[name] += dt
+    if not torch.isfinite(loss.detach()):
+        raise TrainError(f"the loss became {float(loss.detach())} at iteration {iteration}; lower the learning rates")
+    return float(loss.detach()), losses.psnr(out.rgb, target), it.tau
+
+
+def run_iterations(run: Run) -> float:
+    """Step ``run`` from its start to its end, recording the history every ``log_every`` iterations and
+    checkpointing every ``checkpoint_every``; returns the seconds it took."""
+    config, bar = run.config, None
+    t_start = time.perf_counter()
+    if run.options.progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=config.iterations, initial=run.start, desc=f"train {config.variant}", unit="it",
+                   file=run.options.log)
+    running_loss, running_psnr = [], []
+    with heap_kept():
+        for it in range(run.start, run.end):
+            loss, psnr, tau = train_step(run, it)
+            running_loss.append(loss)
+            running_psnr.append(psnr)
+            if (it + 1) % config.log_every == 0 or it + 1 == config.iterations:
+                rec = {"iteration": it + 1, "loss": float(np.mean(running_loss)), "psnr": float(np.mean(running_psnr)),
+                       "tau": tau}
+                run.history.append(rec)
+                running_loss, running_psnr = [], []
+                if bar is not None:
+                    bar.set_postfix(loss=f"{rec['loss']:.4f}", psnr=f"{rec['psnr']:.2f}")
+            if bar is not None:
+                bar.update(1)
+            if (it + 1) % config.checkpoint_every == 0:
+                run.save(it + 1, time.perf_counter() - t_start)
+    if bar is not None:
+        bar.close()
+    return time.perf_counter() - t_start
+
+
+@dataclass
+class Marks:
+    """The segments whose opacities the writer may lower (:func:`training.visibility.negligible_segments`;
+    None: none), their budget, the seconds marking took, and the kept export's EncodeReport."""
+
+    negligible: np.ndarray | None = None
+    budget: float | None = None
+    seconds: float = 0.0
+    report: EncodeReport | None = None
+
+    @property
+    def kept(self) -> int | None:
+        """The opacities the writer lowered: 0 where the plain stream coded smaller; None without marks."""
+        if self.negligible is None:
+            return None
+        return self.report.opacity.marked if self.report.opacity.kept else 0
+
+
+def export(run: Run, result: TrainResult) -> Marks:
+    """Fill ``result``'s exported asset, weight mode and the PSNRs of each mode's file as written, marks
+    and all (:func:`choose_export`); the marks rest on geometry and opacity, the same in either mode."""
+    config, profile, marks = run.config, run.options.profile, Marks()
+    t0 = time.perf_counter()  # (an export step, not one of the iterations' stages)
+    if (run.model.export_refusal() is None and run.options.out is not None and config.opacity_budget > 0
+            and not get_profile(profile).lossless):
+        marks.negligible = negligible_segments(run.model.to_asset(run.base), run.views, config.opacity_budget,
+                                               run.backend, run.device)
+        marks.budget = config.opacity_budget
+    marks.seconds = time.perf_counter() - t0
+    result.asset, result.weight_mode, result.export_psnr, marks.report = choose_export(
+        run.model, run.base, run.views, config, profile, run.device, run.backend, marks.negligible, marks.budget)
+    return marks
+
+
+def summary(run: Run, result: TrainResult, marks: Marks) -> dict:
+    """The figures of a finished run, saved in the asset's metadata and as ``<out>.train.json``."""
+    return {
+        "config": run.config.to_dict(), "dataset": run.dataset_name, "backend": run.backend,
+        "iterations_run": result.iterations_run, "seconds": round(result.seconds, 3),
+        "seconds_total": round(run.seconds_before + result.seconds, 3),
+        "stage_seconds": {k: round(v, 3) for k, v in run.stage.items()},
+        "final": run.history[-1] if run.history else None, "weight_mode": result.weight_mode,
+        "export_psnr": result.export_psnr, "appearance_parameters": run.model.appearance_parameters(),
+        "gaussians": run.model.n_gaussians,
+        "negligible_segments": marks.kept,  # the opacities the writer lowered
+        "negligible_seconds": round(marks.seconds, 3),
+    }
+
+
+def finish(run: Run, seconds: float) -> TrainResult:
+    """Write the last checkpoint; after the last iteration of the config also export the model and
+    write the .cgh and ``<out>.train.json`` (a run stopped early exports nothing)."""
+    run.save(run.end, seconds)
+    out = Path(run.options.out) if run.options.out is not None else None
+    result = TrainResult(run.model, run.base, run.config, history=run.history, seconds=seconds,
+                         stage_seconds=run.stage, iterations_run=run.end - run.start, out_path=out,
+                         backend=run.backend)
+    if run.end < run.config.iterations:
+        return result
+    marks = export(run, result)
+    facts = summary(run, result, marks)
+    if result.asset is not None:
+        result.asset.metadata["training"] = facts
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        write_text(out.with_suffix(".train.json"), json.dumps(facts, indent=2) + "\n")
+        if result.asset is not None:
+            from cghair_format import write
+
+            write(result.asset, out, run.options.profile, negligible=marks.negligible, opacity_budget=marks.budget)
+    return result
+
+
 def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None = None,
           cards: HairAsset | str | Path | None = None, out: str | Path | None = None,
           config: TrainConfig | None = None, resume: str | Path | None = None,
@@ -216,162 +435,10 @@ def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None
     ("cpu", "cuda"); the splatter follows it. ``backend`` is the rasterizer (:mod:`training.backends`;
     default: the fastest one that runs on ``device``). ``stop_at`` ends the run after
     that iteration as if interrupted (checkpoint written, nothing exported); resume continues it.
+    The keyword arguments other than ``strands``, ``cards`` and ``config`` are :class:`RunOptions`.
     """
-    log = log if log is not None else sys.stderr
-    dev = torch_device(device)
-    backend = resolve_backend(backend, dev)
-    render = renderer(backend)
-    if threads:
-        torch.set_num_threads(threads)
-    ds = dataset if isinstance(dataset, Dataset) else read_dataset(dataset)
-    dataset_name = str(dataset) if not isinstance(dataset, Dataset) else "<in memory>"
-    state = None
-    if resume is not None:
-        state = load_checkpoint(resume)
-        cfg = TrainConfig.from_dict(state["config"])
-        if config is not None:  # how the run ends is the caller's
-            cfg.iterations, cfg.opacity_budget = config.iterations, config.opacity_budget
-        config = cfg
-        from cghair_format import decode
-
-        base = decode(state["base_cgh"])
-    else:
-        config = (config or TrainConfig()).validate()
-        base = base_asset(config, strands, cards, progress)
-    from cghair_format.gaussians import decode_strands
-
-    from .capture import check_strands_in_views
-
-    # strands in another frame: refuse now, not after hours
-    check_strands_in_views(decode_strands(base).points, ds.train)
-    torch.manual_seed(config.seed)
-    model = HairModel(base, config, mean_hair_colour(ds.train)).to(device)
-    # fused: one kernel per parameter for the whole update, several times faster than the loop on the
-    # CPU (docs/ablation.md, "Around the rasterizer")
-    optimizer = torch.optim.Adam(model.param_groups(config, _scene_scale(base)), eps=1e-15, fused=True)
-    base_lr = {g["name"]: g["lr"] for g in optimizer.param_groups}
-    history: list[dict] = []
-    start, seconds_before = 0, 0.0
-    if state is not None:
-        model.load_state_dict(state["model"])
-        optimizer.load_state_dict(state["optimizer"])  # moves the moments to the parameters' device
-        history = list(state["history"])
-        start = int(state["iteration"])
-        seconds_before = float(state.get("seconds", 0.0))  # (checkpoints before it was kept: unknown, 0)
-        torch.set_rng_state(state["rng"])
-    out_path = Path(out) if out is not None else None
-    ckpt_path = Path(checkpoint) if checkpoint else (out_path.with_suffix(".ckpt.pt") if out_path else None)
-
-    targets, masks = (t.to(device) for t in _targets(ds.train, config.background))
-    n_views = len(ds.train)
-    stage = dict.fromkeys(STAGES, 0.0)
-
-    def clock() -> float:  # on a GPU the kernels run asynchronously: wait for them, so each stage is timed
-        if dev.type == "cuda":
-            torch.cuda.synchronize(dev)
-        return time.perf_counter()
-
-    t_start = time.perf_counter()
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=config.iterations, initial=start, desc=f"train {config.variant}", unit="it", file=log)
-    running_loss, running_psnr = [], []
-    frozen = None
-    end = config.iterations if stop_at is None else max(start, min(stop_at, config.iterations))
-    with heap_kept():
-        for it in range(start, end):
-            geometry_on = it >= config.geometry_frozen_iters
-            model.set_geometry_trainable(geometry_on)
-            factor = _lr_factor(config, it)
-            for g in optimizer.param_groups:
-                decays = g["name"] in ("mlp", "codebook", "sh")
-                g["lr"] = base_lr[g["name"]] * (factor if decays else 1.0)
-                if g["name"] in ("uv", "delta") and not geometry_on:
-                    g["lr"] = 0.0
-            v = view_at(config.seed, it, n_views)
-            tau = tau_at(config, it)
-
-            t0 = clock()
-            if geometry_on:
-                frozen = None
-            elif frozen is None:  # frozen geometry: the Gaussians' positions are computed once
-                with torch.no_grad():
-                    frozen = model.gaussian_geometry()
-            means, quats, scales = frozen if frozen is not None else model.gaussian_geometry()
-            sh = model.sh_source("gumbel", tau)  # the native backend runs it for the Gaussians it shows only
-            t1 = clock()
-            out_img = render(means, quats, scales, model.gaussian_opacities(), sh, ds.train[v].camera,
-                             tuple(config.background))
-            t2 = clock()
-            loss = (losses.image_loss(out_img.rgb, targets[v], config.lambda_dssim)
-                    + config.lambda_alpha * losses.l1(out_img.alpha, masks[v])
-                    + config.lambda_opacity_smooth * losses.opacity_smoothness(model.opacities(),
-                                                                                    model.real_segments))
-            t3 = clock()
-            optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            t4 = clock()
-            optimizer.step()
-            t5 = clock()
-            for name, dt in zip(STAGES, (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4), strict=True):
-                stage[name] += dt
-            if not torch.isfinite(loss.detach()):
-                raise TrainError(f"the loss became {float(loss.detach())} at iteration {it}; lower the learning rates")
-            running_loss.append(float(loss.detach()))
-            running_psnr.append(losses.psnr(out_img.rgb, targets[v]))
-            if (it + 1) % config.log_every == 0 or it + 1 == config.iterations:
-                rec = {"iteration": it + 1, "loss": float(np.mean(running_loss)), "psnr": float(np.mean(running_psnr)),
-                       "tau": tau}
-                history.append(rec)
-                running_loss, running_psnr = [], []
-                if bar is not None:
-                    bar.set_postfix(loss=f"{rec['loss']:.4f}", psnr=f"{rec['psnr']:.2f}")
-            if bar is not None:
-                bar.update(1)
-            if ckpt_path is not None and (it + 1) % config.checkpoint_every == 0:
-                save_checkpoint(ckpt_path, model=model, optimizer=optimizer, config=config, base=base,
-                                iteration=it + 1, history=history, dataset=dataset_name,
-                                seconds=seconds_before + time.perf_counter() - t_start)
-    if bar is not None:
-        bar.close()
-    seconds = time.perf_counter() - t_start
-    iterations_run = end - start
-    if ckpt_path is not None:
-        save_checkpoint(ckpt_path, model=model, optimizer=optimizer, config=config, base=base,
-                        iteration=end, history=history, dataset=dataset_name, seconds=seconds_before + seconds)
-
-    result = TrainResult(model, base, config, history=history, seconds=seconds, stage_seconds=stage,
-                         iterations_run=iterations_run, out_path=out_path, backend=backend)
-    if end < config.iterations:
-        return result
-    negligible, budget, t0 = None, None, time.perf_counter()  # (an export step, not one of the iterations' stages)
-    if (model.export_refusal() is None and out_path is not None and config.opacity_budget > 0
-            and not get_profile(profile).lossless):  # (the marks rest on geometry and opacity: either mode's)
-        negligible, budget = negligible_segments(model.to_asset(base), ds.train, config.opacity_budget, backend,
-                                                 dev), config.opacity_budget
-    marked_seconds = time.perf_counter() - t0
-    asset, mode, scores, report = choose_export(model, base, ds.train, config, profile, dev, backend, negligible,
-                                                budget)  # scores: the files as written, marks and all
-    result.asset, result.weight_mode, result.export_psnr = asset, mode, scores
-    summary = {
-        "config": config.to_dict(), "dataset": dataset_name, "backend": backend, "iterations_run": iterations_run,
-        "seconds": round(seconds, 3), "seconds_total": round(seconds_before + seconds, 3),
-        "stage_seconds": {k: round(v, 3) for k, v in stage.items()},
-        "final": history[-1] if history else None, "weight_mode": mode, "export_psnr": scores,
-        "appearance_parameters": model.appearance_parameters(), "gaussians": model.n_gaussians,
-        # the opacities the writer lowered: none where the plain stream coded smaller
-        "negligible_segments": None if negligible is None else report.opacity.marked if report.opacity.kept else 0,
-        "negligible_seconds": round(marked_seconds, 3),
-    }
-    if asset is not None:
-        asset.metadata["training"] = summary
-    if out_path is not None:
-        out_path.parent.mkdir(parents=True, exist_ok=True)
-        write_text(out_path.with_suffix(".train.json"), json.dumps(summary, indent=2) + "\n")
-        if asset is not None:
-            from cghair_format import write
-
-            write(asset, out_path, profile, negligible=negligible, opacity_budget=budget)
-    return result
+    options = RunOptions(out=out, checkpoint=checkpoint, resume=resume, profile=profile, progress=progress,
+                         log=log if log is not None else sys.stderr, threads=threads, stop_at=stop_at,
+                         device=device, backend=backend)
+    run = start_run(dataset, config, options, strands, cards)
+    return finish(run, run_iterations(run))

@@ -21,7 +21,7 @@ from cghair_format.asset import HairAsset
 from cghair_format.gaussians import SH_C0, gaussian_frames
 
 from .backends import render, resolve_backend
-from .dataset import View
+from .datasets.types import View
 from .splatter import torch_device
 
 

@@ -45,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"   wrote {out / 'strands.npz'} ({time.perf_counter() - t:.1f} s)")
 
     from training.config import TrainConfig
-    from training.dataset import render_dataset
+    from training.datasets.synthetic import render_dataset
     from training.evaluate import evaluate
     from training.train import train
 

@@ -69,7 +69,7 @@ def setup():
 
     from cghair_format.exchange import load_strands
     from training.ablation import scaled_config
-    from training.dataset import orbit_cameras
+    from training.datasets.cameras import orbit_cameras
     from training.model import HairModel
     from training.train import base_asset
 

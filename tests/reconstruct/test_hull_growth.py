@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from cghair_format.strands import Strands
-from training.dataset import render_dataset
+from training.datasets.synthetic import render_dataset
 from training.reconstruct.grow import grow_strands
 from training.reconstruct.hull import orientation_field, visual_hull
 from training.reconstruct.orientation import orientation_map

@@ -40,7 +40,7 @@ def _projected_segment_angles(strands, camera, shape, depth):
     """Per pixel: the image angle of the front-most projected strand segment (NaN where none)."""
     from scipy.spatial import cKDTree
 
-    from training.dataset import strand_segments
+    from training.datasets.synthetic import strand_segments
 
     first, _ = strand_segments(strands)
     a, b = strands.points[first].astype(np.float64), strands.points[first + 1].astype(np.float64)
@@ -68,7 +68,8 @@ def _projected_segment_angles(strands, camera, shape, depth):
 
 @pytest.mark.slow
 def test_splat_render_of_real_strands_matches_projected_segments():
-    from training.dataset import default_thickness, orbit_cameras, reference_gaussians
+    from training.datasets.cameras import orbit_cameras
+    from training.datasets.synthetic import default_thickness, reference_gaussians
     from training.splatter import render_gaussians
 
     hair = load_hair("ruby_long_hair_16_guide.tfx")

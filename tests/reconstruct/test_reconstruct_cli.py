@@ -9,7 +9,9 @@ import pytest
 from cghair_format.cli import main
 from cghair_format.exchange import load_strands, save_strands
 from cghair_format.synth import synthesize
-from training.dataset import read_dataset, render_dataset, write_dataset
+from training.datasets.nerf import write_dataset
+from training.datasets.read import read_dataset
+from training.datasets.synthetic import render_dataset
 from training.reconstruct.metrics import evaluate_strands
 
 

@@ -16,7 +16,7 @@ from cghair_format.camera import Camera
 from cghair_format.gaussians import SH_C0
 from training import backends, splatter
 from training.backends import BackendError
-from training.dataset import default_thickness, reference_gaussians
+from training.datasets.synthetic import default_thickness, reference_gaussians
 
 
 def _native_built() -> bool:

@@ -8,7 +8,8 @@ import pytest
 import torch
 
 from training.config import TrainConfig
-from training.dataset import read_dataset, render_dataset
+from training.datasets.read import read_dataset
+from training.datasets.synthetic import render_dataset
 from training.evaluate import evaluate_model
 from training.train import base_asset, train
 

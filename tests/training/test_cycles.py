@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from cghair_format.errors import MissingDependencyError
-from training.cycles import bpy_available
-from training.dataset import read_dataset, render_dataset
+from training.datasets.cycles import bpy_available
+from training.datasets.read import read_dataset
+from training.datasets.synthetic import render_dataset
 
 
 def test_without_bpy_the_error_names_the_extra(tmp_path, strands, monkeypatch):

@@ -8,16 +8,10 @@ import numpy as np
 import pytest
 
 from cghair_format.camera import Camera
-from training.dataset import (
-    Dataset,
-    DatasetError,
-    View,
-    read_dataset,
-    reference_gaussians,
-    render_dataset,
-    split_indices,
-    write_dataset,
-)
+from training.datasets.nerf import write_dataset
+from training.datasets.read import read_dataset
+from training.datasets.synthetic import reference_gaussians, render_dataset
+from training.datasets.types import Dataset, DatasetError, View, split_indices
 
 
 def _views(n, res=10, seed=0):
@@ -96,7 +90,7 @@ def test_render_dataset_bad_options(tmp_path, strands):
 
 def test_multitone_colours_are_ordered_segments(strands):
     from cghair_format.synth import melanin_rgb
-    from training.dataset import MULTITONE_MELANIN, multitone_colours
+    from training.datasets.colours import MULTITONE_MELANIN, multitone_colours
 
     for tones in (2, 3, 4):
         rgb = multitone_colours(strands, tones, seed=1)
@@ -125,7 +119,7 @@ def test_multitone_changes_the_splat_ground_truth(tmp_path, strands):
 
 
 def test_prepare_strands_reaches_the_requested_scale(strands):
-    from training.dataset import prepare_strands
+    from training.datasets.synthetic import prepare_strands
 
     out = prepare_strands(strands, points=10, count=300, seed=0)
     assert out.count == 300 and np.all(out.point_counts == 10)
@@ -143,3 +137,27 @@ def test_cli_paper_scale_options(tmp_path, strands_file, capsys):
     assert (meta["strands"], meta["points"], meta["multitone"]) == (200, 8, 3)
     with pytest.raises(SystemExit):
         main(["render-dataset", str(strands_file), "-o", str(out), "--multitone", "5"])
+
+
+def test_the_dataset_modules_import_in_one_direction():
+    """training/datasets/: each module imports (at any depth of its code) only the package's modules
+    listed before it in the package docstring's order, and nothing else of training but the rasterizers."""
+    import ast
+    from pathlib import Path
+
+    import training.datasets
+
+    order = ["types", "colmap", "nerf", "layouts", "capture", "read", "alignment", "cameras", "colours", "cycles",
+             "synthetic"]
+    folder = Path(training.datasets.__file__).parent
+    assert sorted(p.stem for p in folder.glob("*.py") if p.stem != "__init__") == sorted(order)
+    for k, name in enumerate(order):
+        for node in ast.walk(ast.parse((folder / f"{name}.py").read_text())):
+            if isinstance(node, ast.ImportFrom) and node.level == 1:
+                target = node.module or node.names[0].name
+                assert target in order[:k], f"datasets.{name} imports datasets.{target}"
+            elif isinstance(node, ast.ImportFrom) and node.level == 2:
+                assert node.module in ("backends", "splatter"), f"datasets.{name} imports training.{node.module}"
+            elif isinstance(node, ast.ImportFrom | ast.Import):
+                modules = [node.module] if isinstance(node, ast.ImportFrom) else [a.name for a in node.names]
+                assert not any(m and m.split(".")[0] in ("training", "viewer") for m in modules), (name, modules)

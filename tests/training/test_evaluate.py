@@ -10,7 +10,7 @@ import pytest
 from PIL import Image
 
 from cghair_format.cli import main
-from training.dataset import render_dataset
+from training.datasets.synthetic import render_dataset
 from training.evaluate import DIFF_GAIN, evaluate_renders
 from training.lpips import ensure_weights
 

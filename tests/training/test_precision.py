@@ -6,7 +6,7 @@ from training_helpers import hair_cap
 
 import cghair_format as cgh
 from cghair_format.cards import build_cards
-from training.dataset import render_dataset
+from training.datasets.synthetic import render_dataset
 from training.precision import main, measure, with_weight_step
 
 
@@ -14,7 +14,7 @@ def test_coarser_weights_and_profiles_cost_picture_quality(tmp_path, capsys):
     strands = hair_cap(60, 10, seed=2)
     asset = build_cards(strands, n_cards=8, n_groups=2, points=10, seed=0, progress=False).asset
     render_dataset(strands, tmp_path / "ds", views=4, res=24, engine="splat")
-    from training.dataset import read_dataset
+    from training.datasets.read import read_dataset
 
     views = read_dataset(tmp_path / "ds").split("test")
     rows = {r["what"]: r for r in measure(asset, views, steps=(0.02, 0.5))}

@@ -10,11 +10,13 @@ import torch
 
 from cghair_format import read
 from training.config import TrainConfig
-from training.dataset import read_dataset, render_dataset
+from training.datasets.read import read_dataset
+from training.datasets.synthetic import render_dataset
 from training.evaluate import evaluate, evaluate_model
 from training.model import HairModel
+from training.schedule import view_at
 from training.splatter import DeviceError
-from training.train import TrainError, base_asset, load_checkpoint, mean_hair_colour, train, view_at
+from training.train import TrainError, base_asset, load_checkpoint, mean_hair_colour, train
 
 
 def _tiny_config(**kw) -> TrainConfig:

@@ -128,7 +128,7 @@ def _probe_psnr(path, dataset, summary) -> float:
     from cghair_format import decode_gaussians, read
     from training import losses
     from training.backends import render_gaussians
-    from training.dataset import read_dataset
+    from training.datasets.read import read_dataset
     from training.train import EXPORT_PROBE_VIEWS, _targets
 
     views = read_dataset(dataset).train

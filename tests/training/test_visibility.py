@@ -9,7 +9,7 @@ from test_native_splat import camera, hair_scene
 
 from cghair_format.examples import example_asset
 from training import native_splat, splatter
-from training.dataset import View
+from training.datasets.types import View
 from training.visibility import blend_weights, least_weight, negligible_segments
 
 

@@ -31,7 +31,7 @@ def nerf_to_colmap(src, dst, text: bool = False, haircut: bool = False, scale: i
     import pycolmap
     from PIL import Image
 
-    from training.dataset import read_dataset
+    from training.datasets.read import read_dataset
 
     src, dst = Path(src), Path(dst)
     ds = read_dataset(src)

@@ -98,6 +98,26 @@ def _strands_from(state: dict, prefix: str, cfg: ReconstructConfig, up_axis: str
                    up_axis=up_axis)
 
 
+class _Progress:
+    """The checkpointed state of a run: which stages are done, their results, timings and losses."""
+
+    def __init__(self, path: Path, state: dict, log):
+        self.path, self.state, self.log = path, state, log
+        self.timings: dict = state.get("timings", {})
+        self.losses: dict = state.get("losses", {})
+
+    def done(self, stage: str) -> bool:
+        return stage in self.state["done"]
+
+    def finish(self, stage: str, t0: float, note: str) -> None:
+        """Record ``stage`` (begun at ``t0``) as done, save the checkpoint and log ``note``."""
+        self.timings[stage] = round(time.perf_counter() - t0, 2)
+        self.state["done"].append(stage)
+        self.state["timings"], self.state["losses"] = self.timings, self.losses
+        _save_ckpt(self.path, self.state)
+        self.log(f"[{stage}] {note} ({self.timings[stage]:.1f} s)")
+
+
 def reconstruct(dataset, config: ReconstructConfig, checkpoint: str | Path, scalp: str | Path | None = None,
                 debug_dir: str | Path | None = None, resume: bool = False, log=print) -> Result:
     """Run the stages on ``dataset``'s training views (see the module docstring)."""
@@ -107,87 +127,95 @@ def reconstruct(dataset, config: ReconstructConfig, checkpoint: str | Path, scal
     mesh = load_scalp_mesh(scalp) if scalp else None
     ckpt = Path(checkpoint)
     state = _load_ckpt(ckpt) if resume else {"version": CHECKPOINT_VERSION, "done": [], "config": asdict(cfg)}
+    run = _Progress(ckpt, state, log)
     debug = Path(debug_dir) if debug_dir else None
     if debug:
         debug.mkdir(parents=True, exist_ok=True)
     up = _up_vector(dataset)
     up_axis = "Z" if abs(up[2]) > abs(up[1]) else "Y"
-    timings: dict = state.get("timings", {})
-    losses: dict = state.get("losses", {})
+    maps = _orientation_stage(run, views, cfg, debug)
+    hull = _hull_stage(run, views, maps, cfg, debug)
+    roots = _scalp_stage(run, hull, mesh, scalp, up, cfg)
+    grown = _growth_stage(run, hull, roots, views, up, up_axis, cfg)
+    result = _refine_stage(run, grown, views, maps, up, up_axis, cfg) if cfg.refine_iters > 0 else grown
+    return Result(result, grown, run.timings, run.losses)
 
-    def finish(stage: str, t0: float, note: str) -> None:
-        timings[stage] = round(time.perf_counter() - t0, 2)
-        state["done"].append(stage)
-        state["timings"], state["losses"] = timings, losses
-        _save_ckpt(ckpt, state)
-        log(f"[{stage}] {note} ({timings[stage]:.1f} s)")
 
-    # orientation maps are cheap to recompute and large to store: computed on every run
+def _orientation_stage(run: _Progress, views, cfg: ReconstructConfig, debug: Path | None) -> list:
+    """The views' orientation maps: cheap to recompute and large to store, so computed on every run."""
     t0 = time.perf_counter()
     maps = [orientation_map(v.image, cfg.orientations) for v in views]
     if debug:
         for v, m in zip(views, maps, strict=True):
             save_debug(m, debug / f"orientation_{v.name}.png")
     conf = float(np.mean([m.confidence[m.mask].mean() for m in maps]))
-    if "orientation" not in state["done"]:
-        finish("orientation", t0, f"{len(maps)} views, mean confidence in the masks {conf:.3f}")
+    if not run.done("orientation"):
+        run.finish("orientation", t0, f"{len(maps)} views, mean confidence in the masks {conf:.3f}")
+    return maps
 
-    if "hull" in state["done"]:
-        hull = Hull(Grid(state["grid_origin"], float(state["grid_voxel"]), tuple(state["grid_shape"])),
+
+def _hull_stage(run: _Progress, views, maps, cfg: ReconstructConfig, debug: Path | None) -> Hull:
+    state = run.state
+    if run.done("hull"):
+        return Hull(Grid(state["grid_origin"], float(state["grid_voxel"]), tuple(state["grid_shape"])),
                     state["occupancy"], state["field"])
-    else:
-        t0 = time.perf_counter()
-        hull = orientation_field(visual_hull(views, cfg.hull_resolution), views, maps)
-        state.update(grid_origin=hull.grid.origin, grid_voxel=hull.grid.voxel, grid_shape=list(hull.grid.shape),
-                     occupancy=hull.occupancy, field=hull.field)
-        if debug:
-            _save_hull_debug(hull, debug / "hull.png")
-        finish("hull", t0, f"{int(hull.occupancy.sum())} hair voxels of {hull.grid.voxel:.4g} units")
+    t0 = time.perf_counter()
+    hull = orientation_field(visual_hull(views, cfg.hull_resolution), views, maps)
+    state.update(grid_origin=hull.grid.origin, grid_voxel=hull.grid.voxel, grid_shape=list(hull.grid.shape),
+                 occupancy=hull.occupancy, field=hull.field)
+    if debug:
+        _save_hull_debug(hull, debug / "hull.png")
+    run.finish("hull", t0, f"{int(hull.occupancy.sum())} hair voxels of {hull.grid.voxel:.4g} units")
+    return hull
 
-    if "scalp" in state["done"]:
-        roots = Roots(state["roots"], state["root_normals"])
-    else:
-        t0 = time.perf_counter()
-        if mesh is not None:
-            roots = sample_mesh_roots(mesh, cfg.strands, cfg.seed)
-            check_roots_in_hull(roots, hull, f"scalp mesh {scalp}")
-            how = f"sampled on {scalp}"
-        else:
-            roots = estimate_scalp(hull, up, cfg.strands, cfg.seed)
-            how = "on the scalp estimated from the hull"
-        state.update(roots=roots.points, root_normals=roots.normals)
-        finish("scalp", t0, f"{len(roots.points)} roots {how}")
 
+def _scalp_stage(run: _Progress, hull: Hull, mesh, scalp, up: np.ndarray, cfg: ReconstructConfig) -> Roots:
+    if run.done("scalp"):
+        return Roots(run.state["roots"], run.state["root_normals"])
+    t0 = time.perf_counter()
+    if mesh is not None:
+        roots = sample_mesh_roots(mesh, cfg.strands, cfg.seed)
+        check_roots_in_hull(roots, hull, f"scalp mesh {scalp}")
+        how = f"sampled on {scalp}"
+    else:
+        roots = estimate_scalp(hull, up, cfg.strands, cfg.seed)
+        how = "on the scalp estimated from the hull"
+    run.state.update(roots=roots.points, root_normals=roots.normals)
+    run.finish("scalp", t0, f"{len(roots.points)} roots {how}")
+    return roots
+
+
+def _growth_stage(run: _Progress, hull: Hull, roots: Roots, views, up: np.ndarray, up_axis: str,
+                  cfg: ReconstructConfig) -> Strands:
     from .grow import grow_strands
 
-    if "growth" in state["done"]:
-        grown = _strands_from(state, "grown", cfg, up_axis)
-    else:
-        t0 = time.perf_counter()
-        grown = grow_strands(hull, roots, up, cfg.points_per_strand, meters_per_unit=cfg.meters_per_unit,
-                             up_axis=up_axis, inset=INSET_PIXELS * pixel_footprint(hull, views))
-        if grown.count == 0:
-            raise ReconstructError("no strand grew from the roots: the scalp lies outside the hair volume")
-        state.update(_strands_state("grown", grown))
-        lengths = np.linalg.norm(np.diff(grown.to_array(), axis=1), axis=2).sum(1)
-        finish("growth", t0, f"{grown.count} strands, median length {np.median(lengths):.4g} units")
+    if run.done("growth"):
+        return _strands_from(run.state, "grown", cfg, up_axis)
+    t0 = time.perf_counter()
+    grown = grow_strands(hull, roots, up, cfg.points_per_strand, meters_per_unit=cfg.meters_per_unit,
+                         up_axis=up_axis, inset=INSET_PIXELS * pixel_footprint(hull, views))
+    if grown.count == 0:
+        raise ReconstructError("no strand grew from the roots: the scalp lies outside the hair volume")
+    run.state.update(_strands_state("grown", grown))
+    lengths = np.linalg.norm(np.diff(grown.to_array(), axis=1), axis=2).sum(1)
+    run.finish("growth", t0, f"{grown.count} strands, median length {np.median(lengths):.4g} units")
+    return grown
 
-    result = grown
-    if cfg.refine_iters > 0:
-        if "refine" in state["done"]:
-            result = _strands_from(state, "refined", cfg, up_axis)
-        else:
-            from .refine import refine_strands
 
-            t0 = time.perf_counter()
-            from .prior import StrandPrior
+def _refine_stage(run: _Progress, grown: Strands, views, maps, up: np.ndarray, up_axis: str,
+                  cfg: ReconstructConfig) -> Strands:
+    if run.done("refine"):
+        return _strands_from(run.state, "refined", cfg, up_axis)
+    from .prior import StrandPrior
+    from .refine import refine_strands
 
-            strand_prior = None if cfg.prior == "none" else StrandPrior.load(cfg.prior or BUILTIN_PRIOR)
-            result, hist = refine_strands(grown, views, maps, cfg, up, strand_prior, log=log)
-            losses["refine"] = hist
-            state.update(_strands_state("refined", result))
-            finish("refine", t0, f"loss {hist[0]:.4f} -> {hist[-1]:.4f} over {cfg.refine_iters} iterations")
-    return Result(result, grown, timings, losses)
+    t0 = time.perf_counter()
+    strand_prior = None if cfg.prior == "none" else StrandPrior.load(cfg.prior or BUILTIN_PRIOR)
+    result, hist = refine_strands(grown, views, maps, cfg, up, strand_prior, log=run.log)
+    run.losses["refine"] = hist
+    run.state.update(_strands_state("refined", result))
+    run.finish("refine", t0, f"loss {hist[0]:.4f} -> {hist[-1]:.4f} over {cfg.refine_iters} iterations")
+    return result
 
 
 def _save_hull_debug(hull: Hull, path: Path) -> None:

@@ -1,7 +1,7 @@
 """Blender worker: ``python render_cycles.py JOB_DIR``. Reads JOB_DIR/job.npz and job.json, renders
 every camera with Cycles (CPU), and writes JOB_DIR/r_000.png ... (RGBA, transparent background).
 
-Runs in its own process (see :mod:`training.cycles`); it imports only numpy and bpy.
+Runs in its own process (see :mod:`training.datasets.cycles`); it imports only numpy and bpy.
 """
 
 from __future__ import annotations

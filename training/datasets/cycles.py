@@ -1,6 +1,6 @@
 """Ground truth rendered by Blender Cycles: strands as curves with the Principled Hair BSDF.
 
-Blender runs in a subprocess (``python training/_bpy_worker/render_cycles.py JOB``, with the interpreter that
+Blender runs in a subprocess (``python training/datasets/_bpy_worker/render_cycles.py JOB``, with the interpreter that
 has bpy, usually ``.venv/blender``) so that a crash or a hang
 in bpy cannot take the caller down; the job (points, radii, colours, cameras, settings) goes
 through a temporary folder and the PNGs come back the same way.
@@ -20,6 +20,8 @@ import numpy as np
 from cghair_format.camera import Camera
 from cghair_format.errors import CghError, MissingDependencyError
 from cghair_format.strands import Strands
+
+from .colours import PRESETS
 
 # its own folder: the script folder goes on sys.path, and a module named like one of Blender's
 # add-ons (our cycles.py vs the "cycles" add-on) would shadow it
@@ -52,8 +54,6 @@ def render_cycles(strands: Strands, cameras: list[Camera], *, thickness: float, 
                   samples: int = 16, seed: int = 0, progress: bool = False, denoise: bool = False) -> list[np.ndarray]:
     """RGBA images ``[H, W, 4]`` (straight colour, alpha = coverage) of ``strands`` seen by ``cameras``;
     ``denoise`` runs Cycles' OpenImageDenoise on each."""
-    from .dataset import PRESETS
-
     python = blender_python()
     if python is None:
         raise MissingDependencyError("bpy", "blender", "rendering with --engine cycles (or run `make blender`)")
