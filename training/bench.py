@@ -6,7 +6,7 @@ The small config (a real model of about 2,000 strands x 32 points, 128 x 128 vie
         [--backend reference|native|gsplat] [--threads 2] [--device cuda] [--json small.json]
 
 The paper's scale (25,000 strands x 100 points densified from a real model exactly as
-tests/bench/paper_scale.py does, 800 cards, N_T 64, K 10, D 64, SH degree 3, 256 x 256 views):
+cghair_format/paper_scale.py gives, 800 cards, N_T 64, K 10, D 64, SH degree 3, 256 x 256 views):
 
     python -m training.bench --paper-scale [--strands ../shared/data/hair/harolongo.data] \
         --iters 20 [--reference-iters 2] [--res 256] [--backend ...] [--json paper.json]
@@ -51,7 +51,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--strands", default=None, help="a real hair model (required for the small config; at paper "
                    f"scale default ../shared/data/hair/{PAPER_SCALE_DEFAULT_MODEL})")
     p.add_argument("--paper-scale", action="store_true",
-                   help="25,000 strands x 100 points, 800 cards, N_T 64, K 10, D 64, SH 3 (tests/bench/paper_scale.py)")
+                   help="25,000 strands x 100 points, 800 cards, N_T 64, K 10, D 64, SH 3 "
+                        "(cghair_format/paper_scale.py)")
     p.add_argument("--work", default=None, help="folder for the dataset, cards and outputs, kept between runs "
                    "(default: $CGH_BENCH_DIR, else ~/.cache/cghair/bench, outside the repository)")
     p.add_argument("--iters", type=int, default=None, help="training iterations (default: 2000; paper scale 20)")
@@ -89,19 +90,6 @@ def _emit(report: dict, args: argparse.Namespace, lines: list[str]) -> None:
     print("\n".join(lines), flush=True)
     if args.json:
         Path(args.json).write_text(json.dumps(report, indent=2) + "\n")
-
-
-def _paper_scale_module():
-    """tests/bench/paper_scale.py, the one recipe for paper-scale strands and model sizes."""
-    tests = REPO / "tests"
-    if not (tests / "bench" / "paper_scale.py").is_file():
-        raise BenchError(f"--paper-scale needs the repository's tests/bench/paper_scale.py (not found under {REPO})")
-    for path in (str(tests), str(REPO)):
-        if path not in sys.path:
-            sys.path.insert(0, path)
-    from bench import paper_scale
-
-    return paper_scale
 
 
 def _peak_memory(device) -> dict:
@@ -146,10 +134,11 @@ def cache_dir() -> Path:
 
 def _paper_scene(args: argparse.Namespace, work: Path):
     """The paper-scale strands, their cards (cached in ``work``), the config for N iterations and a tag."""
+    from cghair_format import paper_scale as ps
+
     from .ablation import scaled_config
     from .train import base_asset
 
-    ps = _paper_scale_module()
     path = Path(args.strands or REPO.parent / "shared" / "data" / "hair" / PAPER_SCALE_DEFAULT_MODEL)
     if not path.is_file():
         raise BenchError(f"hair model {path} not found (give --strands)")

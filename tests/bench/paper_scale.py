@@ -24,9 +24,8 @@ from hairdata import hair_path
 
 import cghair_format as cgh
 from cghair_format.asset import Appearance, HairAsset, MlpLayer
-from cghair_format.strands import Strands
+from cghair_format.paper_scale import CARDS, GROUPS, HIDDEN, POINTS, SH_DEGREE, STRANDS, D, K, paper_scale_strands
 
-STRANDS, POINTS, CARDS, GROUPS, K, D, HIDDEN, SH_DEGREE = 25_000, 100, 800, 64, 10, 64, 64, 3
 PAPER_DATA = Path(os.environ.get("CGH_PAPER_DATA", Path.home() / ".cache" / "cghair" / "paper"))
 TRAINED = PAPER_DATA / "latents.cgh"  # the Makefile's paper-trained target writes it
 
@@ -53,14 +52,6 @@ def trained_paper_scale_asset() -> tuple[HairAsset, str]:
     asset = cgh.read(TRAINED)
     iterations = asset.metadata.get("training", {}).get("config", {}).get("iterations", "?")
     return asset, f"trained, {iterations} iterations ({TRAINED})"
-
-
-def paper_scale_strands(path: Path) -> Strands:
-    """The strands of a real model resampled (B-spline) to 100 points and densified to 25,000."""
-    from cghair_format.exchange import load_strands
-    from cghair_format.strands import densify, resample
-
-    return densify(resample(load_strands(path), POINTS, method="bspline"), STRANDS, seed=0)
 
 
 def with_trained_like_appearance(asset: HairAsset, seed: int = 0) -> HairAsset:

@@ -39,10 +39,9 @@ def test_bench_small_config_reports_every_figure(tmp_path, capsys):
 
 def test_bench_paper_scale_path_on_a_reduced_recipe(tmp_path, monkeypatch, capsys):
     """The --paper-scale code path with the recipe's sizes shrunk (the real one needs minutes an iteration)."""
+    from cghair_format import paper_scale
     from training import bench
     from training.backends import default_backend
-
-    from . import paper_scale
 
     for name, value in {"STRANDS": 150, "POINTS": 8, "CARDS": 8, "GROUPS": 2, "K": 3, "D": 8, "HIDDEN": 16,
                         "SH_DEGREE": 1}.items():
