@@ -39,7 +39,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--up", choices=PLY_UPS, default=None,
                    help="up axis of a 3DGS .ply (default -y: the INRIA/COLMAP convention 3DGS viewers expect)")
     p.add_argument("--frames", metavar="A:B",
-                   help="of an animated .cgh, export frames A (included) to B (excluded); A or B may be left out")
+                   help="of an animated .cgh, export frames A (included) to B (excluded); A or B may be left out, "
+                        "negatives count from the end (--frames=-10:)")
     p.add_argument("--rest", action="store_true", help="export an animated .cgh's rest pose alone")
     p.add_argument("--units", type=float, metavar="M", help="metres per unit of strand input (overrides the file)")
     p.add_argument("--input-up", choices=("Y", "Z", "y", "z"), help="up axis of strand input (overrides the file)")
