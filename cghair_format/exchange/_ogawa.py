@@ -2,8 +2,9 @@
 
 No Alembic library installs from PyPI, so this writes the bytes itself (numpy and the standard
 library only), following the layout of Alembic's AbcCoreOgawa, which every current Alembic reader
-(Blender, Houdini, Maya, Unreal) reads. Only what a static groom needs: objects, compound, scalar
-and array properties of plain numeric types, one sample each on the default time sampling.
+(Blender, Houdini, Maya, Unreal) reads. Only what a groom needs: objects, compound, scalar and array
+properties of plain numeric types, with one sample on the default time sampling (index 0) or, for an
+animated archive, one sample per frame on a uniform time sampling (index 1, :class:`TimeSampling`).
 
 Ogawa (little-endian): a 16-byte header (``b"Ogawa"``, a "frozen" byte set to 0xff once the file
 is complete, the format version 0x0001 big-endian, the uint64 position of the root group), then
@@ -23,7 +24,13 @@ Abc on Ogawa (AbcCoreOgawa version 0):
   ``info`` bit field: property type, size hint, POD type, extent, constant/homogeneous flags,
   metadata index; then sample count, name and metadata sized by the hint).
 - array property group, per sample: a data (16-byte key, then the values) and the dimensions
-  (empty data for rank-1 numeric arrays); scalar property: the data only.
+  (empty data for rank-1 numeric arrays); scalar property: the data only. A property whose samples
+  are all equal is *constant*: one sample stored, the header's sample count still the frames'.
+  Otherwise every sample is stored (equal data shared) and the changes run from sample 1 to the
+  last, which the header then need not state. A property on time sampling 1 says so after its
+  sample count.
+- time samplings, per sampling: uint32 the most samples any property has on it, float64 seconds
+  per cycle, uint32 stored-time count (1: uniform) and float64 the first sample's time.
 - metadata: ``key=value`` pairs joined by ``;``, keys sorted; short strings are stored once in
   the indexed table (index 1..254; 0 means empty, 255 written inline).
 
@@ -36,10 +43,13 @@ from __future__ import annotations
 
 import hashlib
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from ..atomic import atomic_path
 
 DATA_BIT = 1 << 63  # a child position with this bit set is data, otherwise a group
 EMPTY_GROUP = 0
@@ -56,15 +66,27 @@ POD = {np.dtype(np.bool_): 0, np.dtype(np.uint8): 1, np.dtype(np.int8): 2, np.dt
 SCALAR, ARRAY = 1, 2  # Alembic's PropertyType (compound is 0)
 
 
+@dataclass(frozen=True)
+class TimeSampling:
+    """A uniform time sampling: ``frames`` samples, ``1 / fps`` seconds apart, the first at ``start``."""
+
+    fps: float
+    start: float
+    frames: int
+
+
 @dataclass
 class Values:
-    """A scalar (one value of ``extent`` numbers) or array property with one sample.
-    ``values`` is ``[n]`` or ``[n, extent]`` (a scalar holds one such row)."""
+    """A scalar (one value of ``extent`` numbers) or array property.
+    ``values`` is ``[n]`` or ``[n, extent]`` (a scalar holds one such row): one sample on the default
+    time sampling or, when ``sampled``, held at every frame of the archive's :class:`TimeSampling`;
+    or a function of the frame giving that frame's sample (``sampled`` then)."""
 
     name: str
-    values: np.ndarray
+    values: np.ndarray | Callable[[int], np.ndarray]
     metadata: dict[str, str] = field(default_factory=dict)
     scalar: bool = False
+    sampled: bool = False
 
 
 @dataclass
@@ -134,8 +156,10 @@ def _size_hint(*sizes: int) -> int:
 
 
 class _ArchiveWriter:
-    def __init__(self, ogawa: OgawaWriter):
+    def __init__(self, ogawa: OgawaWriter, sampling: TimeSampling | None = None):
         self.o = ogawa
+        self.sampling = sampling
+        self.max_samples = 1  # the most samples a property has on time sampling 1
         self.md_table: dict[bytes, int] = {}
         self.samples: dict[bytes, int] = {}  # key -> data position (equal samples stored once)
 
@@ -160,27 +184,51 @@ class _ArchiveWriter:
         return self.samples[key], key
 
     def values(self, p: Values) -> tuple[int, bytes, bytes]:
-        """Write one property's sample; return its group, header bytes and hash."""
-        v = np.asarray(p.values)
+        """Write one property's samples; return its group, header bytes and hash."""
+        if p.sampled and self.sampling is None:
+            raise ValueError(f"property {p.name}: sampled values need the archive's time sampling")
+        if callable(p.values) and not p.sampled:
+            raise ValueError(f"property {p.name}: values given per frame must be sampled")
+        count = self.sampling.frames if p.sampled else 1
+        sample = p.values if callable(p.values) else lambda f: p.values
+        positions, keys, v = [], [], None
+        for f in range(count if callable(p.values) else 1):
+            v = self.checked(p, sample(f), v)
+            pos, key = self.sample(v)
+            positions.append(pos)
+            keys.append(key)
+        constant = len(set(keys)) == 1
+        group = self.o.group([c for pos in positions[:1 if constant else None]
+                              for c in ([pos] if p.scalar else [pos, EMPTY_DATA])])  # rank-1 dims: empty data
+        extent = v.size if p.scalar else 1 if v.ndim == 1 else v.shape[1]
+        md = serialize_metadata(p.metadata)
+        index = self.md_index(md)
+        name = p.name.encode()
+        hint = _size_hint(len(md), len(name), count)
+        info = (SCALAR if p.scalar else ARRAY) | ((1 if p.scalar else len(v)) == 1)  # bit 0: scalar-like
+        info |= hint << 2 | POD[v.dtype.newbyteorder("=")] << 4 | 0x400 | extent << 12 | index << 20
+        info |= 0x800 * constant | 0x100 * p.sampled  # constant; on time sampling 1
+        head = struct.pack("<I", info) + _uint(count, hint) + (_uint(1, hint) if p.sampled else b"")
+        head += _uint(len(name), hint) + name
+        if index == INLINE_METADATA:
+            head += _uint(len(md), hint) + md
+        if p.sampled:
+            self.max_samples = max(self.max_samples, 1 if constant else count)
+        return group, head, hashlib.md5(head + b"".join(keys)).digest()
+
+    @staticmethod
+    def checked(p: Values, values, first: np.ndarray | None) -> np.ndarray:
+        """``values`` as little-endian numbers of an Alembic type, shaped as frame 0's (``first``)."""
+        v = np.asarray(values)
         if v.dtype not in POD:
             raise ValueError(f"property {p.name}: no Alembic type for {v.dtype}")
         v = v.astype(v.dtype.newbyteorder("<"), copy=False)
         if v.ndim > 2 or (p.scalar and v.ndim == 2 and len(v) != 1):
             raise ValueError(f"property {p.name}: values must be [n] or [n, extent] (one row for a scalar)")
-        extent = v.size if p.scalar else 1 if v.ndim == 1 else v.shape[1]
-        points = 1 if p.scalar else len(v)
-        pos, key = self.sample(v)
-        group = self.o.group([pos] if p.scalar else [pos, EMPTY_DATA])  # rank-1 dims: empty data
-        md = serialize_metadata(p.metadata)
-        index = self.md_index(md)
-        name = p.name.encode()
-        hint = _size_hint(len(md), len(name), 1)
-        info = (SCALAR if p.scalar else ARRAY) | (points == 1)  # bit 0: scalar-like
-        info |= hint << 2 | POD[v.dtype.newbyteorder("=")] << 4 | 0x400 | 0x800 | extent << 12 | index << 20
-        head = struct.pack("<I", info) + _uint(1, hint) + _uint(len(name), hint) + name
-        if index == INLINE_METADATA:
-            head += _uint(len(md), hint) + md
-        return group, head, hashlib.md5(head + key).digest()
+        if first is not None and (v.dtype, v.shape) != (first.dtype, first.shape):
+            raise ValueError(f"property {p.name}: a frame holds {v.dtype} {v.shape}, frame 0 {first.dtype} "
+                             f"{first.shape}")
+        return v
 
     def compound(self, props: list[Values | Compound]) -> tuple[int, bytes]:
         """Write the properties and their headers; return the group and the compound's hash."""
@@ -225,8 +273,12 @@ class _ArchiveWriter:
         return self.o.group(children), prop_hash + child_hash
 
     def time_samplings(self) -> bytes:
-        """The default sampling (index 0): uniform, 1 s per cycle, from time 0, one sample."""
-        return struct.pack("<IdId", 1, 1.0, 1, 0.0)
+        """The default sampling (index 0: uniform, 1 s per cycle, from time 0, one sample) and the
+        archive's :class:`TimeSampling` (index 1) where it has one."""
+        out = struct.pack("<IdId", 1, 1.0, 1, 0.0)
+        if self.sampling is not None:
+            out += struct.pack("<IdId", self.max_samples, 1.0 / self.sampling.fps, 1, self.sampling.start)
+        return out
 
     def metadata_table(self) -> int:
         if not self.md_table:
@@ -235,21 +287,19 @@ class _ArchiveWriter:
         return self.o.data(b"".join(struct.pack("<B", len(m)) + m for m in ordered))
 
 
-def write_archive(path: str | Path, children: list[Object], metadata: dict[str, str]) -> None:
+def write_archive(path: str | Path, children: list[Object], metadata: dict[str, str],
+                  sampling: TimeSampling | None = None) -> None:
     """Write an Alembic (Ogawa) archive whose top object holds ``children``; ``metadata`` is the
-    archive's (``_ai_Application``, ``_ai_DateWritten``, ...)."""
-    path = Path(path)
-    try:
-        _write(path, children, metadata)
-    except BaseException:
-        path.unlink(missing_ok=True)  # never leave a partial archive behind
-        raise
+    archive's (``_ai_Application``, ``_ai_DateWritten``, ...); ``sampling`` the time sampling of the
+    ``sampled`` properties. Samples computed per frame are written as they come (memory: one frame)."""
+    with atomic_path(path) as tmp:  # a failure or an interrupt leaves the old file, never a partial one
+        _write(tmp, children, metadata, sampling)
 
 
-def _write(path: Path, children: list[Object], metadata: dict[str, str]) -> None:
+def _write(path: Path, children: list[Object], metadata: dict[str, str], sampling: TimeSampling | None) -> None:
     with open(path, "wb") as f:
         o = OgawaWriter(f)
-        w = _ArchiveWriter(o)
+        w = _ArchiveWriter(o, sampling)
         top, _ = w.object([], children)
         archive_md = dict(metadata)
         archive_md.setdefault("_ai_AlembicVersion", "Alembic 1.8.0 layout (cghair writer)")

@@ -21,6 +21,8 @@ Layout (``/Hair`` is the default prim, an Xform with Unreal's ``GroomAPI`` appli
   the splat field (Blender 5.0 does).
 - ``/Hair/Materials``: the preview-surface materials (:mod:`.usd_materials`).
 
+Given an ``animation``, what moves gets time samples, one per frame (:mod:`.usd_animation`).
+
 Colours are linear Rec.709: the colour attributes say so (``colorSpace = lin_rec709_scene``) and
 ``/Hair`` carries ``ColorSpaceAPI`` with the same name where usd-core has it. The stage's
 ``metersPerUnit`` and ``upAxis`` come from the asset or strands; ``scale`` multiplies every
@@ -51,13 +53,18 @@ DROPPED = ("Blender 5.0's USD importer drops {g} (ParticleField3DGaussianSplat) 
 
 def export_usd(path: str | Path, *, asset: HairAsset | None = None, strands: Strands | None = None,
                curves: bool = True, cards: bool = False, gaussians: bool = False, groom: bool = True,
-               scale: float = 1.0) -> None:
+               scale: float = 1.0, animation=None) -> None:
     """Write ``asset`` (or plain ``strands``) to a USD file; ``cards``/``gaussians`` need an asset.
-    ``scale`` multiplies coordinates and widths (output units per input unit)."""
+    ``scale`` multiplies coordinates and widths (output units per input unit); an ``animation``
+    (:class:`~cghair_format.animation.Animation` of the asset) adds its frames as time samples."""
     path = Path(path)
     scale = check_scale(scale)
     if (asset is None) == (strands is None):
         raise CghError("export_usd needs exactly one of asset= or strands=")
+    if animation is not None:
+        from .animated import check_animation
+
+        check_animation(asset, animation)
     if asset is None and (cards or gaussians):
         raise CghError("card meshes and Gaussians exist only for a .cgh asset, not for plain strands")
     if not (curves or cards or gaussians):
@@ -94,6 +101,10 @@ def export_usd(path: str | Path, *, asset: HairAsset | None = None, strands: Str
             from ..gaussians import decode_gaussians
 
             write_gaussian_prims(stage, decode_gaussians(asset), scale)
+        if animation is not None:
+            from .usd_animation import write_time_samples
+
+            write_time_samples(stage, ROOT, asset, animation, scale, curves=curves, cards=cards, gaussians=gaussians)
 
     write_stage(path, build, src.meters_per_unit / scale, src.up_axis)
 

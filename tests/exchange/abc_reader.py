@@ -1,6 +1,7 @@
 """A small Alembic (Ogawa) reader for tests: an independent reading of the layout that
 ``cghair_format.exchange._ogawa`` writes (AbcCoreOgawa's, as its reader parses it), to check a
-file's structure. Numeric properties only; not part of the package."""
+file's structure. Numeric properties only, every stored sample, each frame's sample found as
+Alembic's reader finds it (constant, first and last changed sample); not part of the package."""
 
 from __future__ import annotations
 
@@ -18,9 +19,27 @@ DTYPES = {0: np.bool_, 1: np.uint8, 2: np.int8, 3: np.uint16, 4: np.int16, 5: np
 class Prop:
     kind: str  # "compound", "scalar" or "array"
     metadata: dict
-    values: np.ndarray | None = None  # [n, extent] (scalar: [1, extent])
+    values: np.ndarray | None = None  # sample 0, [n, extent] (scalar: [1, extent])
     props: dict = field(default_factory=dict)
-    samples: int = 0
+    samples: int = 0  # the header's sample count
+    stored: list = field(default_factory=list)  # the stored samples, [n, extent] each
+    time_sampling: int = 0
+    changed: tuple = (0, 0)  # first and last changed sample (0, 0: constant)
+
+    def sample(self, i: int) -> np.ndarray:
+        """Sample ``i`` (0 <= i < samples), mapped onto the stored ones as AbcCoreOgawa's reader does."""
+        assert 0 <= i < self.samples
+        first, last = self.changed
+        if (first, last) == (0, 0) or i < first:
+            return self.stored[0]
+        return self.stored[min(i, last) - first + 1]
+
+
+@dataclass
+class TimeSampling:
+    max_samples: int
+    time_per_cycle: float
+    times: tuple  # the stored times (one: uniform)
 
 
 @dataclass
@@ -46,7 +65,13 @@ class Archive:
         self.abc_version = struct.unpack("<i", self.data(root[0]))[0]
         self.library_version = struct.unpack("<i", self.data(root[1]))[0]
         self.metadata = parse_md(self.data(root[3]))
-        self.time_samplings = self.data(root[4])
+        self.time_samplings_raw = self.data(root[4])
+        self.time_samplings, pos, raw = [], 0, self.time_samplings_raw
+        while pos < len(raw):
+            most, tpc, n = struct.unpack_from("<IdI", raw, pos)
+            self.time_samplings.append(TimeSampling(most, tpc, struct.unpack_from(f"<{n}d", raw, pos + 16)))
+            pos += 16 + 8 * n
+        assert pos == len(raw)
         table, self.md_table, pos = self.data(root[5]), [], 0
         while pos < len(table):
             n = table[pos]
@@ -110,13 +135,16 @@ class Archive:
                 return v
 
             ptype, pod, extent = info & 3, (info >> 4) & 0xF, (info >> 12) & 0xFF
-            samples = 0
+            samples, changed, ts = 0, (0, 0), 0
             if ptype:
                 samples = uint()
+                changed = (1, samples - 1)
                 if info & 0x200:
-                    uint(), uint()
+                    changed = (uint(), uint())
+                if info & 0x800:  # constant
+                    changed = (0, 0)
                 if info & 0x100:
-                    uint()
+                    ts = uint()
             n = uint()
             name = heads[p:p + n].decode()
             p += n
@@ -129,9 +157,12 @@ class Archive:
             if ptype == 0:
                 props[name] = Prop("compound", md, props=self.compound(child))
                 continue
-            sample = self.group(child)
-            raw = self.data(sample[0])[16:]  # 16-byte key, then the values
-            values = np.frombuffer(raw, DTYPES[pod]).reshape(-1, extent)
-            props[name] = Prop("scalar" if ptype == 1 else "array", md, values, samples=samples)
+            entries = self.group(child)[::1 if ptype == 1 else 2]  # arrays: each sample's data, then dims
+            stored = [np.frombuffer(self.data(e)[16:], DTYPES[pod]).reshape(-1, extent)  # 16-byte key, values
+                      for e in entries]
+            want = 1 if changed == (0, 0) else changed[1] - changed[0] + 2
+            assert len(stored) == want, f"{name}: {len(stored)} samples stored, the header implies {want}"
+            props[name] = Prop("scalar" if ptype == 1 else "array", md, stored[0], samples=samples, stored=stored,
+                               time_sampling=ts, changed=changed)
         assert p == len(heads)
         return props

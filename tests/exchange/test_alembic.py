@@ -120,7 +120,7 @@ def test_layout_and_groom_attributes(tmp_path):
     assert a.frozen and a.version == 1 and a.abc_version == 0 and a.library_version >= 9999
     assert a.metadata["_ai_Application"].startswith("cghair ") and "_ai_AlembicVersion" in a.metadata
     # the default time sampling: one sample, 1 s per cycle, starting at 0
-    assert a.time_samplings == np.array([1], "<u4").tobytes() + np.array([1.0], "<f8").tobytes() + \
+    assert a.time_samplings_raw == np.array([1], "<u4").tobytes() + np.array([1.0], "<f8").tobytes() + \
         np.array([1], "<u4").tobytes() + np.array([0.0], "<f8").tobytes()
     hair = a.top.children["Strands"]
     assert hair.metadata["schema"] == "AbcGeom_Xform_v3" and hair.props[".xform"].props[".inherits"].values[0, 0]
