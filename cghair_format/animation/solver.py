@@ -10,6 +10,8 @@ Strands are ``[N, P, 3]`` float64 points whose first point (the root) rides the 
 4. :func:`collide` and :func:`keep_lengths`, alternately: points pushed out of the head's capsules, then
    every segment given its rest length, root to tip (follow the leader: exact after each pass).
 
+Every pass moves positions only; the Verlet velocity is what they moved, less ``damping``.
+
 Gravity acts as it does: the shape constraints are what hold a groom's style up, as in the game
 engines, so a styled groom settles a little under its own weight when the simulation starts.
 """
@@ -38,7 +40,6 @@ class SolverSettings:
     global_range: float = 0.3  # share of each strand (from the root) the global shape holds
     local_stiffness: float = 0.9  # pull toward the rest bend per substep
     length_iterations: int = 2  # collide + keep_lengths rounds per substep
-    length_damping: float = 0.9  # follow-the-leader velocity correction (Mueller et al. 2012)
     substeps: int = 4
     settle: float = 1.0  # seconds simulated with the head still before the first frame
     gravity: bool = True
@@ -47,8 +48,7 @@ class SolverSettings:
 
     def check(self) -> None:
         """A setting outside the solver's stable range raises :class:`UnstableSimulation`."""
-        for name in ("damping", "global_stiffness", "global_range", "local_stiffness", "length_damping",
-                     "wind_gust"):
+        for name in ("damping", "global_stiffness", "global_range", "local_stiffness", "wind_gust"):
             value = getattr(self, name)
             if not (np.isfinite(value) and 0 <= value <= 1):
                 raise UnstableSimulation(f"{name} must lie in [0, 1], got {value}")
@@ -124,18 +124,15 @@ def local_shape(state: StrandState, target: np.ndarray, stiffness: float) -> Non
         x[:, k + 1] += stiffness * (want - x[:, k + 1])
 
 
-def keep_lengths(state: StrandState, length_damping: float) -> None:
+def keep_lengths(state: StrandState) -> None:
     """Follow the leader: root to tip, each point is put back at its rest length from its parent, along
-    the segment; its parent's velocity loses ``length_damping`` of that correction (Mueller et al. 2012),
-    which takes out the energy the projection would otherwise add."""
-    x, prev = state.x, state.x_prev
+    the segment, so every length is exact after one pass. (Mueller et al. 2012 also take part of each
+    correction off the parent's velocity; under gravity that leaves a velocity that never dies out, so
+    the solver's damping is left to take out the energy the projection adds.)"""
+    x = state.x
     for k in range(x.shape[1] - 1):
         seg = x[:, k + 1] - x[:, k]
-        placed = x[:, k] + _unit(seg) * state.rest_length[:, k, None]
-        correction = placed - x[:, k + 1]
-        x[:, k + 1] = placed
-        if k > 0:
-            prev[:, k] += length_damping * correction
+        x[:, k + 1] = x[:, k] + _unit(seg) * state.rest_length[:, k, None]
 
 
 @dataclass(frozen=True)
@@ -179,21 +176,22 @@ def step(state: StrandState, settings: SolverSettings, rotation: np.ndarray, tra
          gravity: np.ndarray, wind: np.ndarray, capsules: Capsules | None, dt: float) -> None:
     """One substep of ``dt`` seconds with the head at ``x -> rotation x + translation``; ``gravity`` and
     ``wind`` in scene units per s^2."""
-    target = state.rest @ rotation.T + translation
-    state.x[:, 0] = target[:, 0]
-    state.x_prev[:, 0] = target[:, 0]
-    accel = gravity if settings.gravity else np.zeros(3)
-    if np.any(wind):
-        accel = accel + wind_accel(state, wind)
-    integrate(state, accel, settings.damping, dt)
-    reach = int(round(settings.global_range * state.x.shape[1]))
-    global_shape(state, target, settings.global_stiffness, reach)
-    local_shape(state, target, settings.local_stiffness)
-    moved = capsules.moved(rotation, translation) if capsules is not None else None
-    for _ in range(settings.length_iterations):
-        if moved is not None:
-            collide(state, moved)
-        keep_lengths(state, settings.length_damping)
+    with np.errstate(all="ignore"):  # a blow-up is refused below, in one line, not as numpy's warnings
+        target = state.rest @ rotation.T + translation
+        state.x[:, 0] = target[:, 0]
+        state.x_prev[:, 0] = target[:, 0]
+        accel = gravity if settings.gravity else np.zeros(3)
+        if np.any(wind):
+            accel = accel + wind_accel(state, wind)
+        integrate(state, accel, settings.damping, dt)
+        reach = int(round(settings.global_range * state.x.shape[1]))
+        global_shape(state, target, settings.global_stiffness, reach)
+        local_shape(state, target, settings.local_stiffness)
+        moved = capsules.moved(rotation, translation) if capsules is not None else None
+        for _ in range(settings.length_iterations):
+            if moved is not None:
+                collide(state, moved)
+            keep_lengths(state)
     if not np.isfinite(state.x).all():
         raise UnstableSimulation("the simulation produced non-finite points; lower the wind, raise the "
                                  "damping or the substeps")
