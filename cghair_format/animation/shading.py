@@ -80,8 +80,11 @@ def _smallest_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.where(c > -1 + 1e-9, rot, np.eye(3))
 
 
-def segment_rotations(asset: HairAsset, animation: Animation, frame: int) -> np.ndarray:
-    """Each segment's rotation from rest to ``frame``, ``[S, P-1, 3, 3]`` (see the module docstring)."""
+def segment_rotations(asset: HairAsset, animation: Animation, frame: int, points: np.ndarray | None = None
+                      ) -> np.ndarray:
+    """Each segment's rotation from rest to ``frame``, ``[S, P-1, 3, 3]`` (see the module docstring); with
+    ``points [S, P, 3]``, onto those strands' segments instead of the driven ones (strands simulated alone,
+    say) from the same cards' frames."""
     moved = animation.cards(asset.cards, frame)
     turn = np.einsum("ckij,cklj->ckil", _card_frames(moved), _card_frames(asset.cards))  # F_now F_rest^T
     m = asset.cards.segments
@@ -94,7 +97,7 @@ def segment_rotations(asset: HairAsset, animation: Animation, frame: int) -> np.
         return d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-30)
 
     rest = np.einsum("spij,spj->spi", r_card, directions(strand_points(asset.cards, asset.strand_card, asset.uvd)))
-    now = directions(strand_points(moved, asset.strand_card, asset.uvd))
+    now = directions(strand_points(moved, asset.strand_card, asset.uvd) if points is None else points)
     return _smallest_rotation(rest, now) @ r_card
 
 
