@@ -178,7 +178,7 @@ def run_viewer(asset: HairAsset, *, title: str, file_size: int, width: int = 128
         state = ViewerState(OrbitController.framing(*renderer.bounds, asset.up_axis),
                             max_sh_degree=asset.appearance.sh_degree)
         budgets = BudgetControl(renderer.count, fixed=budget)
-        keys = WindowInput(glfw, window, state, press, motion if isinstance(motion, LiveSimulation) else None)
+        keys = WindowInput(glfw, window, state, press, motion if simulate else None)
         drawn = last_view = None  # drawn: what the accumulation target holds, (view, pose, budget)
         frames_drawn, pose, fps, idle, last = 0, 0, 0.0, False, time.perf_counter()  # fps: of splat frames
         print(HELP if motion is None else f"{HELP}\n{LIVE_HELP if simulate else PLAY_HELP}")
