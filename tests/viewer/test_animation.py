@@ -117,6 +117,24 @@ def test_render_frames_of_a_simulated_motion(gl_ctx, tmp_path):
     assert max(np.abs(frames[0] - f).max() for f in frames[1:]) > 0  # the hair moves
 
 
+def test_render_frames_to_mp4(gl_ctx, tmp_path):
+    pytest.importorskip("imageio_ffmpeg", reason="MP4 output needs imageio-ffmpeg")
+    import imageio.v2 as imageio
+
+    from cghair_format.cli import main
+
+    path = tmp_path / "hair.cgh"
+    cghair_format.write(example_asset(seed=8, strands=30, points=6), path)
+    out = tmp_path / "walk.mp4"
+    assert main(["render", str(path), "-o", str(out), "--motion", "walk", "--frames", ":5", "--width", "32",
+                 "--height", "32", "--fps", "10"]) == 0
+    reader = imageio.get_reader(out)
+    try:
+        assert reader.count_frames() == 5 and reader.get_meta_data()["fps"] == pytest.approx(10)
+    finally:
+        reader.close()
+
+
 def test_render_animate_reads_the_files_animation(gl_ctx, tmp_path, monkeypatch, asset):
     """Where the format package reads animations (cghair_format.read_animation, stood in for here),
     --animate renders each of its frames; frame 2 equals the static render of that pose (same job)."""
