@@ -57,11 +57,12 @@ def window_title(title: str, fps: float, drawn: str, budget: str, file_size: int
 class WindowInput:
     """Key and mouse state from glfw's callbacks: keys held (for flying), presses not yet handled,
     and mouse drags applied to the orbit controller (left: orbit; right, middle or shift: pan), or
-    with ctrl to a live simulation's head (left: turn; right or middle: move)."""
+    with ctrl to the motion: a live simulation's head (left: turn; right or middle: move), or a
+    clip's time (the pointer across the window's width is the time slider)."""
 
     def __init__(self, glfw: Any, window: Any, state: ViewerState, press: tuple[str, ...] = (),
-                 head: LiveSimulation | None = None):
-        self.glfw, self.window, self.state, self.head = glfw, window, state, head
+                 motion: ClipPlayer | LiveSimulation | None = None):
+        self.glfw, self.window, self.state, self.motion = glfw, window, state, motion
         self.held: set[str] = set()
         self.pending: list[str] = list(press)
         self.buttons: set[int] = set()
@@ -90,6 +91,8 @@ class WindowInput:
         self.shift = bool(mods & self.glfw.MOD_SHIFT)
         self.ctrl = bool(mods & self.glfw.MOD_CONTROL)
         (self.buttons.add if action == self.glfw.PRESS else self.buttons.discard)(button)
+        if action == self.glfw.PRESS and self.ctrl and isinstance(self.motion, ClipPlayer) and self.pos is not None:
+            self.motion.seek(self.pos[0] / max(self.glfw.get_window_size(self.window)[0] - 1, 1))
 
     def on_move(self, _w, x, y) -> None:
         glfw, ctl = self.glfw, self.state.controller
@@ -97,11 +100,13 @@ class WindowInput:
             dx, dy = x - self.pos[0], y - self.pos[1]
             second = glfw.MOUSE_BUTTON_RIGHT in self.buttons or glfw.MOUSE_BUTTON_MIDDLE in self.buttons
             height = glfw.get_framebuffer_size(self.window)[1]
-            if self.ctrl and self.head is not None:
+            if self.ctrl and isinstance(self.motion, ClipPlayer):
+                self.motion.seek(x / max(glfw.get_window_size(self.window)[0] - 1, 1))
+            elif self.ctrl and isinstance(self.motion, LiveSimulation):
                 if second:
-                    self.head.move(ctl.drag_offset(dx, dy, height))
+                    self.motion.move(ctl.drag_offset(dx, dy, height))
                 else:
-                    self.head.turn(dx * ORBIT_DEG_PER_PIXEL, dy * ORBIT_DEG_PER_PIXEL, ctl.axes()[0])
+                    self.motion.turn(dx * ORBIT_DEG_PER_PIXEL, dy * ORBIT_DEG_PER_PIXEL, ctl.axes()[0])
             elif second or self.shift:
                 ctl.pan(dx, dy, height)
             else:
@@ -178,7 +183,7 @@ def run_viewer(asset: HairAsset, *, title: str, file_size: int, width: int = 128
         state = ViewerState(OrbitController.framing(*renderer.bounds, asset.up_axis),
                             max_sh_degree=asset.appearance.sh_degree)
         budgets = BudgetControl(renderer.count, fixed=budget)
-        keys = WindowInput(glfw, window, state, press, motion if simulate else None)
+        keys = WindowInput(glfw, window, state, press, motion)
         drawn = last_view = None  # drawn: what the accumulation target holds, (view, pose, budget)
         frames_drawn, pose, fps, idle, last = 0, 0, 0.0, False, time.perf_counter()  # fps: of splat frames
         print(HELP if motion is None else f"{HELP}\n{LIVE_HELP if simulate else PLAY_HELP}")

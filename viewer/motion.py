@@ -21,7 +21,8 @@ from cghair_format.animation import Animation
 from cghair_format.errors import CghError
 
 PLAY_KEYS = ("SPACE", "LEFT", "RIGHT", "HOME", "END", "PAGE_UP", "PAGE_DOWN")
-HELP = "space: play/pause | left/right: step | page up/down: scrub 1/10 | home/end: first/last frame"
+HELP = ("space: play/pause | left/right: step | page up/down: scrub 1/10 | home/end: first/last frame | "
+        "ctrl-click or ctrl-drag: the window's width is the time slider")
 LIVE_HELP = "ctrl-drag: turn the head | ctrl-right-drag: move the head | space: pause the simulation"
 LIVE_FPS = 30.0  # the live simulation's step: one display frame is this much simulated time
 MAX_TURN_DEG = 15.0  # most the head turns in one live frame (a faster drag is spread over frames)
@@ -83,6 +84,12 @@ class ClipPlayer:
             return False
         self._clock = 0.0
         return True
+
+    def seek(self, fraction: float) -> None:
+        """Pause at ``fraction`` (0: first frame, 1: last; clamped) of the clip: the time slider."""
+        self.playing = False
+        self.index = int(round(min(max(fraction, 0.0), 1.0) * (len(self.frames) - 1)))
+        self._clock = 0.0
 
     def advance(self, seconds: float) -> Cards | None:
         """The cards to show now, or ``None`` when the frame shown is still the right one."""

@@ -51,7 +51,12 @@ def test_clip_player_keys_and_clock(asset, nod):
     assert player.press("END") and player.frame == 7
     assert player.press("PAGE_UP") and player.frame == 0
     assert not player.press("C")  # not a playback key: the camera's
-    assert "frame 0/7" in player.status() and "paused" in player.status()
+    player.press("SPACE")
+    player.seek(0.5)
+    assert player.frame == 4 and not player.playing  # round(0.5 * 7): the time slider pauses
+    player.seek(2.0)
+    assert player.frame == 7
+    assert "frame 7/7" in player.status() and "paused" in player.status()
 
 
 def test_clip_player_range_and_validation(asset, nod):

@@ -39,7 +39,7 @@ def _fake_glfw(width, height):
                  "set_window_should_close"):
         setattr(glfw, name, lambda *a: None)
     glfw.window_should_close = lambda w: False
-    glfw.get_framebuffer_size = lambda w: (width, height)
+    glfw.get_framebuffer_size = glfw.get_window_size = lambda w: (width, height)
     glfw.set_window_title = lambda w, title: titles.append(title)
     return glfw
 
@@ -192,3 +192,35 @@ def test_ctrl_drag_turns_the_live_head(gl_ctx, monkeypatch):
     assert np.degrees(np.arccos((np.trace(rotation) - 1) / 2)) == pytest.approx(20 * 0.3)  # 20 pixels right
     assert all(np.array_equal(c, cams[0]) for c in cams)
     assert "simulation live" in glfw.titles[-1]
+
+
+def test_ctrl_drag_is_the_time_slider(gl_ctx, monkeypatch):
+    """With a clip, ctrl-drag pauses at the time the pointer's x gives across the window's width."""
+    from tests.viewer.test_animation import moving_cards
+    from viewer import app
+
+    glfw = _fake_glfw(65, 48)
+    callbacks = {}
+    glfw.set_mouse_button_callback = lambda w, f: callbacks.__setitem__("button", f)
+    glfw.set_cursor_pos_callback = lambda w, f: callbacks.__setitem__("move", f)
+    polls = iter(range(1000))
+
+    def poll(*_):  # the pointer at x = 20, ctrl + left button down, dragged to the middle, then released
+        n = next(polls)
+        if n == 0:
+            callbacks["move"](None, 20.0, 5.0)
+            callbacks["button"](None, 99, glfw.PRESS, glfw.MOD_CONTROL)
+        if n == 1:
+            callbacks["move"](None, 32.0, 5.0)
+            callbacks["button"](None, 99, glfw.RELEASE, glfw.MOD_CONTROL)
+
+    glfw.poll_events = glfw.wait_events_timeout = poll
+    monkeypatch.setitem(sys.modules, "glfw", glfw)
+    monkeypatch.setattr(app, "create_window", lambda w, h, t: ("window", _Context(gl_ctx, w, h)))
+    asset = example_asset(seed=9, strands=64, points=6, sh_degree=1)
+    draws = _record_drawn_budgets(app, monkeypatch)
+    assert app.run_viewer(asset, title="v", file_size=0, width=65, height=48, max_frames=4,
+                          animation=moving_cards(asset, frames=5)) == 4
+    assert "frame 1/4" in glfw.titles[0] and "paused" in glfw.titles[0]  # x = 20 of 64: 1.25 of 4 frames
+    assert "frame 2/4" in glfw.titles[-1] and "paused" in glfw.titles[-1]
+    assert len(draws) == 2  # the orbit did not move: only the two poses were drawn
