@@ -7,7 +7,7 @@ from __future__ import annotations
 import argparse
 
 from .argtypes import int_at_least
-from .info import opacity_line
+from .info import animation_line, opacity_line
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -21,7 +21,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..codec import read, read_info
+    from ..codec import read, read_animation, read_info
     from ..reference_decoder import compare, evenly_spaced_cards
 
     asset = read(args.file)
@@ -30,6 +30,9 @@ def run(args: argparse.Namespace) -> int:
     points = f"{counts.max()}" if counts.min() == counts.max() else f"{counts.min()}-{counts.max()}"
     print(f"{args.file}: valid .cgh ({asset.n_strands:,} strands of {points} points, {asset.n_gaussians:,} "
           f"Gaussians); opacities: {opacity_line(info)}")
+    animation = read_animation(args.file)  # every frame, checked
+    if animation is not None:
+        print(f"{args.file}: animation: {animation_line(info['animation'])}")
     if not args.reference:
         return 0
     if info["quant"]["lossless"]:
