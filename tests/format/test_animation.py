@@ -11,30 +11,14 @@ import zstandard
 import cghair_format as cgh
 from cghair_format import container
 from cghair_format.animation import Animation
-from cghair_format.asset import Cards
 from cghair_format.cli import main as cli_main
 from cghair_format.codec.animation import BLOCK_ENTRY, COUNT, AnimationReader
-from cghair_format.examples import example_asset
+from cghair_format.examples import example_animation, example_asset
 from cghair_format.geometry import spine_frames
 from cghair_format.limits import ReadLimits
 from cghair_format.streams import StreamWriter
 
 pytestmark = pytest.mark.filterwarnings("error")  # refusing bad input must not warn
-
-
-def swing(cards: Cards, frames: int, fps: float = 30.0) -> Animation:
-    """The cards rotated rigidly about their roots, back and forth about x, then bent: an exact clip."""
-    out = []
-    root = cards.spine[:, :1].astype(np.float64)
-    along = np.linspace(0, 1, cards.spine.shape[1])[None, :, None]
-    for f in range(frames):
-        a = 0.4 * np.sin(f / 5)
-        c, s = np.cos(a), np.sin(a)
-        r = np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
-        spine = (cards.spine - root) @ r.T + root + 0.01 * np.sin(f / 3) * along ** 2 * np.array([1.0, 0, 0])
-        out.append(Cards(spine.astype(np.float32), (cards.normal @ r.T).astype(np.float32), cards.half_width,
-                         cards.group))
-    return Animation.of_frames(out, fps, start=0.5, source="swing")
 
 
 @pytest.fixture(scope="module")
@@ -44,7 +28,7 @@ def asset():
 
 @pytest.fixture(scope="module")
 def clip(asset):
-    return swing(asset.cards, 70)
+    return example_animation(asset.cards, 70)
 
 
 @pytest.fixture(scope="module")
@@ -124,8 +108,9 @@ def test_cli_shows_validates_and_keeps_the_animation(tmp_path, files, capsys):
     assert cli_main(["info", str(src)]) == 0
     out = capsys.readouterr().out
     assert "animation   70 frames at 30 fps from 0.5 s (2.3 s), a keyframe every 32" in out and "from swing" in out
-    assert cli_main(["validate", str(src)]) == 0
-    assert "animation: 70 frames" in capsys.readouterr().out
+    assert cli_main(["validate", str(src), "--reference"]) == 0
+    out = capsys.readouterr().out
+    assert "animation: 70 frames" in out and "the same cards on all 70 animation frames, bit for bit" in out
     out_file = tmp_path / "compact.cgh"
     assert cli_main(["encode", str(src), "-o", str(out_file), "--profile", "compact"]) == 0
     assert "animation: 70 frames at 30 fps" in capsys.readouterr().out
