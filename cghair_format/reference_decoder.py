@@ -563,17 +563,25 @@ def decode_frame(data: bytes, t: int) -> list[Card]:
     turn = 1 << bits
     out = []
     for ci in range(c):
-        spine = []
-        for k in range(m1):
-            spine.append([float(integer_at(round(rest[ci].spine[k][a] / qa), [x[ci][k][a] for x in rs], j)) * qa
-                          for a in range(3)])  # (round: half to even, as the spec's)
-        angles = []
-        for k in range(m1):
-            a = (ra[0][ci][k] if k == 0 else angles[k - 1] + ra[0][ci][k]) % turn  # the keyframe's, along the card
-            angles.append(a)
-        for i in range(1, j + 1):
-            angles = [(angles[k] + ra[i][ci][k]) % turn for k in range(m1)]
+        spine = [[0.0] * 3 for _ in range(m1)]
+        for a in range(3):
+            e = [along_card([x[ci][k][a] for k in range(m1)]) for x in rs]  # e[i][k]: frame i's residual
+            for k in range(m1):  # (round: half to even, as the spec's)
+                spine[k][a] = float(integer_at(round(rest[ci].spine[k][a] / qa), [x[k] for x in e], j)) * qa
+        angles = [0] * m1
+        for i in range(j + 1):
+            turned = along_card([x % turn for x in ra[i][ci]])
+            angles = [(angles[k] + turned[k]) % turn for k in range(m1)]
         out.append(frame_card(spine, angles, bits, rest[ci].half_width))
+    return out
+
+
+def along_card(d: list[int]) -> list[int]:
+    """The running sums of ``d`` along a card (4.6), int64 that wraps."""
+    out, total = [], 0
+    for x in d:
+        total = wrap64(total + x)
+        out.append(total)
     return out
 
 

@@ -32,6 +32,7 @@ SPINE_HEADER, ANGLE_HEADER = 4 + 4 * 4, 4 + 3 * 4  # the array records' headers 
 MAX_INT_BYTES = 8  # the widest integer an ``ints`` record may hold
 DEFAULT_KEYFRAME_INTERVAL = 32  # a second at 30 fps: docs/format.md, "Animation"
 STEP_FRACTION = 0.5  # the spine step qa, as a fraction of the profile's point tolerance (docs/format.md, "Animation")
+MAX_TIGHTENINGS, TIGHTEN_TARGET = 6, 0.97  # the step search (:func:`encode_within`), as the strands' writer's
 SAFE_INTEGER = 2.0**53  # spine integers beyond this lose exactness in float64
 
 
@@ -59,20 +60,39 @@ class AnimationReport:
                 f"({self.max_point_error / max(diagonal, 1e-30):.2e} of the bbox diagonal) of the input frames'")
 
 
-def animation_meta(animation: Animation, rest: Cards, prof: Profile, diag: float,
+def animation_meta(animation: Animation, rest: Cards, prof: Profile, diag: float, step: float | None = None,
                    keyframe_interval: int = DEFAULT_KEYFRAME_INTERVAL) -> dict:
     """META's ``animation`` object (spec 2.1) for ``animation`` of ``rest`` at the profile ``prof``:
-    quantized, the spine step is the profile's point tolerance (``qa``, spine coordinates within ``qa/2``),
-    and normals have the bits that keep a point at the card's edge or at the largest ``|delta|``
-    within ``qa/2`` of its place as the normal turns (``reach``: the farthest a rail lies from the spine)."""
+    quantized, the spine step ``step`` (default: :data:`STEP_FRACTION` of the profile's point tolerance;
+    spine coordinates within ``step / 2``), and the fewest normal bits that keep a rail within
+    ``step / 2`` of its place as the normal turns by its bound (``reach``: the widest half-width)."""
     meta = {"frames": animation.frames, "fps": float(animation.fps), "start": float(animation.start),
             "keyframe_interval": int(min(keyframe_interval, animation.frames)), "source": animation.source}
     if prof.lossless:
         return meta
-    qa = STEP_FRACTION * prof.position_tolerance * max(diag, 1e-12)
+    qa = STEP_FRACTION * prof.position_tolerance * max(diag, 1e-12) if step is None else step
     reach = float(np.max(rest.half_width, initial=0.0)) + qa
     bits = int(np.clip(np.ceil(np.log2(2 * np.pi * reach / qa)), 8, 24))
     return meta | {"step": qa, "normal_bits": bits}
+
+
+def encode_within(animation: Animation, rest: Cards, prof: Profile, diag: float, uvd: np.ndarray,
+                  strand_card: np.ndarray) -> tuple[dict, bytes, AnimationReport]:
+    """META's ``animation``, ANIM's payload and the report, at the largest step the search finds (from
+    :func:`animation_meta`'s, smaller while some strand point, ``uvd`` on ``strand_card``, lies farther than
+    the profile's tolerance from its place on the input frames): a spine's error turns its tangent, and
+    so the card's rails, by more where a segment is short against the card's width."""
+    tol = prof.position_tolerance * max(diag, 1e-12)
+    meta = animation_meta(animation, rest, prof, diag)
+    for _ in range(MAX_TIGHTENINGS):
+        payload, decoded = encode_animation(animation, rest, meta, prof.zstd_level)
+        error = animation_point_error(uvd, strand_card, animation, decoded, rest)
+        if prof.lossless or error <= tol:
+            break
+        meta = animation_meta(animation, rest, prof, diag, meta["step"] * TIGHTEN_TARGET * tol / error)
+    report = AnimationReport(animation.frames, animation.fps, len(payload), meta.get("step"), meta.get("normal_bits"),
+                             error)
+    return meta, payload, report
 
 
 def encode_animation(animation: Animation, rest: Cards, meta: dict, level: int) -> tuple[bytes, Animation]:
@@ -136,18 +156,18 @@ def _wrap(x: np.ndarray, bits: int) -> np.ndarray:
 
 
 def _quantized_block(spine_q: np.ndarray, angles: np.ndarray, base: np.ndarray, bits: int) -> bytes:
-    """One block's records: the spine residuals ``ints[n, C, M+1, 3]``, then the angles' ``ints[n, C, M+1]``."""
-    spine_r = np.empty_like(spine_q)
-    spine_r[0] = spine_q[0] - base
-    spine_r[1:2] = spine_q[1:2] - spine_q[0:1]
-    spine_r[2:] = spine_q[2:] - (2 * spine_q[1:-1] - spine_q[:-2])
-    angle_r = np.empty_like(angles)
-    angle_r[0, :, 0] = angles[0, :, 0]
-    angle_r[0, :, 1:] = _wrap(np.diff(angles[0], axis=1), bits)
-    angle_r[1:] = _wrap(np.diff(angles, axis=0), bits)
+    """One block's records (spec 4.6): the spine residuals ``ints[n, C, M+1, 3]``, then the angles'
+    ``ints[n, C, M+1]``, each the difference of a frame's integers from their prediction (the rest
+    cards', or the frames before), differenced again along the card."""
+    spine_e = np.empty_like(spine_q)
+    spine_e[0] = spine_q[0] - base
+    spine_e[1:2] = spine_q[1:2] - spine_q[0:1]
+    spine_e[2:] = spine_q[2:] - (2 * spine_q[1:-1] - spine_q[:-2])
+    angle_e = angles.copy()
+    angle_e[1:] = angles[1:] - angles[:-1]
     w = StreamWriter()
-    w.ints(spine_r)
-    w.ints(angle_r)
+    w.ints(np.diff(spine_e, axis=2, prepend=0))
+    w.ints(_wrap(np.diff(angle_e, axis=2, prepend=0), bits))
     return w.getvalue()
 
 
@@ -285,17 +305,16 @@ class AnimationReader:
         return spine, normal
 
     def _predicted(self, spine_r: np.ndarray, angle_r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Undo the predictions of one block (int64, wrapping) and decode its frames."""
+        """Undo the predictions of one block (int64, wrapping; spec 4.6) and decode its frames."""
         bits = self.meta["normal_bits"]
         turn = 1 << bits
-        q = np.empty_like(spine_r)
-        a = np.empty_like(angle_r)
         with np.errstate(over="ignore"):
-            q[0] = self._base + spine_r[0]
-            a[0] = np.cumsum(angle_r[0] % turn, axis=1) % turn
+            e, turned = np.cumsum(spine_r, axis=2), np.cumsum(angle_r % turn, axis=2)  # along each card
+            q, a = np.empty_like(e), np.empty_like(turned)
+            q[0], a[0] = self._base + e[0], turned[0] % turn
             for j in range(1, len(q)):
-                q[j] = (q[j - 1] if j == 1 else 2 * q[j - 1] - q[j - 2]) + spine_r[j]
-                a[j] = (a[j - 1] + angle_r[j] % turn) % turn
+                q[j] = (q[j - 1] if j == 1 else 2 * q[j - 1] - q[j - 2]) + e[j]
+                a[j] = (a[j - 1] + turned[j]) % turn
         return decode_quantized(q, a, self.meta["step"], bits)
 
 

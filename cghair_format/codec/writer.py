@@ -28,7 +28,7 @@ from ..strand_coder import NEWTON_HALVINGS, STRETCH_MAX, Coded, DeadZone, canoni
 from ..streams import StreamReader, StreamWriter
 from . import choices as choosing
 from . import schema
-from .animation import AnimationReport, animation_meta, animation_point_error, encode_animation
+from .animation import AnimationReport, encode_within
 from .choices import Choices
 from .chunks import OpacityMarks, appearance_chunks, geometry_chunks, lossless_cards, quantized_cards
 from .layout import ANIM_CHUNK, Family, prediction, uvd_scale
@@ -203,13 +203,11 @@ def _animation_chunk(asset: HairAsset, prof: Profile, meta: dict, card: containe
                      ) -> tuple[container.Stored, AnimationReport]:
     """ANIM (stored raw: its blocks are compressed on their own) for ``animation`` of the rest cards as a
     decoder gets them from ``card`` (CARD), with META's ``animation`` object added to ``meta``; and what
-    it measured, the points' error on the file's strands."""
+    it measured, the points' error on the file's strands (within the profile's tolerance of them on the
+    input frames: :func:`.animation.encode_within`)."""
     rest = read_cards(StreamReader(card.chunk.payload, "CARD"), meta)
-    meta["animation"] = animation_meta(animation, rest, prof, meta["bbox_diagonal"])
-    payload, decoded = encode_animation(animation, rest, meta["animation"], prof.zstd_level)
-    error = animation_point_error(asset.uvd, asset.strand_card, animation, decoded, rest)
-    report = AnimationReport(animation.frames, animation.fps, len(payload), meta["animation"].get("step"),
-                             meta["animation"].get("normal_bits"), error)
+    meta["animation"], payload, report = encode_within(animation, rest, prof, meta["bbox_diagonal"], asset.uvd,
+                                                       asset.strand_card)
     return container.Stored(container.Chunk(ANIM_CHUNK, payload, required=False), container.CODEC_RAW, payload), report
 
 
