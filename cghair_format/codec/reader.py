@@ -94,11 +94,20 @@ def read_info(source: Source) -> dict:
         "weight_mode": meta["weight_mode"], "mlp": [layer["out"] for layer in meta["mlp"]],
         "thickness": meta["thickness"], "meters_per_unit": meta["meters_per_unit"], "up_axis": meta["up_axis"],
         "generator": meta["generator"], "attribution": meta["attribution"],
-        "animation": animation_info(meta, next((i for i in infos if i.type == ANIM_CHUNK), None)),
+        "animation": _animation_info(meta, infos, meta_info.offset),
         "bits_per_gaussian": 8 * len(data) / gaussians, "quant": meta["quant"], "opacities": _opacities(meta),
         "chunks": [{"type": i.type, "required": i.required, "codec": ["raw", "zstd"][i.codec],
                     "stored_bytes": i.stored, "raw_bytes": i.raw} for i in infos],
     }
+
+
+def _animation_info(meta: dict, infos: list[container.ChunkInfo], meta_offset: int) -> dict | None:
+    """:func:`.animation.animation_info`, its refusal placed at ANIM's start (or META's)."""
+    anim = next((i for i in infos if i.type == ANIM_CHUNK), None)
+    try:
+        return animation_info(meta, anim)
+    except CghFormatError as exc:
+        raise exc.at(anim.offset if exc.chunk == ANIM_CHUNK else meta_offset) from None
 
 
 def _opacities(meta: dict) -> dict:
