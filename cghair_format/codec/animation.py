@@ -260,23 +260,33 @@ class AnimationReader:
         """The cards at frame ``t`` (half-widths and groups the rest pose's)."""
         if not 0 <= t < self.frames:
             raise AssetError(f"frame {t} is outside the animation's 0..{self.frames - 1}")
-        spine, normal = self._block(t // self.meta["keyframe_interval"])
         j = t % self.meta["keyframe_interval"]
-        return Cards(spine[j], normal[j], self.rest.half_width, self.rest.group)
+        spine, normal = self._frames(t // self.meta["keyframe_interval"], slice(j, j + 1))
+        return Cards(spine[0], normal[0], self.rest.half_width, self.rest.group)
 
     def animation(self) -> Animation:
         """Every frame."""
         self._check_bytes(self.frames, len(self._payload), "all")
-        parts = [self._block(b) for b in range(len(self._blocks))]
+        parts = [self._frames(b, slice(None)) for b in range(len(self._blocks))]
         return Animation(np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]), self.fps,
                          self.start, self.meta["source"])
 
-    def _block(self, b: int) -> tuple[np.ndarray, np.ndarray]:
+    def _frames(self, b: int, frames: slice) -> tuple[np.ndarray, np.ndarray]:
+        """Spines and normals (float32) of block ``b``'s ``frames``. The last block read is kept as its
+        integers (quantized: the floats of a frame are decoded when asked for, so that a player stepping
+        through a block, or seeking into one, decodes one frame's cards a frame)."""
         if self._cache is None or self._cache[0] != b:
             self._cache = (b, self._decode_block(b))
-        return self._cache[1]
+        first, second = self._cache[1]
+        if self.lossless:
+            return first[frames], second[frames]
+        try:
+            return decode_quantized(first[frames], second[frames], self.meta["step"], self.meta["normal_bits"])
+        except InvalidContentError as exc:
+            self._fail(f"block {b}: {exc.message}", self._blocks[b][0])
 
     def _decode_block(self, b: int) -> tuple[np.ndarray, np.ndarray]:
+        """Block ``b``'s lossless spines and normals, or its integers ``Q`` and ``A`` (spec 4.6)."""
         start, stored, raw, codec = self._blocks[b]
         body = bytes(self._payload[start:start + stored])
         if codec == 1:
@@ -292,7 +302,7 @@ class AnimationReader:
                 spine_r, angle_r = r.ints(shape, "spine residuals"), r.ints(shape[:-1], "angle residuals")
             r.finish()
         except InvalidContentError as exc:  # (the block's own offset inside the chunk, then the file)
-            self._fail(f"block {b}: {exc.args[0]}", start, type(exc))
+            self._fail(f"block {b}: {exc.message}", start, type(exc))
         if not self.lossless:
             return self._predicted(spine_r, angle_r)
         check = Animation(spine, normal, self.fps, self.start)
@@ -305,7 +315,7 @@ class AnimationReader:
         return spine, normal
 
     def _predicted(self, spine_r: np.ndarray, angle_r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Undo the predictions of one block (int64, wrapping; spec 4.6) and decode its frames."""
+        """Undo the predictions of one block (int64, wrapping; spec 4.6): its frames' integers ``Q``, ``A``."""
         bits = self.meta["normal_bits"]
         turn = 1 << bits
         with np.errstate(over="ignore"):
@@ -315,7 +325,7 @@ class AnimationReader:
             for j in range(1, len(q)):
                 q[j] = (q[j - 1] if j == 1 else 2 * q[j - 1] - q[j - 2]) + e[j]
                 a[j] = (a[j - 1] + turned[j]) % turn
-        return decode_quantized(q, a, self.meta["step"], bits)
+        return q, a
 
 
 def _decompress(body: bytes, raw: int, fail) -> bytes:

@@ -223,3 +223,26 @@ def test_nan_in_a_lossless_frame_is_refused(files):
         reader.frame(1)
     assert exc.value.chunk == "ANIM" and exc.value.offset is not None
     assert np.isfinite(reader.frame(40).spine).all()  # its other blocks decode
+
+
+def test_a_spine_beyond_the_format_s_lengths_is_refused_with_its_frame(asset):
+    """A keyframe residual that puts a spine at 2^60 steps decodes, in int64, beyond 10^12 units."""
+    data = cgh.encode(asset, "compact", animation=example_animation(asset.cards, 40))[0]
+    reader = cgh.animation_reader(data)
+    start, stored, raw, _ = reader._blocks[1]
+    w = StreamWriter()
+    shape = (8, *asset.cards.spine.shape)
+    spine = np.zeros(shape, np.int64)
+    spine[0, 0, 0, 0] = 1 << 60
+    w.ints(spine)
+    w.ints(np.zeros(shape[:-1], np.int64))
+    body = w.getvalue()
+    payload = bytes(reader._payload)
+    first = reader._blocks[0]
+    table = COUNT.pack(2) + BLOCK_ENTRY.pack(first[1], first[2], first[3]) + BLOCK_ENTRY.pack(len(body), len(body), 0)
+    bad = _with_anim(data, table + payload[first[0]:first[0] + first[1]] + body)
+    reader = cgh.animation_reader(bad)
+    assert np.isfinite(reader.frame(31).spine).all()
+    with pytest.raises(cgh.CghFormatError, match="block 1: an animation frame's spine lies beyond") as exc:
+        reader.frame(35)
+    assert exc.value.chunk == "ANIM" and exc.value.offset is not None
