@@ -26,11 +26,11 @@ def run(args: argparse.Namespace) -> int:
 
     asset = read(args.file)
     info = read_info(args.file)
+    animation = read_animation(args.file)  # every frame, checked
     counts = asset.counts
     points = f"{counts.max()}" if counts.min() == counts.max() else f"{counts.min()}-{counts.max()}"
     print(f"{args.file}: valid .cgh ({asset.n_strands:,} strands of {points} points, {asset.n_gaussians:,} "
           f"Gaussians); opacities: {opacity_line(info)}")
-    animation = read_animation(args.file)  # every frame, checked
     if animation is not None:
         print(f"{args.file}: animation: {animation_line(info['animation'])}")
     if not args.reference:

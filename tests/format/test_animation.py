@@ -111,6 +111,11 @@ def test_cli_shows_validates_and_keeps_the_animation(tmp_path, files, capsys):
     assert cli_main(["validate", str(src), "--reference"]) == 0
     out = capsys.readouterr().out
     assert "animation: 70 frames" in out and "the same cards on all 70 animation frames, bit for bit" in out
+    nan = tmp_path / "nan.cgh"
+    nan.write_bytes(_nan_frame(files["lossless"][0]))
+    assert cli_main(["validate", str(nan)]) == 1  # refused, and not called valid first
+    captured = capsys.readouterr()
+    assert "valid" not in captured.out and "holds NaN" in captured.err
     out_file = tmp_path / "compact.cgh"
     assert cli_main(["encode", str(src), "-o", str(out_file), "--profile", "compact"]) == 0
     assert "animation: 70 frames at 30 fps" in capsys.readouterr().out
