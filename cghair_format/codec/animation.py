@@ -3,9 +3,10 @@
 Frames come in blocks of ``keyframe_interval`` (``G``) frames, each compressed on its own behind a small
 table of block sizes, so frame ``t`` decodes from its block alone. Quantized, a frame's spine is stored as
 integers ``round(spine / qa)`` and its normals as angles about its own spine in ``2^normal_bits`` steps a
-turn, exactly as CARD codes the rest cards (spec 4.2); a block's first frame (the keyframe) as residuals
-from the rest cards' integers (spine) and along each card (angles), every later frame as residuals from
-a prediction from the frames before it in the block. Lossless: the float32 arrays as they are.
+turn, exactly as CARD codes the rest cards (spec 4.2). A block's first frame (the keyframe) is predicted
+from the rest cards' integers (its angles from none), every later frame from the frames before it in the
+block, and the residuals are differenced along each card. Lossless: the float32 arrays as they are. The
+writer's step search (:func:`encode_within`) and the reader (:class:`AnimationReader`) are here too.
 """
 
 from __future__ import annotations
