@@ -11,15 +11,27 @@ except ImportError as exc:  # pragma: no cover - only a source tree that was nev
                       "(it needs a C compiler: gcc, clang or MSVC), or `make venv`") from exc
 
 from .asset import Appearance, Cards, HairAsset, MlpLayer
-from .codec import EncodeReport, decode, encode, read, read_info, read_with_gaussians, write
+from .codec import (
+    AnimationReader,
+    EncodeReport,
+    animation_reader,
+    decode,
+    encode,
+    read,
+    read_animation,
+    read_info,
+    read_with_gaussians,
+    write,
+)
 from .errors import AssetError, CghError, CghFormatError, MissingDependencyError
 from .gaussians import Gaussians, decode_gaussians, decode_points, decode_strands
 from .profiles import PROFILES, Profile
 from .strands import Strands
 
 __all__ = [
-    "PROFILES", "Appearance", "AssetError", "Cards", "CghError", "CghFormatError", "EncodeReport", "Gaussians",
-    "HairAsset", "MissingDependencyError", "MlpLayer", "Profile", "Strands", "decode", "decode_gaussians",
-    "decode_points", "decode_strands", "encode", "read", "read_info", "read_with_gaussians", "write",
+    "PROFILES", "AnimationReader", "Appearance", "AssetError", "Cards", "CghError", "CghFormatError", "EncodeReport",
+    "Gaussians", "HairAsset", "MissingDependencyError", "MlpLayer", "Profile", "Strands", "animation_reader", "decode",
+    "decode_gaussians", "decode_points", "decode_strands", "encode", "read", "read_animation", "read_info",
+    "read_with_gaussians", "write",
 ]
 __version__ = "0.2.0"

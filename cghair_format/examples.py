@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .animation.clip import Animation
 from .asset import Appearance, Cards, HairAsset, MlpLayer
 
 
@@ -77,3 +78,19 @@ def with_point_counts(asset: HairAsset, seed: int = 0) -> HairAsset:
     counts = rng.integers(2, p + 1, asset.n_strands).astype(np.int32)
     counts[0] = p
     return replace(asset, point_counts=counts).validate()
+
+
+def example_animation(cards: Cards, frames: int, fps: float = 30.0) -> Animation:
+    """``cards`` swung rigidly about their roots, back and forth about x, and bent sideways: a clip whose
+    every frame is known exactly (the spec vectors' and the tests' animation)."""
+    out = []
+    root = cards.spine[:, :1].astype(np.float64)
+    along = np.linspace(0, 1, cards.spine.shape[1])[None, :, None]
+    for f in range(frames):
+        a = 0.4 * np.sin(f / 5)
+        c, s = np.cos(a), np.sin(a)
+        r = np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+        spine = (cards.spine - root) @ r.T + root + 0.01 * np.sin(f / 3) * along**2 * np.array([1.0, 0, 0])
+        out.append(Cards(spine.astype(np.float32), (cards.normal @ r.T).astype(np.float32), cards.half_width,
+                         cards.group))
+    return Animation.of_frames(out, fps, start=0.5, source="swing")

@@ -29,9 +29,10 @@ class ReadLimits:
 
     max_gaussians: int = 1 << 24
     max_decoded_bytes: int = 1 << 31
+    max_frames: int = 1 << 17  # an animation's (spec 4.6): over an hour at 30 fps
 
     def __post_init__(self) -> None:
-        if self.max_gaussians < 1 or self.max_decoded_bytes < 1:
+        if self.max_gaussians < 1 or self.max_decoded_bytes < 1 or self.max_frames < 1:
             raise ValueError(f"read limits must be positive, got {self}")
 
 
@@ -76,6 +77,12 @@ def min_payloads(meta: dict) -> dict[str, int]:
     logits = s if meta["weight_mode"] == "hard" else s * k
     return optional | {"CARD": c * (m + 1) * 5 + 2 * c, "STRD": s, "OPAC": s * (p - 1), "LOGT": logits,
                        "CBKS": nt * k * d, "MLPW": weights, "CHLD": 6 * meta["quant"].get("children", 0)}
+
+
+def animation_bytes(frames: int, cards: int, segments: int) -> int:
+    """The bytes of ``frames`` decoded animation frames (spec 4.6): float32 spines and normals, and the
+    int64 integers a quantized block decodes through."""
+    return frames * cards * (segments + 1) * (6 * FLOAT + 4 * 8)
 
 
 # bytes of the arrays decoded from each optional chunk present, per strand (SCOL: per point)

@@ -17,6 +17,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import zstandard
 
 from . import codec, container
 from .errors import InvalidContentError
@@ -528,6 +529,111 @@ def decode_points(data: bytes, cards: set[int] | None = None) -> Decoded:
     return Decoded(index, coordinates, uvd, points, np.array([counts[i] for i in index], np.int64))
 
 
+# --- 4.6 animation ----------------------------------------------------------------------------------
+
+def rest_cards(data: bytes, meta: dict) -> list[Card]:
+    """The rest cards as a decoder has them: 4.2's, or a lossless file's float32 values as stored."""
+    infos = {i.type: i for i in container.read_table(data)[1]}
+    c, m1 = meta["cards"], meta["segments"] + 1
+    if not meta["quant"]["lossless"]:
+        return decode_cards(container.payload(data, infos["CARD"]), c, m1, meta["quant"])
+    r = StreamReader(container.payload(data, infos["CARD"]), "CARD")
+    spine, normal = r.array((c, m1, 3), "spine", ("<f4",)), r.array((c, m1, 3), "normal", ("<f4",))
+    half_width = r.array((c, m1), "half_width", ("<f4",))
+    return [Card(spine[ci].tolist(), normal[ci].tolist(), half_width[ci].tolist()) for ci in range(c)]
+
+
+def decode_frame(data: bytes, t: int) -> list[Card]:
+    """Frame ``t``'s cards (4.6), from its block alone; half-widths are the rest cards'."""
+    _, table = container.verify(data, set(codec.KNOWN_CHUNKS))
+    infos = {i.type: i for i in table}
+    meta = codec.schema.parse(container.payload(data, infos["META"]))
+    anim, rest = meta["animation"], rest_cards(data, meta)
+    g = anim["keyframe_interval"]
+    n = min(g, anim["frames"] - t // g * g)
+    r = StreamReader(block(container.payload(data, infos["ANIM"]), anim, t // g), "ANIM")
+    c, m1, j = meta["cards"], meta["segments"] + 1, t % g
+    if meta["quant"]["lossless"]:
+        spine = r.array((n, c, m1, 3), "spine", ("<f4",))[j]
+        normal = r.array((n, c, m1, 3), "normal", ("<f4",))[j]
+        return [Card(spine[ci].tolist(), normal[ci].tolist(), rest[ci].half_width) for ci in range(c)]
+    rs = r.ints((n, c, m1, 3), "spine residuals").tolist()
+    ra = r.ints((n, c, m1), "angle residuals").tolist()
+    qa, bits = anim["step"], anim["normal_bits"]
+    turn = 1 << bits
+    out = []
+    for ci in range(c):
+        spine = [[0.0] * 3 for _ in range(m1)]
+        for a in range(3):
+            e = [along_card([x[ci][k][a] for k in range(m1)]) for x in rs]  # e[i][k]: frame i's residual
+            for k in range(m1):  # (round: half to even, as the spec's)
+                spine[k][a] = float(integer_at(round(rest[ci].spine[k][a] / qa), [x[k] for x in e], j)) * qa
+        angles = [0] * m1
+        for i in range(j + 1):
+            turned = along_card([x % turn for x in ra[i][ci]])
+            angles = [(angles[k] + turned[k]) % turn for k in range(m1)]
+        out.append(frame_card(spine, angles, bits, rest[ci].half_width))
+    return out
+
+
+def along_card(d: list[int]) -> list[int]:
+    """The running sums of ``d`` along a card (4.6), int64 that wraps."""
+    out, total = [], 0
+    for x in d:
+        total = wrap64(total + x)
+        out.append(total)
+    return out
+
+
+def block(payload: bytes, anim: dict, b: int) -> bytes:
+    """Block ``b``'s bytes (4.6), decompressed."""
+    count = (anim["frames"] + anim["keyframe_interval"] - 1) // anim["keyframe_interval"]
+    start = 4 + 12 * count
+    for k in range(b):
+        start += int.from_bytes(payload[4 + 12 * k:8 + 12 * k], "little")
+    stored = int.from_bytes(payload[4 + 12 * b:8 + 12 * b], "little")
+    raw = int.from_bytes(payload[8 + 12 * b:12 + 12 * b], "little")
+    body = payload[start:start + stored]
+    return zstandard.ZstdDecompressor().decompress(body, max_output_size=raw) if payload[12 + 12 * b] == 1 else body
+
+
+def integer_at(base: int, residuals: list[int], j: int) -> int:
+    """``Q_j`` of one spine coordinate (4.6): int64 arithmetic that wraps."""
+    q = [wrap64(base + residuals[0])]
+    for i in range(1, j + 1):
+        pred = q[0] if i == 1 else wrap64(2 * q[i - 1] - q[i - 2])
+        q.append(wrap64(pred + residuals[i]))
+    return q[j]
+
+
+def frame_card(spine: list, angles: list, bits: int, half_width: list) -> Card:
+    """A card of a frame from its float64 spine and normal angles (4.6, as 4.2)."""
+    t = tangents(spine)
+    normals, ref = [], None
+    for k in range(len(spine)):
+        ref = across(t[0]) if k == 0 else _carried(ref, t[k])
+        cos, sin = turn_cos_sin(angles[k] / 2.0 ** bits)
+        normals.append(normalize(add(scale(cos, ref), scale(sin, cross(t[k], ref)))))
+    return Card([[f32(x) for x in p] for p in spine], [[f32(x) for x in n] for n in normals], half_width)
+
+
+def _carried(ref, t):
+    """4.2's ``r_k`` from ``r_{k-1}`` and ``t_k``."""
+    v = sub(ref, scale(dot(ref, t), t))
+    return across(t) if norm(v) < 1e-6 else normalize(v)
+
+
+def frame_points(data: bytes, t: int) -> np.ndarray:
+    """Every strand point ``[S, P, 3]`` (float32) of frame ``t``: 6.1 on its cards with the file's card
+    coordinates (the compiled decoder's: they are the rest pose's, which :func:`decode_points` checks)."""
+    from .codec import decode
+
+    asset = decode(data)
+    strips = [strip(card, 0.0) for card in decode_frame(data, t)]
+    return np.array([[[f32(e) for e in card_map(strips[c], [float(x) for x in pt])] for pt in row]
+                     for c, row in zip(asset.strand_card, asset.uvd, strict=True)], np.float32)
+
+
 def evenly_spaced_cards(count: int, wanted: int | None) -> set[int] | None:
     """``wanted`` of ``count`` cards, evenly spaced (all: None)."""
     if wanted is None or wanted >= count:
@@ -550,3 +656,19 @@ def compare(data: bytes, cards: set[int] | None = None) -> tuple[int, int]:
               | (points.view(np.uint32) != ref.points.view(np.uint32))).any(axis=(1, 2))
     differ |= asset.counts[ref.index] != ref.counts
     return len(ref.index), int(differ.sum())
+
+
+def compare_frames(data: bytes) -> tuple[int, int]:
+    """Decode every frame of a quantized file's animation with the compiled reader and with
+    :func:`decode_frame`; return how many frames were compared and on how many a card's spine or normal
+    differs in any bit."""
+    from .codec import read_animation
+
+    fast = read_animation(data)
+    differ = 0
+    for f in range(fast.frames):
+        cards = decode_frame(data, f)
+        spine = np.array([c.spine for c in cards], np.float32)
+        normal = np.array([c.normal for c in cards], np.float32)
+        differ += spine.tobytes() != fast.spine[f].tobytes() or normal.tobytes() != fast.normal[f].tobytes()
+    return fast.frames, differ

@@ -22,13 +22,35 @@ import zstandard
 
 import cghair_format as cgh
 from cghair_format import codec, container
-from cghair_format.examples import example_asset
+from cghair_format.examples import example_animation, example_asset
 from cghair_format.limits import ReadLimits
 from cghair_format.streams import StreamReader, StreamWriter
 
 
-def small_file(profile: str = "compact") -> bytes:
-    return cgh.encode(example_asset(11, strands=24, points=12, cards=4, segments=5), profile)[0]
+def small_file(profile: str = "compact", frames: int = 0) -> bytes:
+    """A small asset's file; with ``frames``, animated (spec 4.6)."""
+    asset = example_asset(11, strands=24, points=12, cards=4, segments=5)
+    return cgh.encode(asset, profile, animation=example_animation(asset.cards, frames) if frames else None)[0]
+
+
+ANIM_CASE = "ANIM "  # cases so named are read as an animation (read_animation), the others as an asset
+
+
+def with_anim(data: bytes, payload: bytes) -> bytes:
+    """``data`` with ANIM's payload replaced (stored raw, as spec 4.6 has it)."""
+    return reseal(data, bodies={"ANIM": (container.CODEC_RAW, payload, len(payload))})
+
+
+def anim_block_bomb() -> bytes:
+    """A block whose table says 2^31 - 1 raw bytes, its body a zstd frame of zeros declaring no size."""
+    data = small_file(frames=40)
+    bomb = zstd_frame(None, 64)
+    return with_anim(data, struct.pack("<IIIB3xIIB3x", 2, len(bomb), (1 << 31) - 1, 1, 1, 1, 0) + bomb + b"\0")
+
+
+def anim_table(edit: Callable[[bytes], bytes], frames: int = 40, profile: str = "compact") -> bytes:
+    data = small_file(profile, frames)
+    return with_anim(data, edit(container.unpack(data, set(codec.KNOWN_CHUNKS))[2]["ANIM"]))
 
 
 def reseal(data: bytes, payloads: dict[str, bytes] | None = None,
@@ -133,6 +155,15 @@ def cases() -> dict[str, tuple[Callable[[], bytes], ReadLimits | None]]:
         "XMET with NaN": (lambda: reseal(small_file(), extra=[container.Chunk("XMET", b'{"a": NaN}', False)]),
                           None),
         "flipped byte in an unknown optional chunk": (flipped_unknown_chunk, None),
+        "ANIM block zstd bomb (2 GiB declared)": (anim_block_bomb, None),
+        "ANIM block count 2^32 - 1": (lambda: anim_table(lambda a: struct.pack("<I", (1 << 32) - 1) + a[4:]), None),
+        "ANIM block pointing outside": (lambda: anim_table(lambda a: a[:4] + struct.pack("<I", 1 << 31) + a[8:]),
+                                        None),
+        "ANIM table cut short": (lambda: anim_table(lambda a: a[:10]), None),
+        "ANIM frames over the limit": (lambda: small_file(frames=40), ReadLimits(max_frames=39)),
+        "ANIM frames' bytes over the limit": (lambda: small_file(frames=40), ReadLimits(max_decoded_bytes=50_000)),
+        "ANIM frame count 2^20": (lambda: set_field(small_file(frames=40), ("animation", "frames"), str(1 << 20)),
+                                  None),
     }
     for path in (("thickness",), ("temperature",), ("quant", "step"), ("quant", "card_step"),
                  ("quant", "opacity_scale"), ("quant", "weight_steps")):
@@ -152,15 +183,18 @@ def _rss(field: str) -> int:
         return next(int(line.split()[1]) * 1024 for line in f if line.startswith(field))
 
 
-def measure(data: bytes, limits: ReadLimits | None) -> tuple[str, float, int]:
-    """Decode ``data`` (to Gaussians, as a viewer does): the outcome, seconds, and peak RSS bytes above the
-    RSS before."""
+def measure(name: str, data: bytes, limits: ReadLimits | None) -> tuple[str, float, int]:
+    """Decode ``data`` (to Gaussians, as a viewer does; a case named ``ANIM ...``: its animation): the
+    outcome, seconds, and peak RSS bytes above the RSS before."""
     with open("/proc/self/clear_refs", "w") as f:
         f.write("5")  # reset VmHWM to the current RSS
     before = _rss("VmRSS:")
     start = time.perf_counter()
     try:
-        cgh.read_with_gaussians(data, limits)
+        if name.startswith(ANIM_CASE):
+            cgh.read_animation(data, limits)
+        else:
+            cgh.read_with_gaussians(data, limits)
         outcome = "decoded"
     except cgh.CghFormatError as exc:
         outcome = f"{type(exc).__name__}|{exc.chunk}|{exc.offset}|{exc}"
@@ -174,7 +208,7 @@ def main() -> None:
     warnings.simplefilter("error")  # a warning on untrusted values is a defect: it reports as an ESCAPE
     built = {name: (build(), limits) for name, (build, limits) in cases().items()}
     for name, (data, limits) in built.items():
-        outcome, seconds, peak = measure(data, limits)
+        outcome, seconds, peak = measure(name, data, limits)
         print(json.dumps({"case": name, "bytes": len(data), "outcome": outcome, "seconds": seconds, "peak": peak}),
               flush=True)
 

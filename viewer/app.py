@@ -10,11 +10,14 @@ from typing import Any
 import numpy as np
 
 from cghair_format import HairAsset
+from cghair_format.animation import Animation
 from cghair_format.atomic import atomic_path
 
-from .camera_control import HELP, BudgetControl, OrbitController, ViewerState
+from .camera_control import HELP, ORBIT_DEG_PER_PIXEL, BudgetControl, OrbitController, ViewerState
 from .context import create_window
 from .frame import SplatRenderer
+from .motion import HELP as PLAY_HELP
+from .motion import LIVE_HELP, ClipPlayer, LiveSimulation
 from .renderer import create_renderer
 
 IDLE_WAIT_S = 0.05  # how long a resting window waits for input before looking again
@@ -33,7 +36,9 @@ def save_png(image: np.ndarray, path: str | Path) -> Path:
 def _key_name(glfw: Any, key: int) -> str:
     special = {glfw.KEY_ESCAPE: "ESCAPE", glfw.KEY_F12: "F12", glfw.KEY_EQUAL: "=", glfw.KEY_MINUS: "-",
                glfw.KEY_KP_ADD: "+", glfw.KEY_KP_SUBTRACT: "-", glfw.KEY_LEFT_BRACKET: "[",
-               glfw.KEY_RIGHT_BRACKET: "]"}
+               glfw.KEY_RIGHT_BRACKET: "]", glfw.KEY_SPACE: "SPACE", glfw.KEY_LEFT: "LEFT", glfw.KEY_RIGHT: "RIGHT",
+               glfw.KEY_HOME: "HOME", glfw.KEY_END: "END", glfw.KEY_PAGE_UP: "PAGE_UP",
+               glfw.KEY_PAGE_DOWN: "PAGE_DOWN"}
     if key in special:
         return special[key]
     if glfw.KEY_0 <= key <= glfw.KEY_9:
@@ -51,15 +56,18 @@ def window_title(title: str, fps: float, drawn: str, budget: str, file_size: int
 
 class WindowInput:
     """Key and mouse state from glfw's callbacks: keys held (for flying), presses not yet handled,
-    and mouse drags applied to the orbit controller (left: orbit; right, middle or shift: pan)."""
+    and mouse drags applied to the orbit controller (left: orbit; right, middle or shift: pan), or
+    with ctrl to the motion: a live simulation's head (left: turn; right or middle: move), or a
+    clip's time (the pointer across the window's width is the time slider)."""
 
-    def __init__(self, glfw: Any, window: Any, state: ViewerState, press: tuple[str, ...] = ()):
-        self.glfw, self.window, self.state = glfw, window, state
+    def __init__(self, glfw: Any, window: Any, state: ViewerState, press: tuple[str, ...] = (),
+                 motion: ClipPlayer | LiveSimulation | None = None):
+        self.glfw, self.window, self.state, self.motion = glfw, window, state, motion
         self.held: set[str] = set()
         self.pending: list[str] = list(press)
         self.buttons: set[int] = set()
         self.pos: tuple[float, float] | None = None
-        self.shift = False
+        self.shift = self.ctrl = False
         glfw.set_key_callback(window, self.on_key)
         glfw.set_mouse_button_callback(window, self.on_button)
         glfw.set_cursor_pos_callback(window, self.on_move)
@@ -81,14 +89,26 @@ class WindowInput:
 
     def on_button(self, _w, button, action, mods) -> None:
         self.shift = bool(mods & self.glfw.MOD_SHIFT)
+        self.ctrl = bool(mods & self.glfw.MOD_CONTROL)
         (self.buttons.add if action == self.glfw.PRESS else self.buttons.discard)(button)
+        if action == self.glfw.PRESS and self.ctrl and isinstance(self.motion, ClipPlayer) and self.pos is not None:
+            self.motion.seek(self.pos[0] / max(self.glfw.get_window_size(self.window)[0] - 1, 1))
 
     def on_move(self, _w, x, y) -> None:
         glfw, ctl = self.glfw, self.state.controller
         if self.pos is not None and self.buttons:
             dx, dy = x - self.pos[0], y - self.pos[1]
-            if glfw.MOUSE_BUTTON_RIGHT in self.buttons or glfw.MOUSE_BUTTON_MIDDLE in self.buttons or self.shift:
-                ctl.pan(dx, dy, glfw.get_framebuffer_size(self.window)[1])
+            second = glfw.MOUSE_BUTTON_RIGHT in self.buttons or glfw.MOUSE_BUTTON_MIDDLE in self.buttons
+            height = glfw.get_framebuffer_size(self.window)[1]
+            if self.ctrl and isinstance(self.motion, ClipPlayer):
+                self.motion.seek(x / max(glfw.get_window_size(self.window)[0] - 1, 1))
+            elif self.ctrl and isinstance(self.motion, LiveSimulation):
+                if second:
+                    self.motion.move(ctl.drag_offset(dx, dy, height))
+                else:
+                    self.motion.turn(dx * ORBIT_DEG_PER_PIXEL, dy * ORBIT_DEG_PER_PIXEL, ctl.axes()[0])
+            elif second or self.shift:
+                ctl.pan(dx, dy, height)
             else:
                 ctl.orbit(dx, dy)
         self.pos = (x, y)
@@ -110,70 +130,102 @@ def _screenshot(ctx: Any, width: int, height: int, path: Path) -> None:
     print(f"screenshot: {path}")
 
 
+Motion = ClipPlayer | LiveSimulation
+
+
+def _motion(asset: HairAsset, animation: Animation | None, simulate: bool, frames: range | None) -> Motion | None:
+    """What moves the cards: the live solver, a clip, or nothing (a still asset)."""
+    if simulate:
+        return LiveSimulation(asset)
+    return ClipPlayer(animation, asset.cards, frames) if animation is not None else None
+
+
+def _press_keys(keys: WindowInput, state: ViewerState, budgets: BudgetControl, motion: Motion | None,
+                window: Any) -> bool:
+    """Apply the key presses since the last frame; returns whether a screenshot was asked for."""
+    import glfw
+
+    shot = False
+    for key in keys.pending:
+        if motion is not None and motion.press(key):
+            continue
+        action = state.press(key)
+        if action == "quit":
+            glfw.set_window_should_close(window, True)
+        elif action == "budget":
+            budgets.cycle()
+        elif action == "screenshot":
+            shot = True
+    keys.pending.clear()
+    return shot
+
+
 def run_viewer(asset: HairAsset, *, title: str, file_size: int, width: int = 1280, height: int = 720,
                sort: str = "auto", rasterizer: str = "auto", budget: int | None = None,
-               screenshot_dir: str | Path = ".", max_frames: int | None = None, press: tuple[str, ...] = ()) -> int:
+               screenshot_dir: str | Path = ".", max_frames: int | None = None, press: tuple[str, ...] = (),
+               animation: Animation | None = None, frames: range | None = None, simulate: bool = False) -> int:
     """Open a window on ``asset`` and run until it is closed; returns the number of frames drawn.
 
-    ``budget``: a fixed splat budget; by default it adapts while the camera moves (see
-    :class:`BudgetControl`). The splats are drawn again only when the view, the settings or the
-    budget change, so a resting camera costs one full-quality frame. ``max_frames`` closes the
-    window after that many frames and ``press`` replays key presses before the first frame
-    (scripted sessions and tests).
+    ``budget``: a fixed splat budget; by default it adapts while the camera (or the hair) moves (see
+    :class:`BudgetControl`). The splats are drawn again only when the view, the settings, the budget or
+    the cards change, so a resting camera on still hair costs one full-quality frame. ``animation``
+    (its ``frames``, default all) plays in real time; ``simulate`` runs the strand solver live instead,
+    the head dragged with ctrl. ``max_frames`` closes the window after that many frames and ``press``
+    replays key presses before the first frame (scripted sessions and tests).
     """
     import glfw
 
     window, ctx = create_window(width, height, title)
     try:
-        renderer = create_renderer(ctx, asset, sort=sort, rasterizer=rasterizer, budget=budget)
+        motion = _motion(asset, animation, simulate, frames)
+        renderer = create_renderer(ctx, asset, sort=sort, rasterizer=rasterizer, budget=budget,
+                                   animated=motion is not None)
         state = ViewerState(OrbitController.framing(*renderer.bounds, asset.up_axis),
                             max_sh_degree=asset.appearance.sh_degree)
         budgets = BudgetControl(renderer.count, fixed=budget)
-        keys = WindowInput(glfw, window, state, press)
-        drawn = last_view = shot = None  # drawn: what the accumulation target holds, (view, budget)
-        frames, fps, idle, last = 0, 0.0, False, time.perf_counter()  # fps: of the frames that drew splats
-        print(HELP)
-        while not glfw.window_should_close(window) and (max_frames is None or frames < max_frames):
+        keys = WindowInput(glfw, window, state, press, motion)
+        drawn = last_view = None  # drawn: what the accumulation target holds, (view, pose, budget)
+        frames_drawn, pose, fps, idle, last = 0, 0, 0.0, False, time.perf_counter()  # fps: of splat frames
+        print(HELP if motion is None else f"{HELP}\n{LIVE_HELP if simulate else PLAY_HELP}")
+        while not glfw.window_should_close(window) and (max_frames is None or frames_drawn < max_frames):
             if idle:  # nothing changed last time: sleep until an event (or a moment) instead of spinning
                 glfw.wait_events_timeout(IDLE_WAIT_S)
             else:
                 glfw.poll_events()
             now = time.perf_counter()
             state.fly(keys.held, now - last)
+            shot = _press_keys(keys, state, budgets, motion, window)
+            cards = motion.advance(now - last) if motion is not None else None
             last = now
+            if cards is not None:
+                renderer.move_cards(cards)
+                pose += 1
             fb_w, fb_h = glfw.get_framebuffer_size(window)
             if fb_w == 0 or fb_h == 0:
                 continue
             camera = state.controller.camera(fb_w, fb_h)
-            for key in keys.pending:
-                action = state.press(key)
-                if action == "quit":
-                    glfw.set_window_should_close(window, True)
-                elif action == "budget":
-                    budgets.cycle()
-                elif action == "screenshot":
-                    shot = Path(screenshot_dir) / f"cgh_view_{time.strftime('%Y%m%d_%H%M%S')}_{frames}.png"
-            keys.pending.clear()
             s = state.settings
             view = (fb_w, fb_h, camera.world_to_camera.tobytes(), s)
-            moving, last_view = last_view is not None and view != last_view, view
+            playing = motion is not None and motion.active
+            moving, last_view = (last_view is not None and view != last_view) or playing, view
             frame_budget = budgets.budget(moving) if renderer.supports_budget else None  # OpenGL 3.3: every splat
-            idle = (view, frame_budget) == drawn and not keys.active
-            if not s.hide_splats and (view, frame_budget) != drawn:
+            idle = (view, pose, frame_budget) == drawn and not keys.active and not playing
+            if not s.hide_splats and (view, pose, frame_budget) != drawn:
                 seconds = _draw(renderer, camera, s, frame_budget)
                 budgets.record(seconds, renderer.drawn, moving)
-                fps, drawn = 1.0 / max(seconds, 1e-6), (view, frame_budget)
+                fps, drawn = 1.0 / max(seconds, 1e-6), (view, pose, frame_budget)
             ctx.screen.viewport = (0, 0, fb_w, fb_h)
             renderer.composite(camera, s, target=ctx.screen, flip_y=True)
-            if shot is not None:
-                _screenshot(ctx, fb_w, fb_h, shot)
-                shot = None
+            if shot:
+                _screenshot(ctx, fb_w, fb_h, Path(screenshot_dir) /
+                            f"cgh_view_{time.strftime('%Y%m%d_%H%M%S')}_{frames_drawn}.png")
+            status = state.status() + (f" | {motion.status()}" if motion is not None else "")
             glfw.set_window_title(window, window_title(title, fps, renderer.describe(), budgets.label(), file_size,
-                                                      state.status()))
+                                                      status))
             glfw.swap_buffers(window)
-            frames += 1
+            frames_drawn += 1
         renderer.release()
-        return frames
+        return frames_drawn
     finally:
         glfw.destroy_window(window)
         glfw.terminate()

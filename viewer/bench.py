@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from .bench_motion import animated_runs, format_animated
 from .frame import STAGES
 from .pipeline import bind, set_uniforms
 from .rasterizer import Target
@@ -81,12 +82,14 @@ def benchmark(path: str | None = None, synthetic: int | None = None, points: int
               height: int = 1080, frames: int = 3, sort: str = "auto",
               rasterizers: tuple[str, ...] = ("compute", "raster"),
               budgets: tuple[int, ...] | None = None, reference_size: tuple[int, int] | None = REFERENCE_SIZE,
-              ctx: Any = None) -> dict:
+              ctx: Any = None, animate: bool = False, simulate: bool = False) -> dict:
     """Figures in seconds (medians over ``frames``) and dB, plus counts, the OpenGL driver and
     device, and the work-group sizes.
 
     ``budgets``: Gaussians per frame of the level-of-detail runs (default: 1/4, 1/8 and 1/16 of
-    the asset's); ``reference_size``: ``None`` skips the reference splatter.
+    the asset's); ``reference_size``: ``None`` skips the reference splatter. ``animate`` adds the
+    animated frame against the static one (:mod:`viewer.bench_motion`, ``"animated"``), with the live
+    simulation's cost where ``simulate``.
     """
     from cghair_format.camera import Camera
 
@@ -105,7 +108,8 @@ def benchmark(path: str | None = None, synthetic: int | None = None, points: int
         raise GLContextError("bench-viewer measures the GPU pipeline, which needs OpenGL 4.3 compute shaders; "
                              f"this context offers {ctx.version_code / 100:.1f}")
     made: list[Renderer] = []
-    t_upload = _timed(ctx, lambda: made.append(Renderer.from_asset(ctx, asset, sort=sort)))
+    animated = animate or simulate
+    t_upload = _timed(ctx, lambda: made.append(Renderer.from_asset(ctx, asset, sort=sort, animated=animated)))
     renderer = made[0]
     if budgets is None:
         budgets = tuple(max(1, int(renderer.count * f)) for f in BUDGET_FRACTIONS)
@@ -135,6 +139,13 @@ def benchmark(path: str | None = None, synthetic: int | None = None, points: int
         result["compute_over_raster"] = full["compute"] / full["raster"]  # full quality, same run
     if "raster" in rasterizers:
         result.update(_raster_baselines(renderer, cam, settings, frames))
+    if animated:
+        from .motion import file_animation
+
+        renderer.rasterizer = rasterizers[0]
+        clip = file_animation(path) if path is not None and not simulate else None
+        result["animated"] = animated_runs(renderer, asset, cam, settings, (None, *budgets), frames, StageClock, clip,
+                                           simulate)
     renderer.release()
     if own_ctx:
         ctx.release()
@@ -295,4 +306,6 @@ def format_report(r: dict) -> str:
             f"baseline bare instanced quads {ms(r['bare_quads_s'])} ms (draw / bare = {r['draw_over_bare']:.2f}x), "
             f"from the gathered records {ms(r['bare_quads_records_s'])} ms ({r['draw_over_bare_records']:.2f}x)",
         ]
+    if "animated" in r:
+        lines += format_animated(r["animated"])
     return "\n".join(lines)

@@ -63,20 +63,24 @@ class OrbitController:
         """Scroll by ``steps`` (positive: closer)."""
         self.distance = max(MIN_DISTANCE, self.distance * ZOOM_PER_STEP ** steps)
 
-    def _axes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def axes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """World-space right, down and forward axes of the current camera."""
         r = self.camera(2, 2).world_to_camera[:3, :3]
         return r[0], r[1], r[2]
 
+    def drag_offset(self, dx: float, dy: float, viewport_height: int) -> np.ndarray:
+        """The world-space move that follows a drag of ``(dx, dy)`` pixels at the target's depth."""
+        world_per_pixel = 2 * self.distance * math.tan(math.radians(self.fov_y) / 2) / max(viewport_height, 1)
+        right, down, _ = self.axes()
+        return (dx * right + dy * down) * world_per_pixel
+
     def pan(self, dx: float, dy: float, viewport_height: int) -> None:
         """Mouse drag by ``(dx, dy)`` pixels: move the target so the scene follows the pointer."""
-        world_per_pixel = 2 * self.distance * math.tan(math.radians(self.fov_y) / 2) / max(viewport_height, 1)
-        right, down, _ = self._axes()
-        self.target = self.target - (dx * right + dy * down) * world_per_pixel
+        self.target = self.target - self.drag_offset(dx, dy, viewport_height)
 
     def fly(self, forward: float, right: float, up: float, seconds: float) -> None:
         """WASD flight: move the target (and camera) along the view axes for ``seconds``."""
-        r, down, fwd = self._axes()
+        r, down, fwd = self.axes()
         step = FLY_SPEED * self.distance * seconds
         self.target = self.target + step * (forward * fwd + right * r - up * down)
 

@@ -13,10 +13,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="depth sort: GPU radix sort, numpy, or auto (GPU except on software renderers)")
     add_raster_arguments(parser, budget_help="a fixed splat budget, e.g. 500k (default: adaptive, full quality "
                          "when the camera rests; key B cycles budgets)")
+    parser.add_argument("--simulate", action="store_true",
+                        help="run the strand simulation live: ctrl-drag turns the head, ctrl-right-drag moves it "
+                             "(an animated file otherwise plays its animation: space, arrows, page up/down)")
     parser.add_argument("--screenshots", default=".", help="folder for screenshots (key P)")
     parser.add_argument("--frames", type=int, default=None, help="close after this many frames (scripted runs)")
     parser.add_argument("--press", default="", metavar="KEYS",
-                        help="key presses to replay before the first frame, e.g. 'LGP' (scripted runs)")
+                        help="key presses to replay before the first frame, e.g. 'LGP', or key names separated "
+                             "by commas, e.g. 'SPACE,RIGHT,P' (scripted runs)")
+
+
+def press_keys(text: str) -> tuple[str, ...]:
+    """``--press``: one key a character, or key names (``SPACE``, ``RIGHT``) separated by commas."""
+    return tuple(k.strip().upper() for k in text.split(",") if k.strip()) if "," in text else tuple(text)
 
 
 def budget_type(text: str) -> int:
@@ -54,6 +63,7 @@ def run(args: argparse.Namespace) -> int:
     from cghair_format.errors import CghError
 
     from .app import run_viewer
+    from .motion import file_animation
 
     positive("width", args.width)
     positive("height", args.height)
@@ -62,8 +72,9 @@ def run(args: argparse.Namespace) -> int:
     if not Path(args.screenshots).is_dir():
         raise CghError(f"screenshot folder {args.screenshots} does not exist")
     asset = cghair_format.read(args.file)
+    animation = None if args.simulate else file_animation(args.file)
     run_viewer(asset, title=f"cgh view {Path(args.file).name}", file_size=Path(args.file).stat().st_size,
                width=args.width, height=args.height, sort=args.sort, rasterizer=args.rasterizer,
                budget=args.budget, screenshot_dir=args.screenshots,
-               max_frames=args.frames, press=tuple(args.press))
+               max_frames=args.frames, press=press_keys(args.press), animation=animation, simulate=args.simulate)
     return 0

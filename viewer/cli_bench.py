@@ -25,6 +25,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--reference-size", type=int, nargs=2, default=(480, 270), metavar=("W", "H"),
                         help="size of the reference splatter's render for the PSNR (default 480 270)")
     parser.add_argument("--no-reference", action="store_true", help="skip the reference splatter (needs torch)")
+    parser.add_argument("--animate", action="store_true",
+                        help="also time an animated frame (card upload + GPU decode + splat) against the static "
+                             "one, on the file's animation or a simulated nod")
+    parser.add_argument("--simulate", action="store_true",
+                        help="like --animate, with the cards simulated live each frame (simulation time included)")
     parser.add_argument("--json", default=None, metavar="PATH", help="also write the figures as JSON")
 
 
@@ -53,7 +58,8 @@ def run(args: argparse.Namespace) -> int:
     result = benchmark(path=args.file, synthetic=args.synthetic, points=args.points, width=args.width,
                        height=args.height, frames=args.frames, sort=args.sort, rasterizers=rasterizers,
                        budgets=tuple(args.budget) if args.budget else None,
-                       reference_size=None if args.no_reference else tuple(args.reference_size))
+                       reference_size=None if args.no_reference else tuple(args.reference_size),
+                       animate=args.animate, simulate=args.simulate)
     print(format_report(result))
     if args.json:
         with open(args.json, "w", encoding="utf-8") as f:

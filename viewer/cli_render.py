@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from cghair_format.animation import MOTIONS
+
 from .cli import add_raster_arguments
 
 IMAGE_EXTS = (".png",)
@@ -27,7 +29,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--frame", type=int, default=0, help="frame index in --camera (default 0)")
     parser.add_argument("--turntable", type=int, default=0, metavar="N",
                         help="render N views around the up axis into an animated .gif or .mp4")
-    parser.add_argument("--fps", type=float, default=24.0, help="turntable frame rate (default 24)")
+    parser.add_argument("--fps", type=float, default=None,
+                        help="frame rate of the .gif/.mp4 (default: the animation's, or 24 for a turntable)")
+    anim = parser.add_argument_group("hair that moves (one camera; .gif or .mp4)")
+    anim.add_argument("--frames", default=None, metavar="A:B",
+                      help="render frames A to B-1 of the file's animation (or of --motion), e.g. 0:48")
+    anim.add_argument("--animate", action="store_true", help="render every frame of the animation")
+    anim.add_argument("--motion", default=None, choices=MOTIONS,
+                      help="simulate the hair under this built-in head motion (B frames of --frames, or 2 s) "
+                           "instead of reading the file's animation")
     look = parser.add_argument_group("appearance")
     look.add_argument("--background", type=float, nargs=3, default=(0.0, 0.0, 0.0), metavar=("R", "G", "B"))
     look.add_argument("--sh-degree", type=int, choices=(0, 1, 2, 3), default=None,
@@ -64,12 +74,46 @@ def run(args: argparse.Namespace) -> int:
     if not out.parent.exists():
         raise CghError(f"output folder {out.parent} does not exist")
     asset = cghair_format.read(args.file)
+    animation, frames = _animation(args, asset)
+    if frames is not None and ext == ".png":
+        raise CghError("--frames, --animate and --motion write an animation: name the output .gif or .mp4")
+    fps = args.fps if args.fps is not None else (animation.fps if frames is not None else 24.0)
     job = RenderJob(width=args.width, height=args.height, azimuth=args.azimuth, elevation=args.elevation,
                     distance=args.distance, target=args.target, fov=args.fov, transforms=args.camera,
-                    frame=args.frame, turntable=args.turntable, fps=args.fps, background=tuple(args.background),
+                    frame=args.frame, turntable=args.turntable, fps=fps, background=tuple(args.background),
                     sh_degree=args.sh_degree, splat_scale=args.splat_scale,
                     color_by_group=args.color_by_group, cards=args.cards, strands=args.strands, sort=args.sort,
-                    rasterizer=args.rasterizer, budget=args.budget)
-    written = render_job(asset, job, out, log=print if args.verbose else None)
+                    rasterizer=args.rasterizer, budget=args.budget, frames=frames)
+    written = render_job(asset, job, out, log=print if args.verbose else None, animation=animation)
     print(f"wrote {written}")
     return 0
+
+
+def _animation(args: argparse.Namespace, asset):
+    """The animation and the frames of it to render (``None, None``: the rest pose)."""
+    from cghair_format.errors import CghError
+
+    from .motion import file_animation, parse_frames, simulated_animation
+
+    if args.frames is None and not args.animate and args.motion is None:
+        return None, None
+    if args.frames is not None and args.animate:
+        raise CghError("--animate renders every frame: leave out --frames, or --animate")
+    if args.motion is not None:
+        fps = 24.0 if args.fps is None else args.fps
+        if not 0 < fps <= 1000:
+            raise CghError(f"--fps must lie in (0, 1000], got {fps}")
+        text = args.frames or ""
+        try:  # enough frames for A:B (B of them) or N (N + 1); 2 s when B is left out
+            end = text.rpartition(":")[2].strip()
+            count = (int(end) if ":" in text else int(end) + 1) if end else round(2 * fps)
+        except ValueError:
+            raise CghError(f"--frames must be A:B or N (frame numbers), got {text!r}") from None
+        if not 1 <= count <= 100_000:
+            raise CghError(f"--motion simulates 1 to 100000 frames, got {count} (give --frames A:B with 0 < B)")
+        animation = simulated_animation(asset, args.motion, count, fps)
+    else:
+        animation = file_animation(args.file)
+        if animation is None:
+            raise CghError(f"{args.file} holds no animation: make one with cgh animate, or name a built-in --motion")
+    return animation, parse_frames(args.frames or ":", animation.frames)

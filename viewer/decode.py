@@ -57,6 +57,7 @@ class GpuScene:
     mesh_triangles: Any | None = None  # index buffer of the strips
     card_vertices: int = 0  # 2(M+1)
     n_strands: int = 0
+    geometry: CardGeometry | None = None  # an animated scene's geometry decode inputs
 
     @property
     def sh_degree(self) -> int:
@@ -70,6 +71,9 @@ class GpuScene:
         for chunk in self.sh:
             chunk.texture.release()
         self.sh = []
+        if self.geometry is not None:
+            self.geometry.release()
+            self.geometry = None
 
 
 def block_limit(ctx: Any) -> int:
@@ -128,53 +132,105 @@ def _buffer(ctx: Any, data: np.ndarray | None = None, nbytes: int = 0) -> Any:
     return ctx.buffer(reserve=max(int(nbytes), 16))
 
 
-def upload_asset(ctx: Any, programs: Programs, asset: HairAsset) -> GpuScene:
-    """Upload an asset's compact data and decode it on the GPU."""
+@dataclass
+class CardGeometry:
+    """What the geometry decode reads, kept on the GPU for an animated scene: per frame only the cards'
+    spines and normals are written (:meth:`upload_cards`), then :meth:`decode` rebuilds the card
+    strips, strand points and segment frames; the appearance (latents, MLP, SH) is decoded once.
+
+    Hook for SH rotation (issue 34, "Appearance follows"): :meth:`decode` writes each segment's
+    rotation (``u_rotations``, the quaternion taking +z onto the segment); a rest-pose copy of that
+    image and ``q_now * conj(q_rest)`` in the preprocess would turn each Gaussian's SH with its segment.
+    """
+
+    spine: Any  # [C * (M+1)] vec4
+    normal: Any  # [C * (M+1)] vec4
+    half_width: Any  # [C * (M+1)] float
+    mesh_nrm: Any  # [C * 2(M+1)] vec4
+    uvd: Any  # [S * P * 3] float
+    opacity: Any  # [G] float
+    cards: int  # C
+    card_points: int  # M + 1
+    thickness: float
+
+    def upload_cards(self, spine: np.ndarray, normal: np.ndarray) -> None:
+        """Write new card spines and normals (``[C, M+1, 3]`` each)."""
+        self.spine.write(_vec4(np.asarray(spine, np.float32).reshape(-1, 3), 1.0).tobytes())
+        self.normal.write(_vec4(np.asarray(normal, np.float32).reshape(-1, 3)).tobytes())
+
+    def decode(self, ctx: Any, programs: Programs, scene: GpuScene, lod: tuple[Any, tuple] | None = None) -> None:
+        """Card strips, then strand points and the Gaussians' means, rotations and scales, into ``scene``:
+        every strand's, or with ``lod`` (the priority lists' buffer and a plan's chunks, viewer/lod.py)
+        only the strands a splat budget draws."""
+        c, m1 = self.cards, self.card_points
+        prog = programs.compute("card_mesh")
+        bind(prog, Spine=self.spine, Normal=self.normal, HalfWidth=self.half_width, MeshPos=scene.mesh_pos,
+             MeshNrm=self.mesh_nrm)
+        set_uniforms(prog, u_count=c * m1, u_points=m1)
+        dispatch(ctx, prog, c * m1)
+        prog = programs.compute("decode_geometry")
+        # without lod, LodStrands is bound to any buffer: the shader does not read it
+        lists, chunks = lod if lod is not None else (scene.strand_card, ((0, scene.count),))
+        bind(prog, MeshPos=scene.mesh_pos, MeshNrm=self.mesh_nrm, StrandCard=scene.strand_card, Uvd=self.uvd,
+             Opacity=self.opacity, Points=scene.points, LodStrands=lists)
+        bind_images(prog, u_means=scene.means, u_rotations=scene.rotations, u_scales=scene.scales)
+        set_uniforms(prog, u_points=scene.segments + 1, u_segments=m1 - 1, u_thickness=self.thickness,
+                     u_indexed=lod is not None)
+        for list_base, count, *_ in chunks:
+            set_uniforms(prog, u_count=count, u_list_base=list_base)
+            dispatch(ctx, prog, count)
+
+    def release(self) -> None:
+        for buf in (self.spine, self.normal, self.half_width, self.mesh_nrm, self.uvd, self.opacity):
+            buf.release()
+
+
+def _card_geometry(ctx: Any, asset: HairAsset) -> CardGeometry:
+    cards = asset.cards
+    c, m1 = cards.spine.shape[:2]
+    # placeholder segments (spec 3) get opacity 0: they are decoded with the others, and never seen
+    opacity = (asset.opacity * asset.real_segments()).astype(np.float32).reshape(-1)
+    return CardGeometry(
+        spine=_buffer(ctx, _vec4(cards.spine.reshape(-1, 3), 1.0)),
+        normal=_buffer(ctx, _vec4(cards.normal.reshape(-1, 3))),
+        half_width=_buffer(ctx, cards.half_width.astype(np.float32).reshape(-1)),
+        mesh_nrm=_buffer(ctx, nbytes=c * 2 * m1 * 16), uvd=_buffer(ctx, asset.uvd.astype(np.float32).reshape(-1)),
+        opacity=_buffer(ctx, opacity), cards=c, card_points=m1, thickness=float(asset.thickness))
+
+
+def upload_asset(ctx: Any, programs: Programs, asset: HairAsset, animated: bool = False) -> GpuScene:
+    """Upload an asset's compact data and decode it on the GPU. ``animated`` keeps the geometry
+    decode's inputs (:attr:`GpuScene.geometry`) so that its cards can move
+    (:meth:`viewer.renderer.Renderer.move_cards`)."""
     asset.validate()
-    cards, app = asset.cards, asset.appearance
+    cards = asset.cards
     c, m1 = cards.spine.shape[:2]
     s, p = asset.n_strands, asset.points_per_strand
     g = s * (p - 1)  # the shaders index Gaussians s (P-1) + i: a variable-count asset's placeholders too
     check_capacity(ctx, g)
-    spine = _buffer(ctx, _vec4(cards.spine.reshape(-1, 3), 1.0))
-    normal = _buffer(ctx, _vec4(cards.normal.reshape(-1, 3)))
-    half_width = _buffer(ctx, cards.half_width.astype(np.float32).reshape(-1))
-    card_group = _buffer(ctx, cards.group.astype(np.uint32))
-    mesh_pos = _buffer(ctx, nbytes=c * 2 * m1 * 16)
-    mesh_nrm = _buffer(ctx, nbytes=c * 2 * m1 * 16)
-    prog = programs.compute("card_mesh")
-    bind(prog, Spine=spine, Normal=normal, HalfWidth=half_width, MeshPos=mesh_pos, MeshNrm=mesh_nrm)
-    set_uniforms(prog, u_count=c * m1, u_points=m1)
-    dispatch(ctx, prog, c * m1)
-
-    strand_card = _buffer(ctx, asset.strand_card.astype(np.uint32))
-    uvd = _buffer(ctx, asset.uvd.astype(np.float32).reshape(-1))
-    # placeholder segments (spec 3) get opacity 0: they are decoded with the others, and never seen
-    opacity = _buffer(ctx, (asset.opacity * asset.real_segments()).astype(np.float32).reshape(-1))
-    means, rotations, scales = (data_image(ctx, g, 4, "f4") for _ in range(3))
-    points = _buffer(ctx, nbytes=s * p * 16)
-    prog = programs.compute("decode_geometry")
-    bind(prog, MeshPos=mesh_pos, MeshNrm=mesh_nrm, StrandCard=strand_card, Uvd=uvd, Opacity=opacity, Points=points)
-    bind_images(prog, u_means=means, u_rotations=rotations, u_scales=scales)
-    set_uniforms(prog, u_count=g, u_points=p, u_segments=m1 - 1, u_thickness=float(asset.thickness))
-    dispatch(ctx, prog, g)
-
-    sh = _decode_appearance(ctx, programs, asset, strand_card, card_group)
-    for buf in (spine, normal, half_width, mesh_nrm, uvd, opacity):
-        buf.release()
-
     from cghair_format.geometry import card_mesh
 
-    triangles = card_mesh(cards).triangles
-    strand_group = cards.group.astype(np.uint32)[asset.strand_card]
+    strand_card = _buffer(ctx, asset.strand_card.astype(np.uint32))
+    card_group = _buffer(ctx, cards.group.astype(np.uint32))
     lo = cards.spine.reshape(-1, 3).min(axis=0) - cards.half_width.max()
     hi = cards.spine.reshape(-1, 3).max(axis=0) + cards.half_width.max()
-    return GpuScene(
-        count=g, sh_coeffs=app.sh_coeffs, segments=p - 1, means=means, rotations=rotations,
-        scales=scales, sh=sh, strand_card=strand_card, card_group=card_group, bounds=(lo, hi),
-        points=points, strand_group=_buffer(ctx, strand_group), mesh_pos=mesh_pos,
-        mesh_triangles=ctx.buffer(triangles.astype(np.uint32).tobytes()), card_vertices=2 * m1,
+    scene = GpuScene(
+        count=g, sh_coeffs=asset.appearance.sh_coeffs, segments=p - 1,
+        means=data_image(ctx, g, 4, "f4"), rotations=data_image(ctx, g, 4, "f4"), scales=data_image(ctx, g, 4, "f4"),
+        sh=[], strand_card=strand_card, card_group=card_group, bounds=(lo, hi),
+        points=_buffer(ctx, nbytes=s * p * 16),
+        strand_group=_buffer(ctx, cards.group.astype(np.uint32)[asset.strand_card]),
+        mesh_pos=_buffer(ctx, nbytes=c * 2 * m1 * 16),
+        mesh_triangles=ctx.buffer(card_mesh(cards).triangles.astype(np.uint32).tobytes()), card_vertices=2 * m1,
         n_strands=s)
+    geometry = _card_geometry(ctx, asset)
+    geometry.decode(ctx, programs, scene)
+    scene.sh = _decode_appearance(ctx, programs, asset, strand_card, card_group)
+    if animated:
+        scene.geometry = geometry
+    else:
+        geometry.release()
+    return scene
 
 
 def _pad4(a: np.ndarray) -> np.ndarray:

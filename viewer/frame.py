@@ -25,6 +25,7 @@ from .rasterizer import Target
 
 MAX_TARGET_SIZES = 2  # render target sizes kept allocated at once
 STAGES = ("preprocess", "sort", "gather", "draw")  # the stages of a frame, in order
+CARD_STAGES = ("upload", "decode")  # an animated frame's stages before them (Renderer.move_cards)
 
 T = TypeVar("T")
 Stage = Callable[[str, Callable[[], T]], T]  # runs one named stage of a frame and returns its result
@@ -53,6 +54,7 @@ class SplatRenderer(ABC):
     background and overlays, and reading the image back."""
 
     supports_budget = False  # whether ``budget`` (level of detail) is honoured
+    supports_animation = False  # whether the cards can move (``move_cards``)
 
     def __init__(self, ctx: Any, programs: Programs):
         self.ctx = ctx

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from cghair_format import HairAsset
+from cghair_format.animation import Animation
 from cghair_format.atomic import atomic_path
 from cghair_format.camera import Camera
 from cghair_format.errors import CghError, require
@@ -52,6 +53,7 @@ class RenderJob:
     sort: str = "auto"
     rasterizer: str = "auto"
     budget: int | None = None  # Gaussians drawn (level of detail); None: all
+    frames: range | None = None  # frames of the animation to render (one camera); None: the rest pose
 
     def settings(self) -> ViewSettings:
         return ViewSettings(sh_degree=self.sh_degree, splat_scale=self.splat_scale,
@@ -126,11 +128,14 @@ def job_cameras(job: RenderJob, bounds: tuple[np.ndarray, np.ndarray], up_axis: 
 
 
 def to_uint8(image: np.ndarray) -> np.ndarray:
+    """8-bit RGB of a float image in [0, 1] (an 8-bit image is returned as it is)."""
+    if image.dtype == np.uint8:
+        return image[..., :3]
     return (np.clip(image[..., :3], 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
 
 
 def write_images(frames: list[np.ndarray], out: Path, fps: float = 24.0) -> Path:
-    """Write one PNG, or an animated GIF/MP4, from float ``[H, W, >=3]`` frames."""
+    """Write one PNG, or an animated GIF/MP4, from float (or 8-bit) ``[H, W, >=3]`` frames."""
     from PIL import Image
 
     ext = out.suffix.lower()
@@ -154,9 +159,11 @@ def write_images(frames: list[np.ndarray], out: Path, fps: float = 24.0) -> Path
     return out
 
 
-def render_job(asset: HairAsset, job: RenderJob, out: str | Path, ctx=None, log=None) -> Path:
+def render_job(asset: HairAsset, job: RenderJob, out: str | Path, ctx=None, log=None,
+               animation: Animation | None = None) -> Path:
     """Render ``asset`` as ``job`` describes and write ``out``; creates an EGL context if none given.
-    ``log`` (e.g. ``print``) is told which OpenGL driver and device render."""
+    ``log`` (e.g. ``print``) is told which OpenGL driver and device render. With ``job.frames``, those
+    frames of ``animation`` are rendered from the job's camera, at ``job.fps``."""
     from .context import create_headless_context, describe_gl, gl_info
 
     out = Path(out)
@@ -164,17 +171,31 @@ def render_job(asset: HairAsset, job: RenderJob, out: str | Path, ctx=None, log=
         raise CghError(f"--fps must be positive, got {job.fps}")
     if not (job.splat_scale > 0 and math.isfinite(job.splat_scale)):
         raise CghError(f"--splat-scale must be positive, got {job.splat_scale}")
+    if job.frames is not None:
+        if animation is None:
+            raise CghError("--frames renders an animation, and this file holds none: make one with cgh animate "
+                           "or name a built-in --motion")
+        if job.turntable:
+            raise CghError("--frames and --turntable each make the animation's frames: choose one")
+        animation.validate(asset.cards)
     own = ctx is None
     ctx = ctx or create_headless_context()
     ctx.__enter__()  # make it current: another context may have been created since
     if log is not None:
         log(describe_gl(gl_info(ctx)))
     try:
-        renderer = create_renderer(ctx, asset, sort=job.sort, rasterizer=job.rasterizer, budget=job.budget)
+        renderer = create_renderer(ctx, asset, sort=job.sort, rasterizer=job.rasterizer, budget=job.budget,
+                                   animated=job.frames is not None)
         try:
             cameras = job_cameras(job, renderer.bounds, asset.up_axis)
             settings = job.settings()
-            frames = [renderer.render(cam, settings) for cam in cameras]
+            if job.frames is None:
+                frames = [to_uint8(renderer.render(cam, settings)) for cam in cameras]
+            else:
+                frames = []
+                for f in job.frames:
+                    renderer.move_cards(animation.cards(asset.cards, f))
+                    frames.append(to_uint8(renderer.render(cameras[0], settings)))
         finally:
             renderer.release()
     finally:

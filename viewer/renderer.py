@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from cghair_format import Gaussians, HairAsset
+from cghair_format import Cards, Gaussians, HairAsset
 from cghair_format.camera import Camera
 
 from .decode import GpuScene, SceneTooLargeError, block_limit, sh_texels, upload_asset, upload_gaussians
@@ -89,6 +89,7 @@ class Renderer(SplatRenderer):
     """
 
     supports_budget = True
+    supports_animation = True
 
     def __init__(self, ctx: Any, scene: GpuScene, sort: str = "auto", programs: Programs | None = None,
                  primitive: str = "triangles", rasterizer: str = "auto", budget: int | None = None):
@@ -120,6 +121,7 @@ class Renderer(SplatRenderer):
         self.frame_rasterizer = self.rasterizer  # the last frame's: raster where the tiles overflowed
         self._warned = False
         self._mesh_vao = self._lines_vao = None  # the overlays' vertex arrays, made on first use
+        self._decoded = self.lod.n_strands  # strands whose geometry is decoded for the current cards
 
     def rasterizer_named(self, name: str) -> Rasterizer:
         """The renderer's rasterizer of that name, made on first use."""
@@ -131,9 +133,34 @@ class Renderer(SplatRenderer):
 
     @classmethod
     def from_asset(cls, ctx: Any, asset: HairAsset, sort: str = "auto", primitive: str = "triangles",
-                   rasterizer: str = "auto", budget: int | None = None, programs: Programs | None = None) -> Renderer:
+                   rasterizer: str = "auto", budget: int | None = None, programs: Programs | None = None,
+                   animated: bool = False) -> Renderer:
+        """``animated``: keep the geometry decode's inputs so that :meth:`move_cards` can move the cards."""
         programs = programs or Programs(ctx)
-        return cls(ctx, upload_asset(ctx, programs, asset), sort, programs, primitive, rasterizer, budget)
+        return cls(ctx, upload_asset(ctx, programs, asset, animated), sort, programs, primitive, rasterizer, budget)
+
+    def move_cards(self, cards: Cards, stage: Stage = run_stage) -> None:
+        """Put the cards at ``cards`` (an animation's frame; half-widths and groups stay the rest pose's):
+        stage ``upload`` writes their spines and normals, ``decode`` rebuilds the card strips, and the
+        strand points and Gaussians of the strands the current budget draws, on the GPU. The next
+        :meth:`frame` draws them (decoding the others first if its budget draws more)."""
+        geometry = self.scene.geometry
+        if geometry is None:
+            raise ValueError("this renderer was made without animated=True: its cards cannot move")
+        stage("upload", lambda: geometry.upload_cards(cards.spine, cards.normal))
+        self._decoded = 0
+        stage("decode", lambda: self._decode(self.lod.plan(self.budget)))
+
+    def _decode(self, plan: LodPlan) -> None:
+        """Decode the geometry of ``plan``'s strands (all where it is full) for the cards uploaded last."""
+        lod = None if plan.full else (self.lod.buffer, plan.chunks)
+        self.scene.geometry.decode(self.ctx, self.programs, self.scene, lod)
+        self._decoded = plan.strands
+
+    def _decode_missing(self, plan: LodPlan, stage: Stage) -> None:
+        """Where the cards moved and ``plan`` draws strands not yet decoded for them, decode them."""
+        if self.scene.geometry is not None and plan.strands > self._decoded:
+            stage("decode", lambda: self._decode(plan))
 
     @classmethod
     def from_gaussians(cls, ctx: Any, gaussians: Gaussians, sort: str = "auto", primitive: str = "triangles",
@@ -166,6 +193,7 @@ class Renderer(SplatRenderer):
         drawn with the raster path (preprocessed and sorted again, within the gather stage)."""
         width, height = camera.width, camera.height
         name = self.rasterizer
+        self._decode_missing(self.lod.plan(self.budget), stage)
         stage("preprocess", lambda: self.preprocess(camera, settings, name))
         stage("sort", self.sort)
         if not stage("gather", lambda: self._gather(name, width, height)):
@@ -241,6 +269,8 @@ class Renderer(SplatRenderer):
         scene = self.scene
         if scene.points is None:
             return
+        if settings.show_strands:
+            self._decode_missing(self.lod.plan(None), run_stage)
         prog = self.programs.render("overlay", "overlay")
         proj = projection_matrix(camera)
         if flip_y:
@@ -279,15 +309,15 @@ class Renderer(SplatRenderer):
 
 
 def create_renderer(ctx: Any, asset: HairAsset, sort: str = "auto", primitive: str = "triangles",
-                    rasterizer: str = "auto", budget: int | None = None) -> SplatRenderer:
+                    rasterizer: str = "auto", budget: int | None = None, animated: bool = False) -> SplatRenderer:
     """The GPU renderer where compute shaders exist (OpenGL 4.3), else the numpy fallback.
 
-    The compute rasterizer and splat budgets need compute shaders: asking for them on OpenGL 3.3
-    is a :class:`GLContextError` that says so.
+    The compute rasterizer, splat budgets and moving cards (``animated``) need compute shaders: asking
+    for them on OpenGL 3.3 is a :class:`GLContextError` that says so.
     """
     if ctx.version_code >= 430:
         return Renderer.from_asset(ctx, asset, sort=sort, primitive=primitive, rasterizer=rasterizer,
-                                   budget=budget)
+                                   budget=budget, animated=animated)
     from .context import GLContextError
     from .fallback import FallbackRenderer
 
@@ -297,4 +327,7 @@ def create_renderer(ctx: Any, asset: HairAsset, sort: str = "auto", primitive: s
                              "use --rasterizer raster or auto")
     if budget is not None:
         raise GLContextError(f"--budget needs OpenGL 4.3 compute shaders; {offered}: leave --budget out")
+    if animated:
+        raise GLContextError(f"playing hair that moves needs OpenGL 4.3 compute shaders; {offered}: "
+                             "render its rest pose (leave out --frames, --animate and --simulate)")
     return FallbackRenderer.from_asset(ctx, asset)

@@ -33,7 +33,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..codec import read, read_info, write
+    from ..codec import read, read_animation, read_info, write
 
     if args.opacity_budget is not None and args.views is None:
         raise CghError("--opacity-budget needs --views DATASET: the views that measure which Gaussians show")
@@ -49,13 +49,15 @@ def run(args: argparse.Namespace) -> int:
         print(f"{int(negligible.sum()):,} of {asset.n_gaussians:,} Gaussians carry {budget:g} of the blend "
               f"weight of {args.views}'s training views: their opacities may be stored lower")
     report = write(asset, args.output, args.profile, keep_order=args.keep_order, negligible=negligible,
-                   opacity_budget=budget)
+                   opacity_budget=budget, animation=read_animation(args.input))
     total = sum(report.chunk_sizes.values())
     print(f"wrote {args.output}: profile {report.profile}, {total:,} bytes of chunks, max point error "
           f"{report.max_point_error:.3g} ({report.max_point_error / max(report.bbox_diagonal, 1e-30):.2e} "
           "of the bbox diagonal)" + ("" if report.strand_order is None else "; strands stored card by card"))
     if report.opacity is not None:
         print(report.opacity.summary())
+    if report.animation is not None:
+        print(report.animation.summary(report.bbox_diagonal))
     if not source["quant"]["lossless"]:
         known = PROFILES.get(source["profile"])  # (a profile of the caller's own, written through the API: None)
         bound = (f"up to {known.position_tolerance:.0e} of the bbox diagonal" if known is not None

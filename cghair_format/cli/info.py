@@ -39,12 +39,22 @@ def format_info(name: str, info: dict) -> str:
         f"  points      {_coding(info['quant'])}",
         f"  opacities   {opacity_line(info)}",
         f"  generator   {info['generator']}" + (f"; attribution: {info['attribution']}" if info["attribution"] else ""),
+        *([] if info["animation"] is None else [f"  animation   {animation_line(info['animation'])}"]),
         "  chunk  required  codec      stored        raw   share",
     ]
     for c in info["chunks"]:
         lines.append(f"  {c['type']:<6} {'yes' if c['required'] else 'no':<9} {c['codec']:<5} {c['stored_bytes']:>11,} "
                      f"{c['raw_bytes']:>10,} {100 * c['stored_bytes'] / info['file_bytes']:6.1f}%")
     return "\n".join(lines)
+
+
+def animation_line(a: dict) -> str:
+    """The animation (:func:`.codec.read_info`'s ``animation``, spec 4.6) in a line."""
+    bound = ("float32 strips (lossless)" if a["bound"] is None else
+             f"spine within {a['bound']['spine']:.3g}, normals within {a['bound']['normal_radians']:.2g} rad")
+    source = f"; from {a['source']}" if a.get("source") else ""
+    return (f"{a['frames']:,} frames at {a['fps']:g} fps from {a['start']:g} s ({a['duration']:.3g} s), a keyframe "
+            f"every {a['keyframe_interval']}; {a['bytes_per_frame']:,.0f} bytes a frame, {bound}{source}")
 
 
 def opacity_line(info: dict) -> str:

@@ -9,12 +9,15 @@ what they do:
 - :mod:`.layout`: what reader and writer share (chunk names, the interpolated strands' family);
 - :mod:`.writer`: asset -> bytes, the step search that meets the profile's bound and the strands' order;
 - :mod:`.choices`: the writer's per-file choices for the strand coder, each a search on a sample;
-- :mod:`.chunks`: the chunk writer, settled streams -> chunk payloads.
+- :mod:`.chunks`: the chunk writer, settled streams -> chunk payloads;
+- :mod:`.animation`: the animation part (ANIM), frames of card strips <-> keyframe blocks.
 """
 
+from .animation import AnimationReader, AnimationReport
 from .layout import FAMILY_CHUNK, KNOWN_CHUNKS, OPTIONAL_CHUNKS, REQUIRED_CHUNKS
-from .reader import decode, read, read_info, read_with_gaussians
+from .reader import animation_reader, decode, read, read_animation, read_info, read_with_gaussians
 from .writer import EncodeOptions, EncodeReport, OpacityMarks, encode, write
 
-__all__ = ["FAMILY_CHUNK", "KNOWN_CHUNKS", "OPTIONAL_CHUNKS", "REQUIRED_CHUNKS", "EncodeOptions", "EncodeReport",
-           "OpacityMarks", "decode", "encode", "read", "read_info", "read_with_gaussians", "write"]
+__all__ = ["FAMILY_CHUNK", "KNOWN_CHUNKS", "OPTIONAL_CHUNKS", "REQUIRED_CHUNKS", "AnimationReader", "AnimationReport",
+           "EncodeOptions", "EncodeReport", "OpacityMarks", "animation_reader", "decode", "encode", "read",
+           "read_animation", "read_info", "read_with_gaussians", "write"]

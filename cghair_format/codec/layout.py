@@ -13,7 +13,9 @@ REQUIRED_CHUNKS = ("META", "CARD", "STRD", "OPAC", "LOGT", "CBKS", "MLPW")
 OPTIONAL_CHUNKS = ("SIDS", "ROOT", "SCOL", "XMET")
 FAMILY_CHUNK = "CHLD"  # required where META quant.children > 0 (spec 4.5), absent otherwise
 COUNTS_CHUNK = "PCNT"  # required where some strand has fewer than META points (spec 3), absent otherwise
-KNOWN_CHUNKS = frozenset(REQUIRED_CHUNKS + OPTIONAL_CHUNKS + (FAMILY_CHUNK, COUNTS_CHUNK))
+ANIM_CHUNK = "ANIM"  # optional: the animation (spec 4.6), present exactly when META has ``animation``
+ASSET_CHUNKS = frozenset(REQUIRED_CHUNKS + OPTIONAL_CHUNKS + (FAMILY_CHUNK, COUNTS_CHUNK))  # the rest pose's
+KNOWN_CHUNKS = ASSET_CHUNKS | {ANIM_CHUNK}
 
 
 class Family(NamedTuple):

@@ -15,6 +15,7 @@ from typing import BinaryIO
 import numpy as np
 
 from .. import container, memory
+from ..animation.clip import Animation
 from ..asset import Appearance, Cards, HairAsset, MlpLayer
 from ..children import WEIGHT_ONE, place_children
 from ..errors import AssetError, CghFormatError, InvalidContentError, LimitError, UnsupportedVersionError
@@ -27,7 +28,18 @@ from ..residual_coder import read_residuals
 from ..strand_coder import decode_uvd, level_widths, neighbour_decode, neighbour_order
 from ..streams import StreamReader
 from . import schema
-from .layout import COUNTS_CHUNK, FAMILY_CHUNK, KNOWN_CHUNKS, REQUIRED_CHUNKS, Family, prediction, uvd_scale
+from .animation import AnimationReader, animation_info
+from .layout import (
+    ANIM_CHUNK,
+    ASSET_CHUNKS,
+    COUNTS_CHUNK,
+    FAMILY_CHUNK,
+    KNOWN_CHUNKS,
+    REQUIRED_CHUNKS,
+    Family,
+    prediction,
+    uvd_scale,
+)
 
 Source = str | os.PathLike | bytes | bytearray | memoryview | BinaryIO
 
@@ -59,7 +71,7 @@ def read_info(source: Source) -> dict:
         raise InvalidContentError("required chunk 'META' is missing from the chunk table", chunk="META",
                                   offset=container.HEADER_SIZE)
     try:
-        meta = schema.parse(_meta_payload(data, meta_info))
+        meta = schema.parse(meta_payload(data, meta_info))
     except CghFormatError as exc:
         raise exc.at(meta_info.offset) if exc.offset is None else exc from None
     counts_info = next((i for i in infos if i.type == COUNTS_CHUNK), None)
@@ -82,10 +94,20 @@ def read_info(source: Source) -> dict:
         "weight_mode": meta["weight_mode"], "mlp": [layer["out"] for layer in meta["mlp"]],
         "thickness": meta["thickness"], "meters_per_unit": meta["meters_per_unit"], "up_axis": meta["up_axis"],
         "generator": meta["generator"], "attribution": meta["attribution"],
+        "animation": _animation_info(meta, infos, meta_info.offset),
         "bits_per_gaussian": 8 * len(data) / gaussians, "quant": meta["quant"], "opacities": _opacities(meta),
         "chunks": [{"type": i.type, "required": i.required, "codec": ["raw", "zstd"][i.codec],
                     "stored_bytes": i.stored, "raw_bytes": i.raw} for i in infos],
     }
+
+
+def _animation_info(meta: dict, infos: list[container.ChunkInfo], meta_offset: int) -> dict | None:
+    """:func:`.animation.animation_info`, its refusal placed at ANIM's start (or META's)."""
+    anim = next((i for i in infos if i.type == ANIM_CHUNK), None)
+    try:
+        return animation_info(meta, anim)
+    except CghFormatError as exc:
+        raise exc.at(anim.offset if exc.chunk == ANIM_CHUNK else meta_offset) from None
 
 
 def _opacities(meta: dict) -> dict:
@@ -96,6 +118,46 @@ def _opacities(meta: dict) -> dict:
     if q["lossless"]:
         return {"within": 0.0, "lowered": None, "budget": None}
     return {"within": 0.5 / q["opacity_scale"], "lowered": q.get("opacity_lowered"), "budget": q.get("opacity_budget")}
+
+
+def animation_reader(source: Source, limits: ReadLimits | None = None) -> AnimationReader | None:
+    """The animation of a .cgh (path, bytes or binary file object), ready to decode frame by frame
+    (:meth:`AnimationReader.frame`), or None for a file without one. It decodes META and the rest cards
+    only; the frames' blocks are checked against the file and META here, decoded when asked for."""
+    data = read_bytes(source)
+    infos: dict = {}
+    try:
+        _, table = container.verify(data, set(KNOWN_CHUNKS))
+        infos = {i.type: i for i in table}
+        for name in ("META", "CARD"):
+            if name not in infos:
+                raise InvalidContentError(f"required chunk {name!r} is missing from the chunk table", chunk=name,
+                                          offset=container.HEADER_SIZE)
+        meta = schema.parse(meta_payload(data, infos["META"]))
+        anim = infos.get(ANIM_CHUNK)
+        if "animation" not in meta and anim is None:
+            return None
+        if ("animation" in meta) != (anim is not None):
+            raise InvalidContentError("chunk ANIM must be present exactly when META has 'animation'",
+                                      chunk=ANIM_CHUNK if anim is not None else "META")
+        if anim.codec != container.CODEC_RAW:
+            raise InvalidContentError("chunk ANIM must be stored raw (codec 0): its blocks are compressed on "
+                                      "their own", chunk=ANIM_CHUNK)
+        limits = limits or default_limits()
+        check_limits(meta, [infos["META"], infos["CARD"]], limits, False)
+        card = StreamReader(container.payload(data, infos["CARD"]), "CARD")
+        rest = read_cards(card, meta)
+        return AnimationReader(meta, container.payload(data, anim), anim.offset, rest, limits)
+    except CghFormatError as exc:
+        if exc.offset is None and infos:
+            raise exc.at(infos.get(exc.chunk, infos["META"]).offset) from None
+        raise
+
+
+def read_animation(source: Source, limits: ReadLimits | None = None) -> Animation | None:
+    """Every frame of a .cgh's animation (None: the file has none); ``read(source)`` is its rest pose."""
+    anim = animation_reader(source, limits)
+    return None if anim is None else anim.animation()
 
 
 def read_bytes(source: Source) -> bytes:
@@ -115,12 +177,12 @@ def _decode(data: bytes, sh_ahead: bool, limits: ReadLimits | None) -> tuple[Hai
     infos = {}
     try:
         version, table = container.verify(data, set(KNOWN_CHUNKS))
-        infos = {i.type: i for i in table if i.type in KNOWN_CHUNKS}
+        infos = {i.type: i for i in table if i.type in ASSET_CHUNKS}  # (the animation's is read_animation's)
         for name in REQUIRED_CHUNKS:
             if name not in infos:
                 raise InvalidContentError(f"required chunk {name!r} is missing from the chunk table", chunk=name,
                                           offset=container.HEADER_SIZE)
-        meta = schema.parse(_meta_payload(data, infos["META"]))
+        meta = schema.parse(meta_payload(data, infos["META"]))
         if version[0] == 1 and not meta["quant"]["lossless"]:
             raise UnsupportedVersionError(
                 f"format {version[0]}.{version[1]} quantized files decode with other arithmetic: rewrite it with "
@@ -135,7 +197,7 @@ def _decode(data: bytes, sh_ahead: bool, limits: ReadLimits | None) -> tuple[Hai
         raise
 
 
-def _meta_payload(data: bytes, info: container.ChunkInfo) -> bytes:
+def meta_payload(data: bytes, info: container.ChunkInfo) -> bytes:
     """META's bytes, refused before decompressing when the chunk table gives it more than the limit."""
     if info.raw > schema.MAX_META_BYTES:
         raise LimitError(f"META of {info.raw} bytes exceeds {schema.MAX_META_BYTES}", chunk="META",
@@ -191,8 +253,7 @@ def _decode_lossless(rd: dict[str, StreamReader], meta: dict) -> tuple[Cards, np
                                                     "latent_dim"))
     widths = [d] + [layer["out"] for layer in meta["mlp"]]
     f4 = ("<f4",)
-    cards = Cards(rd["CARD"].array((c, m + 1, 3), "spine", f4), rd["CARD"].array((c, m + 1, 3), "normal", f4),
-                  rd["CARD"].array((c, m + 1), "half_width", f4), _read_groups(rd["CARD"], c))
+    cards = read_cards(rd["CARD"], meta)
     uvd = rd["STRD"].array((s, p, 3), "uvd", f4)
     opacity = rd["OPAC"].array((s, p - 1), "opacity", f4)
     appearance = _appearance(meta, rd["LOGT"].array((s, k), "logits", f4),
@@ -208,9 +269,8 @@ def _decode_quantized(rd: dict[str, StreamReader], meta: dict, strand_card: np.n
                       sh_ahead: bool) -> tuple[Cards, np.ndarray, np.ndarray, Appearance, np.ndarray | None]:
     """Cards, card coordinates, opacities and appearance of a quantized file, and with ``sh_ahead`` the
     SH's memory (see :func:`_decode`)."""
-    s, p, c, q = meta["strands"], meta["points"], meta["cards"], meta["quant"]
-    cards = decode_cards(rd["CARD"], c, meta["segments"] + 1, q)
-    cards.group = _read_groups(rd["CARD"], c)
+    s, p, q = meta["strands"], meta["points"], meta["quant"]
+    cards = read_cards(rd["CARD"], meta)
     sh_out = None
     # the strand points (whose rANS decoder runs on one core) while the appearance streams decode and,
     # sh_ahead, the SH's memory faults in; a fault in STRD is raised first, as it comes first in the file
@@ -227,6 +287,19 @@ def _decode_quantized(rd: dict[str, StreamReader], meta: dict, strand_card: np.n
             raise
         uvd = points.result()
     return cards, uvd, opacity, appearance, sh_out
+
+
+def read_cards(r: StreamReader, meta: dict) -> Cards:
+    """CARD's cards (spec 3, 4.2): float32 as stored (lossless) or decoded, then their groups."""
+    c, m1 = meta["cards"], meta["segments"] + 1
+    if meta["quant"]["lossless"]:
+        f4 = ("<f4",)
+        cards = Cards(r.array((c, m1, 3), "spine", f4), r.array((c, m1, 3), "normal", f4),
+                      r.array((c, m1), "half_width", f4), np.zeros(c, np.int32))
+    else:
+        cards = decode_cards(r, c, m1, meta["quant"])
+    cards.group = _read_groups(r, c)
+    return cards
 
 
 def get_hier(r: StreamReader, rows: int, n: int, base_stride: int, name: str) -> np.ndarray:

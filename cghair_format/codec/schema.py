@@ -119,6 +119,16 @@ QUANT_FIELDS = (
     Field("opacity_budget", NUMBER, 0, 1, when=_quantized, optional=True, rule=_with_lowered),
 )
 
+ANIMATION_FIELDS = (  # spec 2.1 and 4.6: the animation part
+    Field("frames", INTEGER, 1, 1 << 20),
+    Field("fps", NUMBER, TINY, 1000),
+    Field("start", NUMBER, -MAX_LENGTH, MAX_LENGTH),  # seconds
+    Field("keyframe_interval", INTEGER, 1, lambda m: min(m["animation"]["frames"], 4096)),
+    Field("step", NUMBER, TINY, MAX_LENGTH, when=_quantized),  # spine step qa, scene units
+    Field("normal_bits", INTEGER, 8, 24, when=_quantized),
+    Field("source", STRING, optional=True),
+)
+
 MLP_LAYER = (Field("out", INTEGER, 1, 1 << 20), Field("activation", STRING, one_of=ACTIVATIONS))
 
 FIELDS = (
@@ -141,6 +151,7 @@ FIELDS = (
     Field("bbox_diagonal", NUMBER, 0),
     Field("profile", STRING),
     Field("quant", OBJECT, fields=QUANT_FIELDS),
+    Field("animation", OBJECT, fields=ANIMATION_FIELDS, optional=True),
 )
 
 # fields that every quantized file of this format version has: a file without them was written by a draft

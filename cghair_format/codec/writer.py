@@ -15,6 +15,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .. import container, memory
+from ..animation.clip import Animation
 from ..asset import Cards, HairAsset
 from ..atomic import write_bytes
 from ..children import WEIGHT_ONE, Children, best_weights, find_children, fit_weights, place_children
@@ -24,12 +25,14 @@ from ..parallel import map_blocks, map_threads
 from ..profiles import DEFAULT_PROFILE, PROFILES, Profile, get_profile
 from ..quantize import weight_steps
 from ..strand_coder import NEWTON_HALVINGS, STRETCH_MAX, Coded, DeadZone, canonical_order, coded_uvd, encode_uvd
-from ..streams import StreamWriter
+from ..streams import StreamReader, StreamWriter
 from . import choices as choosing
 from . import schema
+from .animation import AnimationReport, encode_within
 from .choices import Choices
 from .chunks import OpacityMarks, appearance_chunks, geometry_chunks, lossless_cards, quantized_cards
-from .layout import Family, prediction, uvd_scale
+from .layout import ANIM_CHUNK, Family, prediction, uvd_scale
+from .reader import read_cards
 
 MIN_CHILD_SHARE = 0.1  # interpolated strands are stored where at least this share of the strands are (below
 # it the guides' chains lose more than the few children save; docs/compression.md, "Interpolated strands")
@@ -75,6 +78,7 @@ class EncodeReport:
     # the file's strand i is the input's strand_order[i] (None: the input's order, kept)
     strand_order: np.ndarray | None = None
     opacity: OpacityMarks | None = None  # what became of the negligible marks (None: none given)
+    animation: AnimationReport | None = None  # what the animation's quantization measured (None: none given)
 
     def in_file_order(self, asset: HairAsset) -> HairAsset:
         """The encoded ``asset`` with its strands in the order the file stores them."""
@@ -87,16 +91,16 @@ class EncodeReport:
 
 def write(asset: HairAsset, path: str | os.PathLike, profile: str | Profile = DEFAULT_PROFILE,
           keep_order: bool = False, negligible: np.ndarray | None = None,
-          opacity_budget: float | None = None) -> EncodeReport:
+          opacity_budget: float | None = None, animation: Animation | None = None) -> EncodeReport:
     """Write ``asset`` to ``path`` atomically (:mod:`.atomic`); see :func:`encode`."""
-    data, report = encode(asset, profile, keep_order, negligible, opacity_budget)
+    data, report = encode(asset, profile, keep_order, negligible, opacity_budget, animation)
     write_bytes(path, data)
     return report
 
 
 def encode(asset: HairAsset, profile: str | Profile = DEFAULT_PROFILE, keep_order: bool = False,
-           negligible: np.ndarray | None = None, opacity_budget: float | None = None
-           ) -> tuple[bytes, EncodeReport]:
+           negligible: np.ndarray | None = None, opacity_budget: float | None = None,
+           animation: Animation | None = None) -> tuple[bytes, EncodeReport]:
     """Serialise a validated asset; returns the bytes and what the quantization measured.
 
     The quantized profiles store the strands card by card, alike strands one after another (spec 4.3),
@@ -111,8 +115,13 @@ def encode(asset: HairAsset, profile: str | Profile = DEFAULT_PROFILE, keep_orde
     to their own, where that codes smaller; every other opacity keeps the profile's bound. The lossless
     profile stores every opacity as it is. Where the file stores some lower, META says how many and
     ``opacity_budget`` (the share of the blend weight the marked Gaussians carry, in [0, 1], if known)
-    (spec 4.4, "Lowered opacities"); ``report.opacity`` has the figures."""
+    (spec 4.4, "Lowered opacities"); ``report.opacity`` has the figures.
+
+    ``animation`` (frames of the asset's cards, :class:`~..animation.Animation`) is stored in ANIM (spec
+    4.6) at the profile's precision; ``report.animation`` has its size and measured error."""
     options = EncodeOptions.of(profile, keep_order)
+    if animation is not None:
+        animation.validate(asset.cards)
     if negligible is not None:
         negligible = np.asarray(negligible)
         if negligible.dtype != bool or negligible.shape != np.shape(asset.opacity):
@@ -123,7 +132,7 @@ def encode(asset: HairAsset, profile: str | Profile = DEFAULT_PROFILE, keep_orde
                          f"[0, 1], and needs them: got {opacity_budget} with "
                          f"{'no marks' if negligible is None else 'marks'}")
     with memory.without_huge_pages():
-        return _encode(asset, options, negligible, opacity_budget)
+        return _encode(asset, options, negligible, opacity_budget, animation)
 
 
 class _Geometry(NamedTuple):
@@ -160,8 +169,8 @@ class _Passed(NamedTuple):
     order: np.ndarray | None
 
 
-def _encode(asset: HairAsset, options: EncodeOptions, negligible: np.ndarray | None, budget: float | None
-            ) -> tuple[bytes, EncodeReport]:
+def _encode(asset: HairAsset, options: EncodeOptions, negligible: np.ndarray | None, budget: float | None,
+            animation: Animation | None) -> tuple[bytes, EncodeReport]:
     prof = options.profile
     asset = asset.validate().with_placeholders()
     points = strand_points(asset.cards, asset.strand_card, asset.uvd)
@@ -182,11 +191,24 @@ def _encode(asset: HairAsset, options: EncodeOptions, negligible: np.ndarray | N
     if marks is not None and marks.kept:  # the record of spec 4.4's "Lowered opacities", in META
         geometry.meta["quant"].update(opacity_lowered=marks.lowered, **(
             {} if budget is None else {"opacity_budget": float(budget)}))
+    moving = [] if animation is None else [_animation_chunk(asset, prof, geometry.meta, stored[0], animation)]
     meta = container.compress(container.Chunk("META", schema.dump(geometry.meta)), level)
-    data = container.assemble([meta] + stored + appearance)
+    data = container.assemble([meta] + stored + appearance + [m[0] for m in moving])
     _, infos = container.read_table(data)
     return data, EncodeReport(prof.name, passed.step, passed.error, diag, {i.type: i.stored for i in infos},
-                              passed.order, marks)
+                              passed.order, marks, moving[0][1] if moving else None)
+
+
+def _animation_chunk(asset: HairAsset, prof: Profile, meta: dict, card: container.Stored, animation: Animation
+                     ) -> tuple[container.Stored, AnimationReport]:
+    """ANIM (stored raw: its blocks are compressed on their own) for ``animation`` of the rest cards as a
+    decoder gets them from ``card`` (CARD), with META's ``animation`` object added to ``meta``; and what
+    it measured, the points' error on the file's strands (within the profile's tolerance of them on the
+    input frames: :func:`.animation.encode_within`)."""
+    rest = read_cards(StreamReader(card.chunk.payload, "CARD"), meta)
+    meta["animation"], payload, report = encode_within(animation, rest, prof, meta["bbox_diagonal"], asset.uvd,
+                                                       asset.strand_card)
+    return container.Stored(container.Chunk(ANIM_CHUNK, payload, required=False), container.CODEC_RAW, payload), report
 
 
 def _search_step(input_asset: HairAsset, input_points: np.ndarray, prof: Profile, diag: float, reorder: bool

@@ -1,20 +1,25 @@
 """Regenerate the conformance vectors in this folder: ``python spec/vectors/generate.py``.
 
 Valid files come with ``NAME.expected.npz`` (decoded points and Gaussians, float32; a file with PCNT
-adds ``point_counts``, its ``points`` keep the placeholders: spec 9). Must-reject
-files are listed in ``reject.json`` with the error class and a fragment of its message.
+adds ``point_counts``, its ``points`` keep the placeholders; an animated file each frame's cards and
+points: spec 9). Must-reject files are listed in ``reject.json`` with the error class and a fragment of
+its message (and ``"animation": true`` where only a reader of the animation refuses it).
+``python spec/vectors/generate.py --animation`` writes the animation's vectors alone (spec 4.6).
 """
 
 from __future__ import annotations
 
 import json
+import struct
+import sys
 from pathlib import Path
 
 import numpy as np
+import zstandard
 
 import cghair_format as cgh
 from cghair_format import container
-from cghair_format.examples import example_asset, with_interpolated_strands, with_point_counts
+from cghair_format.examples import example_animation, example_asset, with_interpolated_strands, with_point_counts
 from cghair_format.geometry import strand_points
 from cghair_format.streams import StreamWriter
 
@@ -26,8 +31,14 @@ def _expected(name: str, data: bytes) -> None:
     asset = cgh.decode(data)
     g = cgh.decode_gaussians(asset)
     counts = {"point_counts": asset.point_counts} if asset.variable else {}
+    clip = cgh.read_animation(data)
+    frames = {} if clip is None else {
+        "frame_spine": clip.spine, "frame_normal": clip.normal,
+        "frame_points": np.stack([strand_points(clip.cards(asset.cards, f), asset.strand_card, asset.uvd)
+                                  for f in range(clip.frames)])}
     np.savez_compressed(HERE / f"{name}.expected.npz", points=strand_points(asset.cards, asset.strand_card, asset.uvd),
-                        means=g.means, rotations=g.rotations, scales=g.scales, opacities=g.opacities, sh=g.sh, **counts)
+                        means=g.means, rotations=g.rotations, scales=g.scales, opacities=g.opacities, sh=g.sh, **counts,
+                        **frames)
 
 
 def _rechunk(data: bytes, edit) -> bytes:
@@ -88,6 +99,66 @@ def main() -> None:
     children, family = _children_vector(built)
     counts_file = _variable_counts_vector(built)
     _reject_vectors(minimal, compact, children, family, counts_file)
+    _animation_vectors()
+
+
+def _animation_vectors() -> None:
+    """Animated files (spec 4.6): 40 frames in two blocks, compact and lossless, and the must-reject ones,
+    added to reject.json."""
+    asset = example_asset(5, strands=12, points=6, cards=3, segments=4)
+    clip = example_animation(asset.cards, 40)
+    compact = cgh.encode(asset, "compact", animation=clip)[0]
+    lossless = cgh.encode(asset, "lossless", animation=clip)[0]
+    _expected("animated_compact", compact)
+    _expected("animated_lossless", lossless)
+    reject = json.loads((HERE / "reject.json").read_text())
+
+    def bad(name: str, data: bytes, error: str, fragment: str) -> None:
+        (HERE / f"{name}.cgh").write_bytes(data)
+        reject[f"{name}.cgh"] = {"error": error, "message": fragment, "animation": True}
+
+    def with_anim(data: bytes, payload: bytes) -> bytes:
+        return _stored_anim(data, payload, container.CODEC_RAW, payload)
+
+    anim = container.unpack(compact, set(cgh.codec.KNOWN_CHUNKS))[2]["ANIM"]
+    stored, raw, kind = struct.unpack_from("<IIB", anim, 16)  # block 1's entry
+    bad("reject_anim_block_outside", with_anim(compact, anim[:16] + struct.pack("<IIB", stored + 4096, raw, kind)
+                                               + anim[25:]), "LimitError", "past the chunk")
+    bad("reject_anim_frame_count", _rechunk(compact, lambda c: _meta_edit(c, lambda m: m["animation"].update(
+        frames=70))), "InvalidContentError", "block count")
+    whole = zstandard.ZstdCompressor(level=19, write_content_size=True).compress(anim)
+    bad("reject_anim_compressed", _stored_anim(compact, anim, container.CODEC_ZSTD, whole),
+        "InvalidContentError", "stored raw")
+    bad("reject_anim_without_meta", _rechunk(compact, lambda c: _meta_edit(c, lambda m: m.pop("animation"))),
+        "InvalidContentError", "exactly when")
+    bad("reject_anim_nan_frame", with_anim(lossless, _nan_first_block(lossless)), "InvalidContentError", "NaN")
+    (HERE / "reject.json").write_text(json.dumps(reject, indent=2) + "\n")
+
+
+def _stored_anim(data: bytes, payload: bytes, kind: int, body: bytes) -> bytes:
+    """``data`` with ANIM's payload ``payload``, stored as ``body`` with codec ``kind``."""
+    _, infos, payloads = container.unpack(data, set(cgh.codec.KNOWN_CHUNKS))
+    stored = [container.Stored(container.Chunk(i.type, payload, False), kind, body) if i.type == "ANIM" else
+              container.compress(container.Chunk(i.type, payloads[i.type], i.required)) for i in infos]
+    return container.assemble(stored)
+
+
+def _nan_first_block(lossless: bytes) -> bytes:
+    """A lossless file's ANIM whose first frame's first spine coordinate is NaN (its first block stored raw)."""
+    reader = cgh.animation_reader(lossless)
+    clip = reader.animation()
+    g = reader.meta["keyframe_interval"]
+    spine = clip.spine[:g].copy()
+    spine[0, 0, 0, 0] = np.nan
+    w = StreamWriter()
+    w.array(spine, shuffle=True)
+    w.array(clip.normal[:g], shuffle=True)
+    first = w.getvalue()
+    anim = container.unpack(lossless, set(cgh.codec.KNOWN_CHUNKS))[2]["ANIM"]
+    count = struct.unpack_from("<I", anim)[0]
+    start = 4 + 12 * count + struct.unpack_from("<I", anim, 4)[0]  # block 1 onwards, as they are
+    return (anim[:4] + struct.pack("<IIB3x", len(first), len(first), 0) + anim[16:4 + 12 * count] + first
+            + anim[start:])
 
 
 def _small_vectors(minimal) -> bytes:
@@ -211,4 +282,4 @@ def _reject_vectors(minimal, compact: bytes, children: bytes, family, counts_fil
 
 
 if __name__ == "__main__":
-    main()
+    _animation_vectors() if sys.argv[1:] == ["--animation"] else main()

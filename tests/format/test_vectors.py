@@ -22,6 +22,7 @@ def test_vector_folder_is_complete():
     assert len(VALID) >= 5 and len(REJECT) >= 8
     assert any("point_counts" in np.load(p.with_name(p.stem + ".expected.npz")) for p in VALID)
     assert sorted(p.name for p in VECTORS.glob("reject_*.cgh")) == sorted(REJECT)
+    assert {cgh.read_info(p)["profile"] for p in VALID if cgh.read_info(p)["animation"]} == {"compact", "lossless"}
 
 
 @pytest.mark.parametrize("path", VALID, ids=lambda p: p.stem)
@@ -114,12 +115,42 @@ def test_valid_vector_decodes_to_expected(path):
     for name in ("means", "rotations", "scales", "opacities"):
         np.testing.assert_allclose(getattr(g, name), expected[name], rtol=0, atol=1e-6, err_msg=name)
     np.testing.assert_allclose(g.sh, expected["sh"], rtol=1e-5, atol=1e-5)
+    clip = cgh.read_animation(path)
+    assert (clip is None) == ("frame_spine" not in expected)
+    if clip is not None:  # every frame's cards and points, exactly (spec 4.6, 6.1)
+        np.testing.assert_array_equal(clip.spine, expected["frame_spine"])
+        np.testing.assert_array_equal(clip.normal, expected["frame_normal"])
+        for f in range(clip.frames):
+            points = strand_points(clip.cards(asset.cards, f), asset.strand_card, asset.uvd)
+            np.testing.assert_array_equal(points, expected["frame_points"][f])
+
+
+ANIMATED = [p for p in VALID if cgh.read_info(p)["animation"] is not None]
+
+
+@pytest.mark.parametrize("path", ANIMATED, ids=lambda p: p.stem)
+def test_animated_vectors_agree_with_the_reference_decoder(path):
+    """Each frame's cards as the reference decoder (spec 4.6 in plain Python, from the frame's block alone)
+    decodes them, bit for bit, and the points on a few frames by its card map (6.1)."""
+    expected = np.load(path.with_name(path.stem + ".expected.npz"))
+    data = path.read_bytes()
+    for f in range(len(expected["frame_spine"])):
+        cards = reference_decoder.decode_frame(data, f)
+        assert np.array([c.spine for c in cards], np.float32).tobytes() == expected["frame_spine"][f].tobytes()
+        assert np.array([c.normal for c in cards], np.float32).tobytes() == expected["frame_normal"][f].tobytes()
+    for f in (0, 33, len(expected["frame_spine"]) - 1):
+        assert reference_decoder.frame_points(data, f).tobytes() == expected["frame_points"][f].tobytes()
 
 
 @pytest.mark.parametrize("name", sorted(REJECT))
 def test_reject_vector_raises_named_error(name):
     spec = REJECT[name]
-    for read in (cgh.read, cgh.read_with_gaussians):
+    if spec.get("animation"):  # its rest pose is valid; a reader of its animation refuses it (spec 4.6)
+        assert cgh.read(VECTORS / name).n_strands > 0
+        readers = (cgh.read_animation,)
+    else:
+        readers = (cgh.read, cgh.read_with_gaussians)
+    for read in readers:
         with pytest.raises(getattr(errors, spec["error"]), match=spec["message"]):
             read(VECTORS / name)
 

@@ -78,3 +78,53 @@ def test_window_budgets_and_rasterizers_run(xvfb_display, tmp_path, args):
     done = _view(xvfb_display, path, "--width", 64, "--height", 48, "--frames", 3, *args, cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert "Traceback" not in done.stderr
+
+
+PLAY_SCRIPT = """
+import sys
+import numpy as np
+from cghair_format.animation import frame_asset
+from cghair_format.examples import example_asset
+from tests.viewer.test_animation import moving_cards
+from viewer.app import run_viewer
+from viewer.camera_control import OrbitController
+from viewer.render_jobs import RenderJob, render_job
+
+asset = example_asset(seed=8, strands=60, points=10, sh_degree=1)
+animation = moving_cards(asset)
+run_viewer(asset, title="play", file_size=0, width=96, height=72, max_frames=3, animation=animation,
+           press=("RIGHT", "RIGHT", "P"), screenshot_dir=sys.argv[1])
+c = asset.cards
+lo = c.spine.reshape(-1, 3).min(axis=0) - c.half_width.max()
+hi = c.spine.reshape(-1, 3).max(axis=0) + c.half_width.max()
+ctl = OrbitController.framing(lo, hi, asset.up_axis)
+job = RenderJob(width=96, height=72, azimuth=ctl.azimuth, elevation=ctl.elevation, distance=ctl.distance,
+                target=tuple(ctl.target))
+render_job(frame_asset(asset, animation, 2), job, sys.argv[1] + "/headless.png")
+"""
+
+
+def test_window_plays_an_animation(xvfb_display, tmp_path):
+    """Two steps (right arrow, which pauses) show frame 2: the screenshot equals the headless render of
+    that pose seen by the same camera."""
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    env = dict(os.environ, DISPLAY=xvfb_display, PYTHONPATH=root)
+    done = subprocess.run([sys.executable, "-c", PLAY_SCRIPT, str(tmp_path)], env=env, cwd=tmp_path,
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    shots = sorted(tmp_path.glob("cgh_view_*.png"))
+    assert len(shots) == 1
+    window = np.asarray(Image.open(shots[0])).astype(int)
+    headless = np.asarray(Image.open(tmp_path / "headless.png")).astype(int)
+    assert headless.max() > 40
+    assert np.abs(window - headless).max() <= 1  # 8-bit rounding of the window's framebuffer
+
+
+def test_window_simulates_live(xvfb_display, tmp_path):
+    path = tmp_path / "hair.cgh"
+    cghair_format.write(example_asset(seed=9, strands=30, points=8, sh_degree=2), path)
+    done = _view(xvfb_display, path, "--width", 64, "--height", 48, "--frames", 4, "--simulate",
+                 "--press", "SPACE,SPACE,P", "--screenshots", tmp_path, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert "ctrl-drag: turn the head" in done.stdout and "Traceback" not in done.stderr
+    assert len(list(tmp_path.glob("cgh_view_*.png"))) == 1

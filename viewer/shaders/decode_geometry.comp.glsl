@@ -1,7 +1,9 @@
 #version 430
 // Strand points from card coordinates (cghair_format.geometry.strand_points) and the segment
 // Gaussians' means, rotations and scales (cghair_format.gaussians.segment_frames).
-// One invocation per Gaussian g = s (P-1) + i, for segment p_i -> p_i+1 of strand s.
+// One invocation per Gaussian g = s (P-1) + i, for segment p_i -> p_i+1 of strand s; with u_indexed
+// (an animated frame at a splat budget, viewer/lod.py) only the strands lod_strands[u_list_base...]
+// are decoded, as the preprocess reads them.
 layout(local_size_x = LOCAL_SIZE) in;
 #include "common.glsl"
 
@@ -11,12 +13,15 @@ layout(std430, binding = 2) readonly buffer StrandCard { uint strand_card[]; }; 
 layout(std430, binding = 3) readonly buffer Uvd { float uvd[]; };                // [S*P*3]
 layout(std430, binding = 4) readonly buffer Opacity { float opacity[]; };        // [G]
 layout(std430, binding = 5) writeonly buffer Points { vec4 points[]; };          // [S*P] xyz
+layout(std430, binding = 6) readonly buffer LodStrands { uint lod_strands[]; };  // per SH chunk, by priority
 // The Gaussians as data images, texel g (viewer/decode.py GpuScene): the preprocess fetches them.
 layout(rgba32f, binding = 0) uniform writeonly image2D u_means;      // xyz, opacity
 layout(rgba32f, binding = 1) uniform writeonly image2D u_rotations;  // wxyz
 layout(rgba32f, binding = 2) uniform writeonly image2D u_scales;     // xyz, 0
 
-uniform uint u_count;       // G
+uniform uint u_count;       // Gaussians decoded: G, or this chunk's drawn ones where u_indexed
+uniform bool u_indexed;
+uniform uint u_list_base;   // where u_indexed: this chunk's first entry in lod_strands
 uniform uint u_points;      // P
 uniform uint u_segments;    // card segments M
 uniform float u_thickness;  // d
@@ -44,6 +49,7 @@ void main() {
     uint g = global_index();
     if (g >= u_count) return;
     uint segs = u_points - 1u;
+    if (u_indexed) g = lod_strands[u_list_base + g / segs] * segs + g % segs;
     uint s = g / segs;
     uint i = g % segs;
     vec3 p0 = strand_point(s, i);
