@@ -419,7 +419,8 @@ def _inconsistency(lay: _Layout, rest: Cards, solution: np.ndarray, l_point: np.
 
 def animation_from_file(asset: HairAsset, path: str | Path) -> tuple[Animation, Residuals]:
     """The asset's cards fitted to the animated strands of a USD (time-sampled BasisCurves) or Alembic
-    file, at the file's frame rate and start time; the residuals say how closely they follow."""
+    file, at the file's frame rate and start time, in the asset's units where the file states its own;
+    the residuals say how closely they follow."""
     from ..exchange.strand_cache import load_cache
 
     cache = load_cache(path)
@@ -436,8 +437,10 @@ def animation_from_file(asset: HairAsset, path: str | Path) -> tuple[Animation, 
         raise FitError(f"{path}: {len(wrong)} strands have other point counts than the asset's (strand {s}: "
                        f"{int(cache.counts[ids[s]])} points in the file, {int(asset.counts[s])} in the asset)"
                        ": export the cache with the point counts of the groom the .cgh was built from")
-    return fit_frames(asset, cache.padded(asset.points_per_strand), cache.fps, cache.start,
-                      f"fit {Path(path).name}")
+    # a cache that states its units is brought to the asset's (Blender writes metres, Houdini often cm)
+    scale = 1.0 if cache.meters_per_unit is None else cache.meters_per_unit / asset.meters_per_unit
+    frames = (f * scale for f in cache.padded(asset.points_per_strand))
+    return fit_frames(asset, frames, cache.fps, cache.start, f"fit {Path(path).name}")
 
 
 def residual_lines(residuals: Residuals, fps: float, start: float = 0.0) -> list[str]:

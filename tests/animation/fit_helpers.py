@@ -31,13 +31,14 @@ def known_animation(asset: HairAsset, frames: int = 4) -> Animation:
 
 
 def write_usd_cache(path, frames: list[np.ndarray], counts: np.ndarray, fps: float, first_code: float = 1.0,
-                    codes: list[float] | None = None) -> None:
+                    codes: list[float] | None = None, meters_per_unit: float = 1.0) -> None:
     """A USD stage with one linear BasisCurves prim whose points are sampled at each frame: strand ``i``
     of frame ``[S, P, 3]`` has its first ``counts[i]`` points."""
     from pxr import Usd, UsdGeom, Vt
 
     stage = Usd.Stage.CreateNew(str(path))
     UsdGeom.SetStageUpAxis(stage, "Y")
+    UsdGeom.SetStageMetersPerUnit(stage, meters_per_unit)
     stage.SetTimeCodesPerSecond(fps)
     codes = codes or [first_code + f for f in range(len(frames))]
     stage.SetStartTimeCode(codes[0])
