@@ -88,6 +88,7 @@ class _Layout:
     delta: np.ndarray  # [N] scaled by the card's normal scale
     scale: np.ndarray  # [C] the unknown for n_k is scale * n_k, so its weights are as large as the rails'
     unknowns: int  # 3 (M + 1) per card
+    uvd: np.ndarray  # [N, 3] float64, the points' stored card coordinates
 
 
 def _layout(asset: HairAsset) -> _Layout:
@@ -108,7 +109,7 @@ def _layout(asset: HairAsset) -> _Layout:
     sq = np.bincount(card, uvd[:, 2] ** 2, c_count) / np.maximum(np.bincount(card, minlength=c_count), 1)
     scale = np.maximum(np.sqrt(sq), 1e-9 * bounding_diagonal(cards.spine))
     return _Layout((s_idx, p_idx), card, cols, bary, np.stack([1 - f, f], 1), uvd[:, 2] / scale[card], scale,
-                   unknowns)
+                   unknowns, uvd)
 
 
 def _normal_lengths(lay: _Layout, normal: np.ndarray) -> np.ndarray:
@@ -306,12 +307,14 @@ def _banded_matrix(band: np.ndarray):
 def _refine(lay: _Layout, rest: Cards, now: np.ndarray, spine: np.ndarray, normal: np.ndarray,
             rigid: np.ndarray, shape: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """:data:`GN_STEPS` Gauss-Newton steps on the card model itself (spine points and normals, the rest
-    half-widths), each damped toward where it starts by the Tikhonov term."""
+    half-widths), each damped toward where it starts by the Tikhonov term; a card takes a step only where
+    it brings its points (decoded exactly, spec 6.1) closer to the frame's."""
     from scipy.sparse import eye, kron
     from scipy.sparse.linalg import spsolve
 
     step = 1e-7 * bounding_diagonal(spine)
     start = _model_unknowns(lay, rest, spine, normal)
+    error = _card_errors(lay, rest, spine, normal, now)
     for _ in range(GN_STEPS):
         y0 = _model_unknowns(lay, rest, spine, normal)
         band, rhs = _system(lay, now, _normal_lengths(lay, normal), start, rigid, shape, GN_TIKHONOV)
@@ -321,9 +324,23 @@ def _refine(lay: _Layout, rest: Cards, now: np.ndarray, spine: np.ndarray, norma
         normal_eq = (jac.T @ kron(h, eye(3), format="csr") @ jac).tocsc()
         normal_eq += LEVENBERG * normal_eq.diagonal().mean() * eye(normal_eq.shape[0], format="csc")
         dq = spsolve(normal_eq, jac.T @ grad).reshape(spine.shape[0], -1, 6)
-        spine = spine + dq[..., :3]
-        normal = _perpendicular_normals(spine, normal + dq[..., 3:])
+        new_spine = spine + dq[..., :3]
+        new_normal = _perpendicular_normals(new_spine, normal + dq[..., 3:])
+        new_error = _card_errors(lay, rest, new_spine, new_normal, now)
+        better = new_error < error
+        spine = np.where(better[:, None, None], new_spine, spine)
+        normal = np.where(better[:, None, None], new_normal, normal)
+        error = np.where(better, new_error, error)
     return spine, normal
+
+
+def _card_errors(lay: _Layout, rest: Cards, spine: np.ndarray, normal: np.ndarray, now: np.ndarray
+                 ) -> np.ndarray:
+    """Per card, the summed squared distance ``[C]`` of its strands' decoded points from ``now``."""
+    from ..geometry import CardMap
+
+    decoded = CardMap(Cards(spine, normal, rest.half_width, rest.group))(lay.card, lay.uvd)
+    return np.bincount(lay.card, ((decoded - now) ** 2).sum(1), rest.count)
 
 
 def _check_frame(asset: HairAsset, f: int, frame: np.ndarray) -> np.ndarray:
