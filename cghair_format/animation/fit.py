@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from ..asset import Cards, HairAsset
-from ..errors import CghError
+from ..errors import CghError, require
 from ..geometry import bounding_diagonal, card_rails, cross, lengths, spine_tangents, triangle_and_barycentrics
 from .clip import Animation
 
@@ -371,6 +371,8 @@ def fit_frames(asset: HairAsset, frames: Iterable[np.ndarray], fps: float = 30.0
     """Fit the asset's cards to animated strands: ``frames`` yields each frame's points ``[S, P, 3]`` of the
     source's strands (mapped by the asset's ``strand_ids`` where it has them, else in the asset's order;
     placeholder points after a shorter strand's own are ignored). Returns the animation and the residuals."""
+    for module in ("scipy.linalg", "scipy.sparse.linalg"):  # imported here, not in the first frame's time
+        require(module, "cards", "fitting cards to animated strands", package="scipy")
     rest = asset.cards
     lay = _layout(asset)
     rest_points = _decoded(asset, rest)[lay.pick]

@@ -124,3 +124,13 @@ def test_residual_lines_list_every_frame(asset):
     lines = residual_lines(res, 24.0, start=1.0)
     assert len(lines) == 5 and lines[2].split()[:2] == ["1", "1.042"]
     assert lines[-1].startswith("fitted 3 frames: point error mean")
+
+
+def test_without_scipy_the_fit_says_what_to_install(asset, monkeypatch):
+    import sys
+
+    from cghair_format.errors import MissingDependencyError
+
+    monkeypatch.setitem(sys.modules, "scipy.linalg", None)  # import scipy.linalg now raises ImportError
+    with pytest.raises(MissingDependencyError, match=r"pip install 'cghair\[cards\]'"):
+        fit_frames(asset, [])
