@@ -3,31 +3,34 @@
 A strand point is stored as ``(u, v, delta)`` on its card (spec 6.1): ``x = A + f Ef + e Ev + delta nh``,
 that is ``x = sum_j beta_j V_j + delta nh`` over the point's triangle, with ``nh`` the normalized
 ``(1 - f) n_k + f n_(k+1)``. Holding each point's ``l = |(1 - f) n_k + f n_(k+1)|`` at the last estimate,
-``x`` is linear in the card's rail points ``L_k, R_k`` and normals ``n_k``. Per frame :func:`fit_frames`
+``x`` is linear in the card's rail points ``L_k, R_k`` and normals ``n_k``: with a card's unknowns ordered
+``L_k, R_k, n_k`` by ``k``, each point touches 5 unknowns at most 5 apart, so the least squares of the
+whole groom is one symmetric banded system (6 diagonals; the three coordinates share the matrix),
+solved by banded Cholesky. Per frame :func:`fit_frames`
 
 1. carries each card's rest strip by the best rigid fit (Kabsch) of its strands' rest points to their
    points in the frame (a card with fewer than 3 points, or points on a line, takes the whole groom's):
-   the prior the first solve is drawn to by a Tikhonov term, so that what a card's strands do not
-   determine of its strip (a card of one strand turning about it, the tip past its strands' ends) stays
-   as that rigid fit carries it;
-2. solves the linear least squares for all cards at once: with the unknowns of a card ordered
-   ``L_k, R_k, n_k`` by ``k``, each point touches 5 unknowns at most 5 apart, so the normal equations of
-   the whole groom are one symmetric banded system (6 diagonals), solved by banded Cholesky; the three
-   coordinates share the matrix;
-3. projects onto the card model: spine ``p_k = (L_k + R_k) / 2``, normal perpendicular to the tangent,
-   between the one the rails' direction implies and the fitted ``n_k`` (:func:`_project`); half-widths
-   stay the rest pose's, as :class:`~.clip.Animation` requires;
+   the prior a Tikhonov term draws the solution to, so that what a card's strands do not determine of
+   its strip (a card of one strand turning about it, the tip past its strands' ends) moves rigidly;
+2. measures, with a free fit (the prior all but off), how far each card's strands are from moving as
+   one strip (:func:`_inconsistency`); where they stray, rails that few points pin keep the rigid
+   strip's shape (:func:`_add_shape`), so strands pulling apart at a sparse tip do not stretch it;
+3. solves :data:`ROUNDS` times, each with ``l`` from the last normals and the last solution as the prior
+   (iterated Tikhonov: the pull toward the prior of an unknown the data determine with weight ``s``
+   shrinks by ``lambda / (lambda + s)`` a round, an undetermined one stays at the prior), projecting each
+   onto the card model (:func:`_project`): the spine is the rails' midpoint, the normal perpendicular to
+   its tangent; half-widths stay the rest pose's, as :class:`~.clip.Animation` requires;
+4. takes :data:`GN_STEPS` Gauss-Newton steps on the exact card model (:func:`_refine`), which the linear
+   rounds cannot: they leave the spine past a card's last points to the prior, while the tangent at
+   those points depends on it.
 
-and repeats 2-3 with ``l`` from the new normals and the last solution as the prior (:data:`ROUNDS`
-rounds in all, from the previous frame's normals). That is iterated Tikhonov: the pull toward the
-prior of an unknown the data determine with weight ``s`` shrinks by ``lambda / (lambda + s)`` every round,
-while an undetermined one stays at the prior. On the small asset of the tests, lambda 1e-3 and 5 rounds
-recover bent cards to 1e-10 of the bbox diagonal; 1e-6 in one round leaves a bias of 2e-6, and weaker
-priors let cards of 1-2 strands follow the noise further.
+The previous frame's normals start the next. On the small asset of the tests, lambda 1e-3 and 5 rounds
+recover bent cards to 1e-10 of the bbox diagonal (1e-6 in one round leaves a bias of 2e-6; weaker priors
+let cards of 1-2 strands follow noise further); cut strands are followed to 6e-2 of it by the linear
+rounds and to 2e-3 after the two Gauss-Newton steps.
 
 The residual of a frame is the distance from each of the file's points to the point the fitted cards
-decode, as a fraction of the rest groom's bounding-box diagonal.
-"""
+decode, as a fraction of the rest groom's bounding-box diagonal."""
 
 from __future__ import annotations
 
@@ -48,10 +51,10 @@ ROUNDS = 5  # solves per frame: each takes l from the last normals and the last 
 GN_STEPS = 2  # Gauss-Newton steps on the card model after the linear solves
 GN_TIKHONOV = 1e-6  # weight of the pull toward the linear solution in those steps, relative as TIKHONOV
 LEVENBERG = 1e-9  # damping of a Gauss-Newton step (a normal's length and tangent part are free), relative
-SUPPORT = 0.25  # an unknown the data weigh less than this share of its card's mean keeps the rest shape...
 FREE = 1e-9  # the Tikhonov weight of the probe fit that measures how far strands stray from one strip
-INCONSISTENT = 0.2  # ...fully where its strands stray this share of the card's half-width from one strip
-EXACT = 0.1  # strands within this share of the half-width of one strip (float32 rounding) move as one
+EXACT = 0.1  # strands that stray less than this share of a card's half-width from one strip move as one;
+INCONSISTENT = 0.2  # from EXACT to EXACT + this, the rest shape's weight grows from 0 to full...
+SUPPORT = 0.25  # ...on the rails the data weigh less than this share of the card's mean
 FLAT = 1e-6  # a card's strands whose rest spread has a second axis under this share of the first are on a line
 
 
@@ -142,7 +145,7 @@ def _card_kabsch(lay: _Layout, rest: np.ndarray, now: np.ndarray, c_count: int) 
     d = np.ones((c_count, 3))
     d[:, 2] = np.where(sign == 0, 1, sign)
     rot = np.swapaxes((u * d[:, None, :]) @ vt, 1, 2)
-    spread = np.stack([np.bincount(lay.card, (a * a).sum(1), c_count)], 1)[:, 0]
+    spread = np.bincount(lay.card, (a * a).sum(1), c_count)
     weak = (count < 3) | (s[:, 1] <= FLAT * np.maximum(s[:, 0], 1e-300)) | (spread <= 0)
     g_rot, g_shift = _kabsch(rest, now)
     rot[weak] = g_rot
