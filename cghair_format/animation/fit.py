@@ -55,6 +55,7 @@ FREE = 1e-9  # the Tikhonov weight of the probe fit that measures how far strand
 EXACT = 0.1  # strands that stray less than this share of a card's half-width from one strip move as one;
 INCONSISTENT = 0.2  # from EXACT to EXACT + this, the rest shape's weight grows from 0 to full...
 SUPPORT = 0.25  # ...on the rails the data weigh less than this share of the card's mean
+PAIRS = np.triu_indices(5)  # the 15 pairs (i <= j) of a point's 5 unknowns
 FLAT = 1e-6  # a card's strands whose rest spread has a second axis under this share of the first are on a line
 
 
@@ -92,6 +93,9 @@ class _Layout:
     scale: np.ndarray  # [C] the unknown for n_k is scale * n_k, so its weights are as large as the rails'
     unknowns: int  # 3 (M + 1) per card
     uvd: np.ndarray  # [N, 3] float64, the points' stored card coordinates
+    order: np.ndarray  # [N, 5] the order of each point's unknowns that sorts them (``sorted`` below)
+    sorted: np.ndarray  # [N, 5] each point's unknowns, ascending
+    band: np.ndarray  # [N, 15] where each pair of them (i <= j) adds to the upper band [6, n], flat
 
 
 def _layout(asset: HairAsset) -> _Layout:
@@ -111,8 +115,12 @@ def _layout(asset: HairAsset) -> _Layout:
     # the normal's unknown is scaled by the card's RMS |delta|, so its weights are of order 1 like the rails'
     sq = np.bincount(card, uvd[:, 2] ** 2, c_count) / np.maximum(np.bincount(card, minlength=c_count), 1)
     scale = np.maximum(np.sqrt(sq), 1e-9 * bounding_diagonal(cards.spine))
+    order = np.argsort(cols, axis=1)  # ascending, so that each pair (i <= j) is in the upper band
+    ordered = np.take_along_axis(cols, order, 1)
+    size = c_count * unknowns
+    band = (5 - (ordered[:, PAIRS[1]] - ordered[:, PAIRS[0]])) * size + ordered[:, PAIRS[1]]
     return _Layout((s_idx, p_idx), card, cols, bary, np.stack([1 - f, f], 1), uvd[:, 2] / scale[card], scale,
-                   unknowns, uvd)
+                   unknowns, uvd, order, ordered, band)
 
 
 def _normal_lengths(lay: _Layout, normal: np.ndarray) -> np.ndarray:
@@ -173,17 +181,10 @@ def _system(lay: _Layout, now: np.ndarray, l_point: np.ndarray, prior: np.ndarra
     a card): the upper band ``[6, n]`` of their symmetric matrix (solveh_banded's layout) and the
     right-hand sides ``[n, 3]``."""
     size = len(prior)
-    coef = _coefficients(lay, l_point)
-    order = np.argsort(lay.cols, axis=1)  # ascending unknowns, so that each pair (i <= j) is in the upper band
-    cols = np.take_along_axis(lay.cols, order, 1)
-    coef = np.take_along_axis(coef, order, 1)
-    band = np.zeros((6, size))
-    for i in range(5):
-        for j in range(i, 5):
-            d = cols[:, j] - cols[:, i]  # 0..5
-            band += np.bincount((5 - d) * size + cols[:, j], coef[:, i] * coef[:, j], 6 * size).reshape(6, size)
-    rhs = np.stack([sum(np.bincount(cols[:, i], coef[:, i] * now[:, x], size) for i in range(5))
-                    for x in range(3)], 1)
+    coef = np.take_along_axis(_coefficients(lay, l_point), lay.order, 1)
+    pairs = coef[:, PAIRS[0]] * coef[:, PAIRS[1]]
+    band = np.bincount(lay.band.ravel(), pairs.ravel(), 6 * size).reshape(6, size)
+    rhs = np.stack([np.bincount(lay.sorted.ravel(), (coef * now[:, x, None]).ravel(), size) for x in range(3)], 1)
     mean = np.repeat(np.maximum(band[5].reshape(-1, lay.unknowns).mean(1), 1.0), lay.unknowns)
     _add_shape(band, rhs, mean, np.repeat(shape, lay.unknowns), rigid, lay.unknowns)
     band[5] += weight * mean
