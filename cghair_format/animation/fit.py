@@ -375,6 +375,8 @@ def fit_frames(asset: HairAsset, frames: Iterable[np.ndarray], fps: float = 30.0
     """Fit the asset's cards to animated strands: ``frames`` yields each frame's points ``[S, P, 3]`` of the
     source's strands (mapped by the asset's ``strand_ids`` where it has them, else in the asset's order;
     placeholder points after a shorter strand's own are ignored). Returns the animation and the residuals."""
+    if not (np.isfinite(fps) and 0 < fps <= 1000 and np.isfinite(start)):  # what Animation.validate asks
+        raise FitError(f"the frame rate must lie in (0, 1000] and the start be finite, got {fps} and {start}")
     for module in ("scipy.linalg", "scipy.sparse.linalg"):  # imported here, not in the first frame's time
         require(module, "cards", "fitting cards to animated strands", package="scipy")
     rest = asset.cards

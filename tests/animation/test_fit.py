@@ -113,9 +113,12 @@ def test_mismatched_frames_are_refused_in_one_line(asset, change, message):
     assert message in str(info.value) and "\n" not in str(info.value)
 
 
-def test_no_frames_is_refused(asset):
+def test_no_frames_and_bad_rates_are_refused_before_fitting(asset):
     with pytest.raises(FitError, match="no frames"):
         fit_frames(asset, [])
+    for fps in (0.0, 1e9, np.nan):
+        with pytest.raises(FitError, match="frame rate must lie in"):
+            fit_frames(asset, iter(()), fps=fps)
 
 
 def test_residual_lines_list_every_frame(asset):
