@@ -20,9 +20,9 @@ solved by banded Cholesky. Per frame :func:`fit_frames`
    shrinks by ``lambda / (lambda + s)`` a round, an undetermined one stays at the prior), projecting each
    onto the card model (:func:`_project`): the spine is the rails' midpoint, the normal perpendicular to
    its tangent; half-widths stay the rest pose's, as :class:`~.clip.Animation` requires;
-4. takes :data:`GN_STEPS` Gauss-Newton steps on the exact card model (:func:`_refine`), which the linear
-   rounds cannot: they leave the spine past a card's last points to the prior, while the tangent at
-   those points depends on it.
+4. optionally (``refine``) takes Gauss-Newton steps on the exact card model (:func:`_refine`), which
+   does what the linear rounds cannot: they leave the spine past a card's last points to the prior,
+   while the tangent at those points depends on it.
 
 The previous frame's normals start the next. On the small asset of the tests, lambda 1e-3 and 5 rounds
 recover bent cards to 1e-10 of the bbox diagonal (1e-6 in one round leaves a bias of 2e-6; weaker priors
@@ -48,7 +48,7 @@ from .clip import Animation
 
 TIKHONOV = 1e-3  # weight of the prior, relative to a card's mean data weight per unknown
 ROUNDS = 5  # solves per frame: each takes l from the last normals and the last solution as its prior
-GN_STEPS = 2  # Gauss-Newton steps on the card model after the linear solves
+MAX_REFINE = 16  # Gauss-Newton steps a fit may ask for (each keeps a card only where it comes closer)
 GN_TIKHONOV = 1e-6  # weight of the pull toward the linear solution in those steps, relative as TIKHONOV
 LEVENBERG = 1e-9  # damping of a Gauss-Newton step (a normal's length and tangent part are free), relative
 FREE = 1e-9  # the Tikhonov weight of the probe fit that measures how far strands stray from one strip
@@ -309,8 +309,8 @@ def _banded_matrix(band: np.ndarray):
 
 
 def _refine(lay: _Layout, rest: Cards, now: np.ndarray, spine: np.ndarray, normal: np.ndarray,
-            rigid: np.ndarray, shape: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:data:`GN_STEPS` Gauss-Newton steps on the card model itself (spine points and normals, the rest
+            rigid: np.ndarray, shape: np.ndarray, steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """``steps`` Gauss-Newton steps on the card model itself (spine points and normals, the rest
     half-widths), each damped toward where it starts by the Tikhonov term; a card takes a step only where
     it brings its points (decoded exactly, spec 6.1) closer to the frame's."""
     from scipy.sparse import eye, kron
@@ -319,7 +319,7 @@ def _refine(lay: _Layout, rest: Cards, now: np.ndarray, spine: np.ndarray, norma
     step = 1e-7 * bounding_diagonal(spine)
     start = _model_unknowns(lay, rest, spine, normal)
     error = _card_errors(lay, rest, spine, normal, now)
-    for _ in range(GN_STEPS):
+    for _ in range(steps):
         y0 = _model_unknowns(lay, rest, spine, normal)
         band, rhs = _system(lay, now, _normal_lengths(lay, normal), start, rigid, shape, GN_TIKHONOV)
         h = _banded_matrix(band)
@@ -371,10 +371,15 @@ def _check_frame(asset: HairAsset, f: int, frame: np.ndarray) -> np.ndarray:
 
 
 def fit_frames(asset: HairAsset, frames: Iterable[np.ndarray], fps: float = 30.0, start: float = 0.0,
-               source: str = "") -> tuple[Animation, Residuals]:
+               source: str = "", refine: int = 0) -> tuple[Animation, Residuals]:
     """Fit the asset's cards to animated strands: ``frames`` yields each frame's points ``[S, P, 3]`` of the
     source's strands (mapped by the asset's ``strand_ids`` where it has them, else in the asset's order;
-    placeholder points after a shorter strand's own are ignored). Returns the animation and the residuals."""
+    placeholder points after a shorter strand's own are ignored). ``refine`` Gauss-Newton steps on the exact
+    card model follow the linear fit (2 bring points on cards their strands do not reach the end of 30
+    times closer; on strands that stray from one strip they gain 2% for 2.4 times the time: see
+    docs/animation.md). Returns the animation and the residuals."""
+    if not (isinstance(refine, (int, np.integer)) and 0 <= refine <= MAX_REFINE):
+        raise FitError(f"refine must be a whole number of Gauss-Newton steps in 0..{MAX_REFINE}, got {refine!r}")
     if not (np.isfinite(fps) and 0 < fps <= 1000 and np.isfinite(start)):  # what Animation.validate asks
         raise FitError(f"the frame rate must lie in (0, 1000] and the start be finite, got {fps} and {start}")
     for module in ("scipy.linalg", "scipy.sparse.linalg"):  # imported here, not in the first frame's time
@@ -388,7 +393,7 @@ def fit_frames(asset: HairAsset, frames: Iterable[np.ndarray], fps: float = 30.0
     for f, frame in enumerate(frames):
         now = _check_frame(asset, f, frame)[lay.pick]
         t0 = time.perf_counter()
-        spine, normal = _fit_frame(lay, rest, rest_points, now, normal)
+        spine, normal = _fit_frame(lay, rest, rest_points, now, normal, refine)
         seconds.append(time.perf_counter() - t0)
         cards = Cards(spine.astype(np.float32), normal.astype(np.float32), rest.half_width, rest.group)
         err = lengths(_decoded(asset, cards)[lay.pick] - now) / diagonal
@@ -409,8 +414,8 @@ def _decoded(asset: HairAsset, cards: Cards) -> np.ndarray:
     return CardMap(cards).strands(asset.strand_card, asset.uvd)
 
 
-def _fit_frame(lay: _Layout, rest: Cards, rest_points: np.ndarray, now: np.ndarray, normal: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray]:
+def _fit_frame(lay: _Layout, rest: Cards, rest_points: np.ndarray, now: np.ndarray, normal: np.ndarray,
+               refine: int) -> tuple[np.ndarray, np.ndarray]:
     """One frame's spines and normals ``[C, M+1, 3]`` (float64), from the previous frame's ``normal``."""
     rot, shift = _card_kabsch(lay, rest_points, now, rest.count)
     prior_spine = np.einsum("cij,ckj->cki", rot, rest.spine.astype(np.float64)) + shift[:, None]
@@ -425,7 +430,7 @@ def _fit_frame(lay: _Layout, rest: Cards, rest_points: np.ndarray, now: np.ndarr
     for _ in range(ROUNDS):
         prior = _solve(lay, now, _normal_lengths(lay, normal), prior, rigid, shape)
         spine, normal = _project(lay, prior, rest, prior_normal)
-    return _refine(lay, rest, now, spine, normal, rigid, shape) if GN_STEPS else (spine, normal)
+    return _refine(lay, rest, now, spine, normal, rigid, shape, refine) if refine else (spine, normal)
 
 
 def _inconsistency(lay: _Layout, rest: Cards, solution: np.ndarray, l_point: np.ndarray, now: np.ndarray
@@ -442,7 +447,7 @@ def _inconsistency(lay: _Layout, rest: Cards, solution: np.ndarray, l_point: np.
     return np.clip((rms / width - EXACT) / INCONSISTENT, 0.0, 1.0)
 
 
-def animation_from_file(asset: HairAsset, path: str | Path) -> tuple[Animation, Residuals]:
+def animation_from_file(asset: HairAsset, path: str | Path, refine: int = 0) -> tuple[Animation, Residuals]:
     """The asset's cards fitted to the animated strands of a USD (time-sampled BasisCurves) or Alembic
     file, at the file's frame rate and start time, in the asset's units where the file states its own;
     the residuals say how closely they follow."""
@@ -465,7 +470,7 @@ def animation_from_file(asset: HairAsset, path: str | Path) -> tuple[Animation, 
     # a cache that states its units is brought to the asset's (Blender writes metres, Houdini often cm)
     scale = 1.0 if cache.meters_per_unit is None else cache.meters_per_unit / asset.meters_per_unit
     frames = (f * scale for f in cache.padded(asset.points_per_strand))
-    return fit_frames(asset, frames, cache.fps, cache.start, f"fit {Path(path).name}")
+    return fit_frames(asset, frames, cache.fps, cache.start, f"fit {Path(path).name}", refine)
 
 
 def residual_lines(residuals: Residuals, fps: float, start: float = 0.0) -> list[str]:

@@ -79,10 +79,12 @@ def test_variable_point_counts_fit_their_own_points(asset):
     frames = _frames(short, truth)
     for f in frames:  # what a placeholder holds must not matter
         f[~short.real_points()] = 1e6
-    fit, res = fit_frames(short, frames)
     # the cut strands leave the ends of some cards without points: those stay as the rigid fit carries
     # them, and the tangent at the last points they reach depends on them; the linear fit leaves points
-    # there 6e-2 of the diagonal off, its two Gauss-Newton steps 2e-3 (four: 4e-4)
+    # there 6e-2 of the diagonal off, two Gauss-Newton steps 2e-3 (four: 4e-4)
+    _, linear = fit_frames(short, frames)
+    assert linear.max[0] < 1e-6 and linear.max.max() > 3e-2
+    _, res = fit_frames(short, frames, refine=2)
     assert res.max[0] < 1e-6 and res.max.max() < 5e-3 and res.mean.max() < 2e-5
 
 
@@ -113,12 +115,15 @@ def test_mismatched_frames_are_refused_in_one_line(asset, change, message):
     assert message in str(info.value) and "\n" not in str(info.value)
 
 
-def test_no_frames_and_bad_rates_are_refused_before_fitting(asset):
+def test_no_frames_bad_rates_and_steps_are_refused_before_fitting(asset):
     with pytest.raises(FitError, match="no frames"):
         fit_frames(asset, [])
     for fps in (0.0, 1e9, np.nan):
         with pytest.raises(FitError, match="frame rate must lie in"):
             fit_frames(asset, iter(()), fps=fps)
+    for refine in (-1, 17, 1.5):
+        with pytest.raises(FitError, match="refine must be a whole number"):
+            fit_frames(asset, iter(()), refine=refine)
 
 
 def test_residual_lines_list_every_frame(asset):

@@ -39,7 +39,7 @@ def usd(tmp_path, asset, truth):
 
 
 def test_usd_time_samples_drive_the_asset(asset, truth, usd):
-    fit, res = animation_from_file(asset, usd)
+    fit, res = animation_from_file(asset, usd, refine=2)
     assert fit.frames == 4 and fit.fps == 24.0 and fit.start == pytest.approx(10 / 24)
     assert fit.source == "fit anim.usda"
     assert res.max[0] < 1e-6 and res.max.max() < 5e-3  # as fit_frames on the same points (test_fit)
@@ -126,7 +126,7 @@ def test_alembic_animated_curves_drive_the_asset(tmp_path, asset, truth, usd):
     abc = tmp_path / "anim.abc"
     subprocess.run([python, str(script), str(usd), str(abc), "10", "13"], check=True, capture_output=True,
                    timeout=300)
-    fit, res = animation_from_file(asset, abc)
+    fit, res = animation_from_file(asset, abc, refine=2)
     assert fit.frames == 4 and fit.fps == pytest.approx(24.0)
     assert res.max[0] < 1e-5 and res.max.max() < 5e-3
     assert Path(abc).exists()
