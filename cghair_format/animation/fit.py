@@ -376,7 +376,7 @@ def fit_frames(asset: HairAsset, frames: Iterable[np.ndarray], fps: float = 30.0
     source's strands (mapped by the asset's ``strand_ids`` where it has them, else in the asset's order;
     placeholder points after a shorter strand's own are ignored). ``refine`` Gauss-Newton steps on the exact
     card model follow the linear fit (2 bring points on cards their strands do not reach the end of 30
-    times closer; on strands that stray from one strip they gain 2% for 2.4 times the time: see
+    times closer; on strands that stray from one strip they gain 3-4% for 1.5-2.4 times the time: see
     docs/animation.md). Returns the animation and the residuals."""
     if not (isinstance(refine, (int, np.integer)) and 0 <= refine <= MAX_REFINE):
         raise FitError(f"refine must be a whole number of Gauss-Newton steps in 0..{MAX_REFINE}, got {refine!r}")

@@ -100,6 +100,8 @@ def test_strand_ids_map_the_source_order(asset):
         source.append(s)
     fit, res = fit_frames(mapped, source)
     assert res.max.max() < 1e-6
+    with pytest.raises(FitError, match=f"has {asset.n_strands} strands, but the asset's strand ids reach"):
+        fit_frames(mapped, [s[:asset.n_strands] for s in source])
 
 
 @pytest.mark.parametrize(("change", "message"), [
