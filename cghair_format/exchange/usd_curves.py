@@ -45,8 +45,9 @@ def _pxr():
     return Usd, UsdGeom
 
 
-def load(path: str | Path) -> Strands:
-    Usd, UsdGeom = _pxr()
+def open_stage(path: str | Path):
+    """The USD stage of ``path``, or a :class:`StrandFileError` with USD's own message."""
+    Usd, _ = _pxr()
     with open(path, "rb") as f:
         text = f.read(6) == b"#usda "
     if text:  # usd-core reads text layers as UTF-8, and its errors about other bytes fail to print
@@ -60,6 +61,12 @@ def load(path: str | Path) -> Strands:
         raise StrandFileError(path, f"USD cannot open the file: {_usd_message(exc)}") from exc
     if stage is None:
         raise StrandFileError(path, "USD cannot open the file")
+    return stage
+
+
+def load(path: str | Path) -> Strands:
+    Usd, UsdGeom = _pxr()
+    stage = open_stage(path)
     time = Usd.TimeCode.EarliestTime()
     parts = []
     for prim in stage.Traverse():
