@@ -9,7 +9,7 @@ rest tangent (turned by the head) onto the moved tangent, so a card twists only 
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -17,6 +17,10 @@ from ..asset import Cards
 from ..geometry import spine_tangents
 from .solver import GRAVITY, Capsules, SolverSettings, StrandState, rotate_between, step
 from .tracks import HeadTrack
+
+# damping while the groom settles: heavy, so that it comes to rest within the settle and the first frame
+# starts still (a swing stopped half way would start again once the motion begins)
+SETTLE_DAMPING = 0.3
 
 
 @dataclass(frozen=True)
@@ -54,8 +58,9 @@ def simulate(rest: np.ndarray, scene: Scene, settings: SolverSettings) -> Iterat
     rotation, translation = scene.track.at(0.0)
     state.x[...] = state.rest @ rotation.T + translation
     state.x_prev[...] = state.x
+    settling = replace(settings, damping=max(settings.damping, SETTLE_DAMPING))
     for _ in range(int(round(settings.settle / dt))):  # the groom settles under gravity, head still
-        step(state, settings, rotation, translation, gravity, wind, scene.capsules, dt)
+        step(state, settling, rotation, translation, gravity, wind, scene.capsules, dt)
     state.x_prev[...] = state.x
     yield state.x.copy()
     for f in range(1, scene.track.frames):

@@ -1,0 +1,91 @@
+"""``cgh animate IN.cgh -o OUT.cgh``: move a groom's cards, by the built-in simulation of a head motion
+(``--motion``) or fitted to animated strands from a DCC tool (``--from ANIMATED.usd|.abc``), and write
+the frames as the file's animation part; the rest pose stays as it was."""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+from ..animation.tracks import MOTIONS
+from ..errors import CghError
+from ..profiles import PROFILES
+from .argtypes import int_at_least, positive_float, share
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("input", help="a .cgh file (its rest pose)")
+    p.add_argument("-o", "--output", required=True, help="the animated .cgh to write")
+    source = p.add_mutually_exclusive_group()
+    source.add_argument("--motion", choices=MOTIONS, default=None,
+                        help="simulate the hair on this head motion (default: nod)")
+    source.add_argument("--from", dest="source", metavar="ANIMATED",
+                        help="fit the cards to the animated strands of a USD (time-sampled curves) or Alembic file")
+    p.add_argument("--refine", type=int_at_least(0), default=0,
+                   help="with --from: Gauss-Newton steps on the exact card model after the linear fit (default 0)")
+    p.add_argument("--frames", type=int_at_least(1), default=120, help="frames to simulate (default 120)")
+    p.add_argument("--fps", type=positive_float, default=30.0, help="frames a second (default 30)")
+    p.add_argument("--substeps", type=int_at_least(1), default=None, help="solver steps a frame (default 4)")
+    p.add_argument("--stiffness", type=share, default=None,
+                   help="bend stiffness, 0..1: the pull toward each segment's rest bend a step (default 0.9)")
+    p.add_argument("--damping", type=share, default=None, help="velocity lost a step, 0..1 (default 0.04)")
+    p.add_argument("--wind", type=_vector, default=None, metavar="X,Y,Z", help="wind, m/s^2 across the strands")
+    p.add_argument("--gust", type=share, default=0.0, help="strength of the seeded gusts, 0..1 (default 0)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the gusts (default 0)")
+    p.add_argument("--profile", choices=list(PROFILES), default=None,
+                   help="precision profile of the output (default: the input's)")
+
+
+def _vector(text: str) -> tuple[float, float, float]:
+    try:
+        x, y, z = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected X,Y,Z (three numbers), got {text!r}") from None
+    return x, y, z
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..codec import read, read_info, write
+
+    if args.source is not None and (args.motion is not None or args.wind is not None):
+        raise CghError("--from takes its motion from the file: drop --motion and --wind")
+    asset, info = read(args.input), read_info(args.input)
+    t = time.perf_counter()
+    if args.source is not None:
+        from ..animation.fit import animation_from_file, residual_lines
+
+        animation, residuals = animation_from_file(asset, args.source, refine=args.refine)
+        print("\n".join(residual_lines(residuals, animation.fps, animation.start)))
+    else:
+        animation = _simulated(asset, args)
+    seconds = time.perf_counter() - t
+    profile = args.profile or (info["profile"] if info["profile"] in PROFILES else "compact")
+    report = write(asset, args.output, profile, animation=animation)
+    print(f"{animation.frames} frames at {animation.fps:g} fps ({animation.source}) in {seconds:.1f} s "
+          f"({1e3 * seconds / animation.frames:.1f} ms a frame)")
+    print(f"wrote {args.output}: {sum(report.chunk_sizes.values()):,} bytes of chunks, profile {profile}")
+    print(report.animation.summary(report.bbox_diagonal))
+    return 0
+
+
+def _simulated(asset, args: argparse.Namespace):
+    from dataclasses import replace
+
+    import numpy as np
+
+    from ..animation import Animation, Scene, SolverSettings, builtin_track, card_frames, fit_head
+    from ..geometry import strand_points
+
+    settings = SolverSettings()
+    changes = {"substeps": args.substeps, "local_stiffness": args.stiffness, "damping": args.damping,
+               "wind": args.wind, "wind_gust": args.gust}
+    settings = replace(settings, **{k: v for k, v in changes.items() if v is not None})
+    settings.check()
+    points = strand_points(asset.cards, asset.strand_card, asset.uvd)
+    others = np.concatenate([points[:, 1:].reshape(-1, 3), asset.cards.spine[:, 1:].reshape(-1, 3)])
+    head = fit_head(points[:, 0], others, asset.up_axis)
+    motion = args.motion or "nod"
+    track = builtin_track(motion, head, args.frames, args.fps, asset.meters_per_unit)
+    scene = Scene(track, head.capsules(), asset.meters_per_unit, head.up, args.seed)
+    frames = list(card_frames(asset.cards, scene, settings))
+    return Animation.of_frames(frames, args.fps, source=f"simulate {motion}")
