@@ -159,7 +159,7 @@ def test_early_termination_is_within_its_bound():
     ref = splatter.render(*[t.double() for t in scene], cam, BACKGROUND)
     frame = native_splat._Frame([native_splat._f32(t) for t in scene[:4]], cam, np.asarray(BACKGROUND, np.float32))
     rgb, alpha, _ = (torch.from_numpy(a).double() for a in frame.rasterize(native_splat._f32(scene[4])))
-    t_final = torch.from_numpy(frame.t_final)
+    t_final = torch.from_numpy(frame.pixels.t_final)
     stopped = (t_final >= 1e-4) & (1 - ref.alpha < 1e-4)
     assert int(stopped.sum()) > 20  # early termination did trigger
     # the contributions it skips weigh t_final in all: the error is at most t_final x the largest
