@@ -11,6 +11,8 @@ They predict with the decoder's functions (``_arithmetic.pxi``, shared with :mod
   interpolated strands (spec 4.5, 7).
 """
 
+cimport cython
+
 include "_arithmetic.pxi"
 
 
@@ -65,6 +67,7 @@ cdef inline void nearest(const double* frames, int m, i64 card, const double* pr
 cdef i64 ZERO[3]  # a zero residual, as C's static storage starts
 
 
+@cython.final  # (its methods called directly, inlined, in the writer's loop)
 cdef class ZoneArrays:
     """The writer's dead zone (:class:`.strand_coder.ZoneArrays`, or None: none) for strands of ``shape
     [S, n, 3]``, checked and held for one :func:`encode_strands` call, with where it stands in the
@@ -192,8 +195,9 @@ def encode_strands(plan, layout, const i64[::1] strands_to_code, const double[:,
     shape = (res.shape[0], co.points, 3)
     dz = ZoneArrays(zone, shape)
     dead_zone = dz.on
-    if (tuple(y.shape)[:3] != shape or (pl.row_seg != NULL and level_ref is not None
-                                        and (level_ref.shape[0] != shape[0] or level_ref.shape[1] != max(nbase - 1, 0)))):
+    if (tuple(y.shape)[:3] != shape
+            or (pl.row_seg != NULL and level_ref is not None
+                and (level_ref.shape[0] != shape[0] or level_ref.shape[1] != max(nbase - 1, 0)))):
         raise ValueError("encode_strands: mismatched shapes")
     if first < 0 or first > co.count:
         raise ValueError("encode_strands: first must lie in [0, strands]")

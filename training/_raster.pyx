@@ -194,28 +194,38 @@ cdef void colour_of(const float* mean, const float* sh, int nc, const double* ca
         colour[ch] = dmax(col + 0.5, 0.0)
 
 
+cdef struct Ewa:  # a Gaussian's EWA projection (ewa_rows), which the backward pass recomputes
+    double q[4]  # the unit quaternion, ...
+    double inv_n  # ... its inverse norm ...
+    double r[9]  # ... and rotation matrix
+    double jw0[3]  # the rows of J W ...
+    double jw1[3]
+    double a0[3]  # ... and of A = J W R_q S
+    double a1[3]
+    double ca  # the dilated 2D covariance (ca, cb; cb, cc)
+    double cb
+    double cc
+
+
 cdef void ewa_rows(const float* quat, const float* scale, const double* cam, double x, double y, double iz,
-                   double* q, double* inv_n, double* r, double* jw0, double* jw1, double* a0, double* a1,
-                   double* ca, double* cb, double* cc) noexcept nogil:
-    """The EWA projection of a Gaussian at camera-space (x, y, 1 / iz): the rows ``jw0``, ``jw1`` of
-    J W, of A = J W R_q S (``a0``, ``a1``) and the dilated 2D covariance (ca, cb; cb, cc); also the
-    unit quaternion ``q``, its inverse norm and rotation matrix ``r``, which the backward pass needs."""
+                   Ewa* e) noexcept nogil:
+    """The EWA projection ``e`` of a Gaussian at camera-space (x, y, 1 / iz)."""
     cdef double fx = cam[15], fy = cam[16], m
     cdef int k, j
-    quat_rotmat(quat, q, inv_n, r)
+    quat_rotmat(quat, e.q, &e.inv_n, e.r)
     for k in range(3):
-        jw0[k] = fx * iz * cam[k] - fx * x * iz * iz * cam[6 + k]
-        jw1[k] = fy * iz * cam[3 + k] - fy * y * iz * iz * cam[6 + k]
+        e.jw0[k] = fx * iz * cam[k] - fx * x * iz * iz * cam[6 + k]
+        e.jw1[k] = fy * iz * cam[3 + k] - fy * y * iz * iz * cam[6 + k]
     for j in range(3):  # A = J W R_q S, by rows
-        a0[j] = 0.0
-        a1[j] = 0.0
+        e.a0[j] = 0.0
+        e.a1[j] = 0.0
         for k in range(3):
-            m = r[3 * k + j] * scale[j]
-            a0[j] += jw0[k] * m
-            a1[j] += jw1[k] * m
-    ca[0] = a0[0] * a0[0] + a0[1] * a0[1] + a0[2] * a0[2] + DILATION
-    cb[0] = a0[0] * a1[0] + a0[1] * a1[1] + a0[2] * a1[2]
-    cc[0] = a1[0] * a1[0] + a1[1] * a1[1] + a1[2] * a1[2] + DILATION
+            m = e.r[3 * k + j] * scale[j]
+            e.a0[j] += e.jw0[k] * m
+            e.a1[j] += e.jw1[k] * m
+    e.ca = e.a0[0] * e.a0[0] + e.a0[1] * e.a0[1] + e.a0[2] * e.a0[2] + DILATION
+    e.cb = e.a0[0] * e.a1[0] + e.a0[1] * e.a1[1] + e.a0[2] * e.a1[2]
+    e.cc = e.a1[0] * e.a1[0] + e.a1[1] * e.a1[1] + e.a1[2] * e.a1[2] + DILATION
 
 
 cdef void project_one(const float* mean, const float* quat, const float* scale, float opacity,
@@ -223,13 +233,8 @@ cdef void project_one(const float* mean, const float* quat, const float* scale, 
                       int64_t* ntiles) noexcept nogil:
     cdef double fx = cam[15], fy = cam[16], cx = cam[17], cy = cam[18]
     cdef double t[3]
-    cdef double q[4]
-    cdef double r[9]
-    cdef double jw0[3]
-    cdef double jw1[3]
-    cdef double a0[3]
-    cdef double a1[3]
-    cdef double inv_n, x, y, z, iz, ca, cb, cc, det, idet, mid, lam, rad, qmax, hx, hy, mx, my
+    cdef Ewa e
+    cdef double x, y, z, iz, ca, cb, cc, det, idet, mid, lam, rad, qmax, hx, hy, mx, my
     cdef int k, x0, x1, y0, y1
     for k in range(3):
         t[k] = cam[3 * k] * mean[0] + cam[3 * k + 1] * mean[1] + cam[3 * k + 2] * mean[2] + cam[9 + k]
@@ -243,7 +248,8 @@ cdef void project_one(const float* mean, const float* quat, const float* scale, 
     y = t[1]
     z = t[2]
     iz = 1.0 / z
-    ewa_rows(quat, scale, cam, x, y, iz, q, &inv_n, r, jw0, jw1, a0, a1, &ca, &cb, &cc)
+    ewa_rows(quat, scale, cam, x, y, iz, &e)
+    ca, cb, cc = e.ca, e.cb, e.cc
     det = ca * cc - cb * cb
     idet = 1.0 / det
     f[2] = <float>(cc * idet)
@@ -739,8 +745,6 @@ cdef void project_backward_one(const float* mean, const float* quat, const float
     cdef double fx = cam[15], fy = cam[16]
     cdef double gs[9]
     cdef double t[3]
-    cdef double q[4]
-    cdef double r[9]
     cdef double gr[9]
     cdef double b[16]
     cdef double bx[16]
@@ -750,16 +754,14 @@ cdef void project_backward_one(const float* mean, const float* quat, const float
     cdef double gd[3]
     cdef double gt[3]
     cdef double gq[4]
-    cdef double jw0[3]
-    cdef double jw1[3]
-    cdef double a0[3]
-    cdef double a1[3]
     cdef double ga0[3]
     cdef double ga1[3]
     cdef double gj0[3]
     cdef double gj1[3]
     cdef double gcol[3]
-    cdef double inv_n, x, y, z, iz, ca, cb, cc, idet, idet2, gca, gcb, gcc, nd, col, dot, m, w
+    cdef Ewa e
+    cdef const double* q = e.q  # the unit quaternion
+    cdef double x, y, z, iz, ca, cb, cc, idet, idet2, gca, gcb, gcc, nd, col, dot, m, w
     cdef int64_t p
     cdef int k, j, ch
     for k in range(9):
@@ -812,7 +814,8 @@ cdef void project_backward_one(const float* mean, const float* quat, const float
     y = t[1]
     z = t[2]
     iz = 1.0 / z
-    ewa_rows(quat, scale, cam, x, y, iz, q, &inv_n, r, jw0, jw1, a0, a1, &ca, &cb, &cc)
+    ewa_rows(quat, scale, cam, x, y, iz, &e)
+    ca, cb, cc = e.ca, e.cb, e.cc
     idet = 1.0 / (ca * cc - cb * cb)
     idet2 = idet * idet
     # conic (cc, -cb, ca) / det back to the 2D covariance
@@ -820,17 +823,17 @@ cdef void project_backward_one(const float* mean, const float* quat, const float
     gcc = gs[2] * (idet - cc * ca * idet2) + gs[3] * (cb * ca * idet2) + gs[4] * (-ca * ca * idet2)
     gcb = gs[2] * (2 * cc * cb * idet2) + gs[3] * (-idet - 2 * cb * cb * idet2) + gs[4] * (2 * ca * cb * idet2)
     for j in range(3):
-        ga0[j] = 2 * gca * a0[j] + gcb * a1[j]
-        ga1[j] = 2 * gcc * a1[j] + gcb * a0[j]
+        ga0[j] = 2 * gca * e.a0[j] + gcb * e.a1[j]
+        ga1[j] = 2 * gcc * e.a1[j] + gcb * e.a0[j]
         gj0[j] = 0.0
         gj1[j] = 0.0
     for j in range(3):  # A = J W M with M = R_q S: to J W's rows, M, then S and R_q
         w = 0.0
         for k in range(3):
-            gj0[k] += ga0[j] * r[3 * k + j] * scale[j]
-            gj1[k] += ga1[j] * r[3 * k + j] * scale[j]
-            m = ga0[j] * jw0[k] + ga1[j] * jw1[k]  # dL/dM[k, j]
-            w += m * r[3 * k + j]
+            gj0[k] += ga0[j] * e.r[3 * k + j] * scale[j]
+            gj1[k] += ga1[j] * e.r[3 * k + j] * scale[j]
+            m = ga0[j] * e.jw0[k] + ga1[j] * e.jw1[k]  # dL/dM[k, j]
+            w += m * e.r[3 * k + j]
             gr[3 * k + j] = m * scale[j]
         g_scale[j] = <float>w
     # J W's rows and the centre's projection, by camera-space x, y, z
@@ -854,7 +857,7 @@ cdef void project_backward_one(const float* mean, const float* quat, const float
                  + q[2] * gr[5] + q[1] * gr[6] + q[2] * gr[7])
     dot = q[0] * gq[0] + q[1] * gq[1] + q[2] * gq[2] + q[3] * gq[3]
     for k in range(4):
-        g_quat[k] = <float>((gq[k] - q[k] * dot) * inv_n)
+        g_quat[k] = <float>((gq[k] - q[k] * dot) * e.inv_n)
 
 
 def project_backward(const float[:, ::1] means, const float[:, ::1] quats, const float[:, ::1] scales,
