@@ -223,6 +223,19 @@ def test_bad_shapes_are_rejected():
         native_splat.render(*scene, camera())
 
 
+def test_the_kernel_refuses_tiles_of_another_feature_width():
+    """The tile side and the features per Gaussian are the kernel's (``_raster.TILE``, ``_raster.NF``):
+    feature rows of another width are refused, not read past."""
+    from training import _raster
+
+    frame = native_splat._Frame([native_splat._f32(t) for t in random_scene(20, 0, seed=0)[:4]], camera(),
+                                np.zeros(3, np.float32))
+    assert frame.tiles_x == -(-frame.width // _raster.TILE) and frame.feat.shape[1] == _raster.NF
+    wide = frame.tiles._replace(feat=np.zeros((20, _raster.NF + 1), np.float32))
+    with pytest.raises(ValueError, match="mismatched"):
+        _raster.contributors(wide, np.zeros(20, np.uint8))
+
+
 def test_sh_asked_only_for_contributing_gaussians_gives_the_same_render_and_gradients(monkeypatch):
     """render() with a function of Gaussian indices for the SH, with as few Gaussians a pixel as
     allowed: asked once, for the contributing Gaussians only (fewer than all in a dense pile), and
