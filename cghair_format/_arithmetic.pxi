@@ -309,7 +309,7 @@ cdef struct Strand:  # the strand at position t of the coding order, being coded
     const double* WN  # ... or without a card neighbour
 
 
-cdef class PlanArrays:
+cdef class PlanView:
     """A plan's arrays (:class:`strand_coder.Recurrence`), checked (the kernels read them unchecked),
     held for one kernel call, and the :c:type:`Plan` that points into them."""
     cdef const i64[::1] base, base_order, level_start, level_taps, idx, row_seg
@@ -356,7 +356,7 @@ cdef class PlanArrays:
         self.c.base_guide = plan.base_guide
 
 
-cdef class CodingArrays:
+cdef class CodingView:
     """The strands ``strands_to_code`` on the cards of ``layout`` (:class:`strand_coder.Layout`: the
     cards' frames and segments, each strand's card and scale) with the reconstruction's rows ``rec``
     and ``world`` (``scratch``: SCRATCH_STRANDS of them, else one per strand), checked and held for
@@ -391,7 +391,7 @@ cdef class CodingArrays:
         self.c.points = rec.shape[1]
         self.c.scratch = scratch
 
-    def check_residuals(self, PlanArrays plan, const i64[:, :, ::1] res):
+    def check_residuals(self, PlanView plan, const i64[:, :, ::1] res):
         """``res`` must hold every strand's residuals under ``plan``: ``[S, nbase + rows, 3]``."""
         if tuple(res.shape)[:3] != (self.card.shape[0], plan.c.nbase + plan.idx.shape[0], 3):
             raise ValueError("strand recurrence: mismatched shapes")

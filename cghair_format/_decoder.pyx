@@ -61,8 +61,8 @@ def decode_strands(plan, layout, const i64[::1] strands_to_code, i64[:, :, ::1] 
     card coordinates and world points of the strand decoding and of those before it that it may
     follow. Returns how many coordinates float32 cannot hold (beyond its range, or NaN: a corrupt
     file)."""
-    cdef PlanArrays plan_arrays
-    cdef CodingArrays coding_arrays
+    cdef PlanView plan_view
+    cdef CodingView coding_view
     cdef const Plan* pl
     cdef const Coding* co
     cdef Strand st
@@ -77,10 +77,10 @@ def decode_strands(plan, layout, const i64[::1] strands_to_code, i64[:, :, ::1] 
     cdef i64* segref = NULL
     if strands_to_code.shape[0] == 0:
         return 0
-    plan_arrays = PlanArrays(plan)
-    coding_arrays = CodingArrays(layout, strands_to_code, rec, world, True)
-    coding_arrays.check_residuals(plan_arrays, res)
-    pl, co, nbase = &plan_arrays.c, &coding_arrays.c, plan_arrays.c.nbase
+    plan_view = PlanView(plan)
+    coding_view = CodingView(layout, strands_to_code, rec, world, True)
+    coding_view.check_residuals(plan_view, res)
+    pl, co, nbase = &plan_view.c, &coding_view.c, plan_view.c.nbase
     if tuple(uvd.shape)[:3] != (res.shape[0], npts, 3):
         raise ValueError("decode_strands: mismatched shapes")
     segref = <i64*> calloc(max(nbase, 1), sizeof(i64))

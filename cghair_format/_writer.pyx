@@ -68,7 +68,7 @@ cdef i64 ZERO[3]  # a zero residual, as C's static storage starts
 
 
 @cython.final  # (its methods called directly, inlined, in the writer's loop)
-cdef class ZoneArrays:
+cdef class ZoneView:
     """The writer's dead zone (:class:`.strand_coder.ZoneArrays`, or None: none) for strands of ``shape
     [S, n, 3]``, checked and held for one :func:`encode_strands` call, with where it stands in the
     strand being coded."""
@@ -168,9 +168,9 @@ def encode_strands(plan, layout, const i64[::1] strands_to_code, const double[:,
     (-1: none; the caller takes the differences). The strands before position ``first`` are coded
     already (their ``rec``, ``world`` and ``residuals`` as the writer left them, before the level
     differences): the ones after follow them as if coded in one run."""
-    cdef PlanArrays plan_arrays
-    cdef CodingArrays coding_arrays
-    cdef ZoneArrays dz
+    cdef PlanView plan_view
+    cdef CodingView coding_view
+    cdef ZoneView dz
     cdef const Plan* pl
     cdef const Coding* co
     cdef Strand st
@@ -187,13 +187,13 @@ def encode_strands(plan, layout, const i64[::1] strands_to_code, const double[:,
     cdef i64* segref = NULL
     if strands_to_code.shape[0] == 0:
         return 0
-    plan_arrays = PlanArrays(plan)
-    coding_arrays = CodingArrays(layout, strands_to_code, state.rec, state.world, False)
+    plan_view = PlanView(plan)
+    coding_view = CodingView(layout, strands_to_code, state.rec, state.world, False)
     res, level_ref = state.residuals, state.level_ref
-    coding_arrays.check_residuals(plan_arrays, res)
-    pl, co, nbase = &plan_arrays.c, &coding_arrays.c, plan_arrays.c.nbase
+    coding_view.check_residuals(plan_view, res)
+    pl, co, nbase = &plan_view.c, &coding_view.c, plan_view.c.nbase
     shape = (res.shape[0], co.points, 3)
-    dz = ZoneArrays(zone, shape)
+    dz = ZoneView(zone, shape)
     dead_zone = dz.on
     if (tuple(y.shape)[:3] != shape
             or (pl.row_seg != NULL and level_ref is not None

@@ -442,7 +442,7 @@ cdef struct PixelGrads:  # what the backward pass reads per pixel and entry, and
     float* pair_grad  # [pairs, 9]
 
 
-cdef class TileArrays:
+cdef class TileView:
     """A frame's :class:`.native_splat.Tiles` held for one kernel call, and its :c:type:`Tiles`."""
     cdef const float[:, ::1] feat
     cdef const int32_t[::1] tile_start, entries
@@ -556,7 +556,7 @@ def rasterize(tiles, shading, pixels):
     pixel the final transmittance and the index (within its tile's list) of the last contribution, -1
     where none, and per entry the colour of the Gaussian (written only for entries that contribute:
     those the backward pass reads)."""
-    cdef TileArrays tl = TileArrays(tiles)
+    cdef TileView tl = TileView(tiles)
     cdef const float[:, ::1] means = shading.means
     cdef const float[:, :, ::1] sh = shading.sh
     cdef const int32_t[::1] sh_row = shading.sh_row
@@ -591,7 +591,7 @@ def contributors(tiles, uint8_t[::1] contributes):
     """Marks (sets to 1) the Gaussians that :func:`rasterize` would take a colour from: the same
     compositing of ``tiles`` (:class:`.native_splat.Tiles`), on opacities alone. ``contributes`` must
     start zeroed."""
-    cdef TileArrays tl = TileArrays(tiles)
+    cdef TileView tl = TileView(tiles)
     cdef int tile, width = tl.c.width, height = tl.c.height
     cdef float bg[3]
     cdef Shading sg  # no SH: only the background (black) is read
@@ -713,7 +713,7 @@ def rasterize_backward(tiles, grads):
     pixels, ``grads`` (:class:`.native_splat.PixelGrads`), into its ``pair_grad [P, 9]``: centre (2),
     conic (3), opacity, colour (3). Each tile writes only its own pairs, so threads never share an
     output."""
-    cdef TileArrays tl = TileArrays(tiles)
+    cdef TileView tl = TileView(tiles)
     cdef const int32_t[::1] entry_pair = grads.entry_pair
     cdef const float[:, ::1] entry_colour = grads.entry_colour
     cdef const float[::1] bg = grads.bg
