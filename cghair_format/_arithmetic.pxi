@@ -240,33 +240,6 @@ cdef inline double unlikeness(const double* w, const double* wm, const i64* base
     return d + UNLIKE_PLACE * diff2(ORIGIN, w + 3 * base[at], ORIGIN, wm + 3 * base[at])
 
 
-cdef inline i64 scratch_row(Py_ssize_t t, const i64[::1] strands_to_code, bint scratch) noexcept nogil:
-    """The row of ``rec`` and ``world`` holding the strand at position ``t``: its own, or decoding, one
-    of the scratch's SCRATCH_STRANDS in turn."""
-    return (t % (CANDIDATES + 1)) if scratch else strands_to_code[t]
-
-
-cdef inline Py_ssize_t most_alike(Py_ssize_t t, const i64[::1] strands_to_code, const i64[::1] strand_card,
-                                  const double[:, :, ::1] world, bint scratch, const double* w, const i64* base,
-                                  Py_ssize_t first, Py_ssize_t last, Py_ssize_t at) noexcept nogil:
-    """Of the CANDIDATES strands before position ``t`` of ``strands_to_code`` on its card (the one at
-    ``t - 1`` must be), the position of the most alike to the strand with world points ``w`` by
-    :func:`unlikeness` over ``first, last, at``: the neighbour ``t - 1``, unless one farther back is
-    less unlike (strictly: a tie, or NaN, keeps the nearer)."""
-    cdef i64 card = strand_card[strands_to_code[t]]
-    cdef Py_ssize_t k, pick = t - 1
-    cdef double d, best = unlikeness(w, &world[scratch_row(t - 1, strands_to_code, scratch), 0, 0], base, first,
-                                     last, at, INFINITY)
-    k = t - 2
-    while k >= 0 and k >= t - CANDIDATES and strand_card[strands_to_code[k]] == card:
-        d = unlikeness(w, &world[scratch_row(k, strands_to_code, scratch), 0, 0], base, first, last, at, best)
-        if d < best:
-            best = d
-            pick = k
-        k -= 1
-    return pick
-
-
 cdef inline void residual_steps(const double* j, const double* sc, double stretch_max, double* f) noexcept nogil:
     """The steps ``f`` in scaled card coordinates of a residual whose prediction a Newton search made (a
     refinement sample's, a guided base sample's; spec 4.3), from the Jacobian columns ``j [9]`` at that
@@ -295,50 +268,189 @@ cdef check_cards(const i64[::1] card, Py_ssize_t triangles, int segments):
 
 # --- the recurrence of spec 4.3, one sample at a time (the decoder's, which the writer runs too) ----
 
-cdef int check_plan(const i64[::1] strands_to_code, const double[:, ::1] frames, int segments,
-                    const i64[::1] strand_card, const double[:, ::1] scale, const i64[::1] base,
-                    const i64[::1] level_start, const i64[::1] level_taps, const i64[::1] idx, const i64[:, ::1] nb,
-                    const double[:, ::1] wt, double stretch_max, const i64[:, :, ::1] res, const i64[::1] row_seg,
-                    Py_ssize_t rows, Py_ssize_t points, double[:, :, ::1] rec, double[:, :, ::1] world) except -1:
-    """The arguments :func:`decode_strands` and :func:`encode_strands` share, checked (the kernels read
-    them unchecked): ``rec`` and ``world`` hold ``rows`` strands of ``points``."""
-    cdef Py_ssize_t t, row, li, nbase = base.shape[0], levels = level_start.shape[0] - 1
-    check_cards(strand_card, frames.shape[0], segments)
-    if (frames.shape[1] != 18 or scale.shape[0] != strand_card.shape[0] or scale.shape[1] != 3
-            or tuple(rec.shape)[:3] != (rows, points, 3) or tuple(world.shape)[:3] != (rows, points, 3)
-            or tuple(res.shape)[:3] != (strand_card.shape[0], nbase + idx.shape[0], 3)
-            or nb.shape[0] != idx.shape[0] or wt.shape[0] != idx.shape[0] or nb.shape[1] != wt.shape[1]
-            or level_taps.shape[0] != levels or level_start[levels] != idx.shape[0]):
-        raise ValueError("strand recurrence: mismatched shapes")
-    for t in range(strands_to_code.shape[0]):
-        if strands_to_code[t] < 0 or strands_to_code[t] >= strand_card.shape[0]:
-            raise ValueError("strand recurrence: a strand index is out of range")
-    if not stretch_max >= 1.0:
-        raise ValueError("strand recurrence: stretch_max must be at least 1")
-    for li in range(levels):
-        if level_taps[li] < 0 or level_taps[li] > nb.shape[1]:
-            raise ValueError("strand recurrence: a level's interpolation width exceeds its neighbour columns")
-    if row_seg is not None:
-        if row_seg.shape[0] != idx.shape[0]:
+cdef struct Plan:  # spec 4.3's prediction plan (strand_coder.Recurrence) as the recurrence reads it
+    const i64* base  # [nbase] the base samples, ...
+    Py_ssize_t nbase
+    const i64* base_order  # [3] ... their predictor order per channel u, v, delta
+    const i64* level_start  # [levels + 1] the rows of each level, ...
+    Py_ssize_t levels
+    const i64* level_taps  # [levels] ... the columns of nb and wt each uses
+    const i64* idx  # [rows] the sample each row predicts, ...
+    const i64* nb  # [rows, width] ... from these samples (interpolation neighbours) ...
+    const double* wt  # [rows, width] ... with these weights
+    Py_ssize_t width
+    const i64* row_seg  # [rows] each row's base segment (level_guide), or NULL: no level guide
+    int newton_steps
+    int newton_halvings
+    double stretch_max
+    int base_guide
+
+
+cdef struct Coding:  # the strands being coded, on their cards, and what is reconstructed of them
+    const i64* order  # [count] the strands (indices into [S]) in coding order: strands_to_code
+    Py_ssize_t count
+    const i64* card  # [S] each strand's card ...
+    const double* scale  # [S, 3] ... and scale g (spec 4.3)
+    const double* frames  # the cards' triangles (geometry.CardMap)
+    int segments
+    double* rec  # [rows, points, 3] scaled card coordinates ...
+    double* world  # [rows, points, 3] ... and world points of the strands coded
+    Py_ssize_t points
+    bint scratch  # rows: SCRATCH_STRANDS in turn (decoding), else one per strand
+
+
+cdef struct Strand:  # the strand at position t of the coding order, being coded
+    Py_ssize_t t
+    i64 card
+    const double* sc  # its scale
+    double* R  # its scaled card coordinates ...
+    double* W  # ... and world points so far
+    const double* RN  # its card neighbour's (the strand before it on its card): NULL with base_guide 0 ...
+    const double* WN  # ... or without a card neighbour
+
+
+cdef class PlanView:
+    """A plan's arrays (:class:`strand_coder.Recurrence`), checked (the kernels read them unchecked),
+    held for one kernel call, and the :c:type:`Plan` that points into them."""
+    cdef const i64[::1] base, base_order, level_start, level_taps, idx, row_seg
+    cdef const i64[:, ::1] nb
+    cdef const double[:, ::1] wt
+    cdef Plan c
+
+    def __cinit__(self, plan):
+        cdef Py_ssize_t li, row, levels
+        self.base, self.base_order, self.level_start = plan.base, plan.base_order, plan.level_start
+        self.level_taps, self.idx, self.nb, self.wt = plan.level_taps, plan.idx, plan.nb, plan.wt
+        self.row_seg = plan.row_seg
+        levels = self.level_start.shape[0] - 1
+        if (self.base_order.shape[0] != 3 or levels < 0 or self.nb.shape[0] != self.idx.shape[0]
+                or self.wt.shape[0] != self.idx.shape[0] or self.nb.shape[1] != self.wt.shape[1]
+                or self.level_taps.shape[0] != levels or self.level_start[levels] != self.idx.shape[0]
+                or (self.row_seg is not None and self.row_seg.shape[0] != self.idx.shape[0])):
             raise ValueError("strand recurrence: mismatched shapes")
-        for row in range(idx.shape[0]):
-            if row_seg[row] < 0 or row_seg[row] >= nbase - 1:
-                raise ValueError("strand recurrence: a row's base segment is out of range")
-    return 0
+        if not plan.stretch_max >= 1.0:
+            raise ValueError("strand recurrence: stretch_max must be at least 1")
+        for li in range(levels):
+            if self.level_taps[li] < 0 or self.level_taps[li] > self.nb.shape[1]:
+                raise ValueError("strand recurrence: a level's interpolation width exceeds its neighbour columns")
+        if self.row_seg is not None:
+            for row in range(self.idx.shape[0]):
+                if self.row_seg[row] < 0 or self.row_seg[row] >= self.base.shape[0] - 1:
+                    raise ValueError("strand recurrence: a row's base segment is out of range")
+        self.c.base = &self.base[0]
+        self.c.nbase = self.base.shape[0]
+        self.c.base_order = &self.base_order[0]
+        self.c.level_start = &self.level_start[0]
+        self.c.levels = levels
+        self.c.level_taps = &self.level_taps[0]
+        self.c.idx = &self.idx[0]
+        self.c.nb = &self.nb[0, 0]
+        self.c.wt = &self.wt[0, 0]
+        self.c.width = self.nb.shape[1]
+        self.c.row_seg = NULL
+        if self.row_seg is not None:
+            self.c.row_seg = &self.row_seg[0]
+        self.c.newton_steps = plan.newton_steps
+        self.c.newton_halvings = plan.newton_halvings
+        self.c.stretch_max = plan.stretch_max
+        self.c.base_guide = plan.base_guide
 
 
-cdef inline void predict_base(Py_ssize_t t, Py_ssize_t j, const i64[::1] strands_to_code, const i64[::1] strand_card,
-                              double[:, :, ::1] rec, double[:, :, ::1] world, bint scratch, const double* fr,
-                              int segments, i64 card, const double* sc, const i64[::1] base,
-                              const i64[::1] base_order, int base_guide, int newton_steps, int newton_halvings,
-                              double stretch_max, const double* R, const double* W, const double* RN,
-                              const double* WN, double* pred, double* f) noexcept nogil:
-    """Base sample ``j``'s prediction ``pred`` and residual steps ``f`` (spec 4.3) for the strand at
-    position ``t`` with scaled card coordinates ``R`` and world points ``W`` so far. With a card
-    neighbour (``RN``, ``WN`` not NULL; ``base_guide`` > 0): its root, then its step (with 2, scaled
-    as the previous steps compare; with 3, after the first, the step of the most alike strand before
-    it), in world space, carried onto the card by the searched Newton steps. Else the strand's own
-    base samples, per channel (spec 4.1)."""
+cdef class CodingView:
+    """The strands ``strands_to_code`` on the cards of ``layout`` (:class:`strand_coder.Layout`: the
+    cards' frames and segments, each strand's card and scale) with the reconstruction's rows ``rec``
+    and ``world`` (``scratch``: SCRATCH_STRANDS of them, else one per strand), checked and held for
+    one kernel call, and the :c:type:`Coding` that points into them."""
+    cdef const i64[::1] order, card
+    cdef const double[:, ::1] frames, scale
+    cdef double[:, :, ::1] rec, world
+    cdef Coding c
+
+    def __cinit__(self, layout, const i64[::1] strands_to_code, double[:, :, ::1] rec, double[:, :, ::1] world,
+                  bint scratch):
+        cdef Py_ssize_t t, strands
+        self.frames, self.card, self.scale = layout.frames, layout.strand_card, layout.scale
+        self.order, self.rec, self.world = strands_to_code, rec, world
+        strands = self.card.shape[0]
+        check_cards(self.card, self.frames.shape[0], layout.segments)
+        shape = (SCRATCH_STRANDS if scratch else strands, rec.shape[1], 3)
+        if (self.frames.shape[1] != 18 or self.scale.shape[0] != strands or self.scale.shape[1] != 3
+                or tuple(rec.shape)[:3] != shape or tuple(world.shape)[:3] != shape):
+            raise ValueError("strand recurrence: mismatched shapes")
+        for t in range(strands_to_code.shape[0]):
+            if strands_to_code[t] < 0 or strands_to_code[t] >= strands:
+                raise ValueError("strand recurrence: a strand index is out of range")
+        self.c.order = &self.order[0]  # (the pointers of empty arrays are never read)
+        self.c.count = strands_to_code.shape[0]
+        self.c.card = &self.card[0]
+        self.c.scale = &self.scale[0, 0]
+        self.c.frames = &self.frames[0, 0]
+        self.c.segments = layout.segments
+        self.c.rec = &self.rec[0, 0, 0]
+        self.c.world = &self.world[0, 0, 0]
+        self.c.points = rec.shape[1]
+        self.c.scratch = scratch
+
+    def check_residuals(self, PlanView plan, const i64[:, :, ::1] res):
+        """``res`` must hold every strand's residuals under ``plan``: ``[S, nbase + rows, 3]``."""
+        if tuple(res.shape)[:3] != (self.card.shape[0], plan.c.nbase + plan.idx.shape[0], 3):
+            raise ValueError("strand recurrence: mismatched shapes")
+
+
+cdef inline double* strand_row(double* rows, const Coding* co, Py_ssize_t t) noexcept nogil:
+    """The row of ``rows`` (``co.rec`` or ``co.world``) holding the strand at position ``t``: its own,
+    or decoding, one of the scratch's SCRATCH_STRANDS in turn."""
+    return rows + 3 * co.points * ((t % (CANDIDATES + 1)) if co.scratch else co.order[t])
+
+
+cdef inline const double* card_neighbour(const Coding* co, Py_ssize_t t, double* rows) noexcept nogil:
+    """The row of ``rows`` (``co.rec`` or ``co.world``) of the strand before position ``t`` when it lies
+    on the same card (the card neighbour, spec 4.3.1), else NULL."""
+    if t > 0 and co.card[co.order[t - 1]] == co.card[co.order[t]]:
+        return strand_row(rows, co, t - 1)
+    return NULL
+
+
+cdef inline void start_strand(const Plan* plan, const Coding* co, Py_ssize_t t, Strand* st) noexcept nogil:
+    """``st``: the strand at position ``t``, its rows and its card neighbour's."""
+    cdef i64 s = co.order[t]
+    st.t = t
+    st.card = co.card[s]
+    st.sc = co.scale + 3 * s
+    st.R = strand_row(co.rec, co, t)
+    st.W = strand_row(co.world, co, t)
+    st.RN = card_neighbour(co, t, co.rec) if plan.base_guide > 0 else NULL
+    st.WN = card_neighbour(co, t, co.world)
+
+
+cdef inline Py_ssize_t most_alike(const Plan* plan, const Coding* co, const Strand* st, Py_ssize_t first,
+                                  Py_ssize_t last, Py_ssize_t at) noexcept nogil:
+    """Of the CANDIDATES strands before ``st`` on its card (the one at ``st.t - 1`` must be), the
+    position of the most alike to it by :func:`unlikeness` over ``first, last, at``: the neighbour
+    ``st.t - 1``, unless one farther back is less unlike (strictly: a tie, or NaN, keeps the nearer)."""
+    cdef Py_ssize_t k, t = st.t, pick = st.t - 1
+    cdef double d, best = unlikeness(st.W, strand_row(co.world, co, t - 1), plan.base, first, last, at, INFINITY)
+    k = t - 2
+    while k >= 0 and k >= t - CANDIDATES and co.card[co.order[k]] == st.card:
+        d = unlikeness(st.W, strand_row(co.world, co, k), plan.base, first, last, at, best)
+        if d < best:
+            best = d
+            pick = k
+        k -= 1
+    return pick
+
+
+cdef inline void predict_base(const Plan* plan, const Coding* co, const Strand* st, Py_ssize_t j, double* pred,
+                              double* f) noexcept nogil:
+    """Base sample ``j``'s prediction ``pred`` and residual steps ``f`` (spec 4.3) for the strand ``st``
+    with scaled card coordinates ``st.R`` and world points ``st.W`` so far. With a card neighbour
+    (``st.RN``, ``st.WN`` not NULL; ``base_guide`` > 0): its root, then its step (with 2, scaled as the
+    previous steps compare; with 3, after the first, the step of the most alike strand before it), in
+    world space, carried onto the card by the searched Newton steps. Else the strand's own base
+    samples, per channel (spec 4.1)."""
+    cdef const i64* base = plan.base
+    cdef const double* R = st.R
+    cdef const double* W = st.W
     cdef i64 a, b, c = base[j]
     cdef double rho
     cdef const double* RM
@@ -349,32 +461,31 @@ cdef inline void predict_base(Py_ssize_t t, Py_ssize_t j, const i64[::1] strands
     f[0] = 1.0
     f[1] = 1.0
     f[2] = 1.0
-    if RN != NULL and j == 0:  # the neighbour's root
+    if st.RN != NULL and j == 0:  # the neighbour's root
         for ch in range(3):
-            pred[ch] = RN[3 * c + ch]
-    elif RN != NULL:  # the neighbour's step, in world space, onto the card
+            pred[ch] = st.RN[3 * c + ch]
+    elif st.RN != NULL:  # the neighbour's step, in world space, onto the card
         b = base[j - 1]
         rho = 1.0
-        if base_guide == 2 and j > 1:  # scaled as the previous steps compare
+        if plan.base_guide == 2 and j > 1:  # scaled as the previous steps compare
             a = base[j - 2]
-            rho = step_ratio(W + 3 * a, W + 3 * b, WN + 3 * a, WN + 3 * b)
-        RM = RN
-        WM = WN
-        if base_guide == 3 and j > 1:  # the most alike strand of those before it
-            a = scratch_row(most_alike(t, strands_to_code, strand_card, world, scratch, W, &base[0],
-                                       max(j - 3, 0), j - 2, j - 1), strands_to_code, scratch)
-            RM = &rec[a, 0, 0]
-            WM = &world[a, 0, 0]
+            rho = step_ratio(W + 3 * a, W + 3 * b, st.WN + 3 * a, st.WN + 3 * b)
+        RM = st.RN
+        WM = st.WN
+        if plan.base_guide == 3 and j > 1:  # the most alike strand of those before it
+            a = most_alike(plan, co, st, max(j - 3, 0), j - 2, j - 1)
+            RM = strand_row(co.rec, co, a)
+            WM = strand_row(co.world, co, a)
         for ch in range(3):
             pred[ch] = R[3 * b + ch] + rho * (RM[3 * c + ch] - RM[3 * b + ch])
             goal[ch] = W[3 * b + ch] + rho * (WM[3 * c + ch] - WM[3 * b + ch])
-        newton(fr, segments, card, sc, goal, newton_steps, newton_halvings, pred, jac)
-        residual_steps(jac, sc, stretch_max, f)
+        newton(co.frames, co.segments, st.card, st.sc, goal, plan.newton_steps, plan.newton_halvings, pred, jac)
+        residual_steps(jac, st.sc, plan.stretch_max, f)
     else:  # the strand's own base samples, per channel (spec 4.1)
         for ch in range(3):
             if j == 0:
                 pred[ch] = 0.0
-            elif j == 1 or base_order[ch] == 1:
+            elif j == 1 or plan.base_order[ch] == 1:
                 pred[ch] = R[3 * base[j - 1] + ch]
             else:
                 a = base[j - 2]
@@ -383,53 +494,40 @@ cdef inline void predict_base(Py_ssize_t t, Py_ssize_t j, const i64[::1] strands
                 pred[ch] = R[3 * b + ch] + (R[3 * b + ch] - R[3 * a + ch]) * rho
 
 
-cdef inline void segment_references(Py_ssize_t t, const i64[::1] strands_to_code, const i64[::1] strand_card,
-                                    const double[:, :, ::1] world, bint scratch, const double* W,
-                                    const i64[::1] base, bint neighbour, i64* segref) noexcept nogil:
+cdef inline void segment_references(const Plan* plan, const Coding* co, const Strand* st,
+                                    i64* segref) noexcept nogil:
     """``level_guide`` (spec 4.3.1): per base segment ``k``, ``segref[k]``, the strand whose refinement
-    residuals the segment's are differences from: the most alike of those before the strand at
-    position ``t`` on its card (-1 without a card ``neighbour``)."""
-    cdef Py_ssize_t k, nbase = base.shape[0]
+    residuals the segment's are differences from: the most alike of those before ``st`` on its card
+    (-1 without a card neighbour)."""
+    cdef Py_ssize_t k, nbase = plan.nbase
     for k in range(nbase - 1):
         segref[k] = -1
-        if neighbour:
-            segref[k] = strands_to_code[most_alike(t, strands_to_code, strand_card, world, scratch, W, &base[0],
-                                                   max(k - 1, 0), min(k + 1, nbase - 2), k + 1)]
+        if st.WN != NULL:
+            segref[k] = co.order[most_alike(plan, co, st, max(k - 1, 0), min(k + 1, nbase - 2), k + 1)]
 
 
-cdef inline void predict_level(Py_ssize_t row, Py_ssize_t taps, const i64[:, ::1] nb, const double[:, ::1] wt,
-                               const double* R, const double* W, const double* fr, int segments, i64 card,
-                               const double* sc, int newton_steps, int newton_halvings, double stretch_max,
-                               double* pred, double* f) noexcept nogil:
-    """A refinement sample's prediction ``pred`` and residual steps ``f`` (spec 4.3): the Lagrange
-    interpolation (the first ``taps`` columns of row ``row`` of ``nb`` and ``wt``, left to right) of
-    the scaled card coordinates ``R`` and of the world points ``W``, the second carried onto the card
-    by the searched Newton steps from the first."""
+cdef inline void predict_level(const Plan* plan, const Coding* co, const Strand* st, Py_ssize_t li,
+                               Py_ssize_t row, double* pred, double* f) noexcept nogil:
+    """Row ``row`` (of level ``li``)'s prediction ``pred`` and residual steps ``f`` (spec 4.3): the
+    Lagrange interpolation (the level's first ``level_taps[li]`` columns of ``nb`` and ``wt``, left to
+    right) of the strand's scaled card coordinates and of its world points, the second carried onto
+    the card by the searched Newton steps from the first."""
     cdef double goal[3]
     cdef double jac[9]
     cdef double w
-    cdef Py_ssize_t k, j
+    cdef Py_ssize_t k, j, taps = plan.level_taps[li]
     cdef int ch
     for ch in range(3):
         pred[ch] = 0.0
         goal[ch] = 0.0
     for k in range(taps):
-        w = wt[row, k]
-        j = 3 * nb[row, k]
+        w = plan.wt[row * plan.width + k]
+        j = 3 * plan.nb[row * plan.width + k]
         for ch in range(3):
-            pred[ch] = pred[ch] + R[j + ch] * w
-            goal[ch] = goal[ch] + W[j + ch] * w
-    newton(fr, segments, card, sc, goal, newton_steps, newton_halvings, pred, jac)
-    residual_steps(jac, sc, stretch_max, f)
-
-
-cdef inline const double* card_neighbour(Py_ssize_t t, const i64[::1] strands_to_code, const i64[::1] strand_card,
-                                          double[:, :, ::1] rows, bint scratch) noexcept nogil:
-    """The row of ``rows`` (``rec`` or ``world``) of the strand before position ``t`` when it lies on the
-    same card (the card neighbour, spec 4.3.1), else NULL."""
-    if t > 0 and strand_card[strands_to_code[t - 1]] == strand_card[strands_to_code[t]]:
-        return &rows[scratch_row(t - 1, strands_to_code, scratch), 0, 0]
-    return NULL
+            pred[ch] = pred[ch] + st.R[j + ch] * w
+            goal[ch] = goal[ch] + st.W[j + ch] * w
+    newton(co.frames, co.segments, st.card, st.sc, goal, plan.newton_steps, plan.newton_halvings, pred, jac)
+    residual_steps(jac, st.sc, plan.stretch_max, f)
 
 
 cdef inline void respace(const double* x, int p, double* length, double* out) noexcept nogil:

@@ -49,87 +49,71 @@ def map_strands(const double[:, ::1] frames, int segments, const i64[::1] strand
                     out[s, i, ch] = <float> x[ch]
 
 
-def decode_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int segments,
-                   const i64[::1] strand_card, const double[:, ::1] scale,
-                   const i64[::1] base, const i64[::1] base_order, const i64[::1] level_start,
-                   const i64[::1] level_taps, const i64[::1] idx,
-                   const i64[:, ::1] nb, const double[:, ::1] wt, int newton_steps, int newton_halvings,
-                   double stretch_max, int base_guide, double[:, :, ::1] rec, double[:, :, ::1] world,
-                   i64[:, :, ::1] res, double[:, :, ::1] uvd, const i64[::1] row_seg=None):
+def decode_strands(plan, layout, const i64[::1] strands_to_code, i64[:, :, ::1] res, double[:, :, ::1] uvd,
+                   double[:, :, ::1] rec, double[:, :, ::1] world):
     """Spec 4.3's decoding of the strands ``strands_to_code`` (indices into ``[S]``; every card's
-    strands whole, in file order, best card by card so its triangles stay in cache) of ``n`` points
-    from their residuals ``res [S, len(base) + R, 3]`` (base samples, then the levels' rows; neighbour
-    prediction undone; with ``row_seg``, ``level_guide``'s differences are restored in place), into
-    their card coordinates ``uvd [S, n, 3]`` (float64, ``y / g``). ``rec`` and ``world``
-    ``[SCRATCH_STRANDS, n, 3]`` are the scratch of the scaled card coordinates and world points of
-    the strand decoding and of those before it that it may follow. Returns how many coordinates
-    float32 cannot hold (beyond its range, or NaN: a corrupt file).
-
-    The plan: ``base`` indices, per channel ``base_order``; levels ``level_start [L + 1]`` delimit the
-    rows of ``idx [R]`` (the new indices), ``nb [R, W]`` and ``wt [R, W]`` (interpolation neighbours and
-    weights, the first ``level_taps[l]`` columns of level ``l``); ``row_seg [R]``, each row's base
-    segment. META's ``newton_steps``, ``newton_halvings``, ``stretch_max`` and ``base_guide``."""
-    cdef Py_ssize_t t, s, j, li, row, i, ch, npts = rec.shape[1], nbase = base.shape[0]
-    cdef Py_ssize_t unrepresentable = 0, levels = level_start.shape[0] - 1
+    strands whole, in file order, best card by card so its triangles stay in cache) of ``n`` points on
+    the cards of ``layout`` (:class:`.strand_coder.Layout`) under ``plan``
+    (:class:`.strand_coder.Recurrence`), from their residuals ``res [S, len(base) + R, 3]`` (base
+    samples, then the levels' rows; neighbour prediction undone; with ``plan.row_seg``,
+    ``level_guide``'s differences are restored in place), into their card coordinates ``uvd [S, n, 3]``
+    (float64, ``y / g``). ``rec`` and ``world`` ``[SCRATCH_STRANDS, n, 3]`` are the scratch of the scaled
+    card coordinates and world points of the strand decoding and of those before it that it may
+    follow. Returns how many coordinates float32 cannot hold (beyond its range, or NaN: a corrupt
+    file)."""
+    cdef PlanView plan_view
+    cdef CodingView coding_view
+    cdef const Plan* pl
+    cdef const Coding* co
+    cdef Strand st
+    cdef Py_ssize_t t, s, j, li, row, i, ch, npts = rec.shape[1], nbase
+    cdef Py_ssize_t unrepresentable = 0
     cdef double v
     cdef double pred[3]
     cdef double f[3]
-    cdef const double* fr
-    cdef const double* sc
     cdef double* R
-    cdef double* W
-    cdef const double* RN
-    cdef const double* WN
     cdef i64* LR
-    cdef i64 card, m
+    cdef i64 m
     cdef i64* segref = NULL
-    cdef bint level_guide = row_seg is not None
     if strands_to_code.shape[0] == 0:
         return 0
-    check_plan(strands_to_code, frames, segments, strand_card, scale, base, level_start, level_taps, idx, nb, wt,
-               stretch_max, res, row_seg, SCRATCH_STRANDS, npts, rec, world)
-    if tuple(uvd.shape)[:3] != (strand_card.shape[0], npts, 3):
+    plan_view = PlanView(plan)
+    coding_view = CodingView(layout, strands_to_code, rec, world, True)
+    coding_view.check_residuals(plan_view, res)
+    pl, co, nbase = &plan_view.c, &coding_view.c, plan_view.c.nbase
+    if tuple(uvd.shape)[:3] != (res.shape[0], npts, 3):
         raise ValueError("decode_strands: mismatched shapes")
     segref = <i64*> calloc(max(nbase, 1), sizeof(i64))
     if segref == NULL:
         raise MemoryError()
-    fr = &frames[0, 0]
     with nogil:
-        for t in range(strands_to_code.shape[0]):
-            s = strands_to_code[t]
-            card = strand_card[s]
-            sc = &scale[s, 0]
-            R = &rec[scratch_row(t, strands_to_code, True), 0, 0]
-            W = &world[scratch_row(t, strands_to_code, True), 0, 0]
-            RN = card_neighbour(t, strands_to_code, strand_card, rec, True) if base_guide > 0 else NULL
-            WN = card_neighbour(t, strands_to_code, strand_card, world, True)
+        for t in range(co.count):
+            s = co.order[t]
+            start_strand(pl, co, t, &st)
+            R = st.R
             for j in range(nbase):
-                predict_base(t, j, strands_to_code, strand_card, rec, world, True, fr, segments, card, sc, base,
-                             base_order, base_guide, newton_steps, newton_halvings, stretch_max, R, W, RN, WN,
-                             pred, f)
+                predict_base(pl, co, &st, j, pred, f)
                 for ch in range(3):
-                    R[3 * base[j] + ch] = pred[ch] + res[s, j, ch] * f[ch]
-                to_world(fr, segments, card, R + 3 * base[j], sc, W + 3 * base[j])
-            if level_guide:
-                segment_references(t, strands_to_code, strand_card, world, True, W, base,
-                                   card_neighbour(t, strands_to_code, strand_card, world, True) != NULL, segref)
+                    R[3 * pl.base[j] + ch] = pred[ch] + res[s, j, ch] * f[ch]
+                to_world(co.frames, co.segments, st.card, R + 3 * pl.base[j], st.sc, st.W + 3 * pl.base[j])
+            if pl.row_seg != NULL:
+                segment_references(pl, co, &st, segref)
             LR = &res[s, nbase, 0]
-            for li in range(levels):
-                for row in range(level_start[li], level_start[li + 1]):
-                    i = idx[row]
-                    predict_level(row, level_taps[li], nb, wt, R, W, fr, segments, card, sc, newton_steps,
-                                  newton_halvings, stretch_max, pred, f)
-                    m = segref[row_seg[row]] if level_guide else -1
+            for li in range(pl.levels):
+                for row in range(pl.level_start[li], pl.level_start[li + 1]):
+                    i = pl.idx[row]
+                    predict_level(pl, co, &st, li, row, pred, f)
+                    m = segref[pl.row_seg[row]] if pl.row_seg != NULL else -1
                     if m >= 0:  # stored as the difference from m's (int64, wrapping)
                         for ch in range(3):
                             LR[3 * row + ch] = <i64> (<uint64_t> LR[3 * row + ch] + <uint64_t> res[m, nbase + row, ch])
                     for ch in range(3):
                         R[3 * i + ch] = pred[ch] + LR[3 * row + ch] * f[ch]
-                    if li + 1 < levels:  # nothing is predicted from the last level
-                        to_world(fr, segments, card, R + 3 * i, sc, W + 3 * i)
+                    if li + 1 < pl.levels:  # nothing is predicted from the last level
+                        to_world(co.frames, co.segments, st.card, R + 3 * i, st.sc, st.W + 3 * i)
             for i in range(npts):
                 for ch in range(3):
-                    v = R[3 * i + ch] / sc[ch]
+                    v = R[3 * i + ch] / st.sc[ch]
                     uvd[s, i, ch] = v
                     if not (fabs(v) <= FLT_MAX):
                         unrepresentable += 1

@@ -11,6 +11,8 @@ They predict with the decoder's functions (``_arithmetic.pxi``, shared with :mod
   interpolated strands (spec 4.5, 7).
 """
 
+cimport cython
+
 include "_arithmetic.pxi"
 
 
@@ -62,6 +64,68 @@ cdef inline void nearest(const double* frames, int m, i64 card, const double* pr
         r[ch] = best[ch]
 
 
+cdef i64 ZERO[3]  # a zero residual, as C's static storage starts
+
+
+@cython.final  # (its methods called directly, inlined, in the writer's loop)
+cdef class ZoneView:
+    """The writer's dead zone (:class:`.strand_coder.ZoneArrays`, or None: none) for strands of ``shape
+    [S, n, 3]``, checked and held for one :func:`encode_strands` call, with where it stands in the
+    strand being coded."""
+    cdef const double[:, :, ::1] points
+    cdef const uint8_t[:, ::1] free
+    cdef bint on, neighbour
+    cdef double dist2
+    cdef const double* Z  # the strand's points (world), ...
+    cdef const uint8_t* FREE  # ... its samples that take any residual (NULL: none) ...
+    cdef const i64* NB  # ... and the residuals of the strand a residual may copy (NULL: none)
+
+    def __cinit__(self, zone, tuple shape):
+        self.on = zone is not None and zone.points is not None and zone.distance >= 0
+        if not self.on:
+            return
+        self.points, self.free, self.neighbour = zone.points, zone.free, zone.neighbour
+        self.dist2 = zone.distance * zone.distance
+        if (tuple(self.points.shape)[:3] != shape
+                or (self.free is not None and (self.free.shape[0] != shape[0] or self.free.shape[1] != shape[1]))):
+            raise ValueError("encode_strands: mismatched shapes")
+
+    cdef inline void start(self, const Coding* co, Py_ssize_t s, const i64* neighbour_res) noexcept nogil:
+        """At the start of strand ``s``, with ``neighbour_res`` its card neighbour's residuals (NULL: none)."""
+        self.NB = NULL
+        if not self.on:
+            return
+        self.Z = &self.points[s, 0, 0]
+        if self.neighbour:
+            self.NB = neighbour_res
+        self.FREE = NULL
+        if self.free is not None:
+            self.FREE = &self.free[s, 0]
+
+    cdef inline void settle(self, const Coding* co, const Strand* st, const double* pred, const double* f,
+                            i64 sample, i64* r, Py_ssize_t column, bint refinement) noexcept nogil:
+        """The residual ``r`` of ``sample`` (``column``: its place in a strand's residuals) under the
+        dead zone: the nearest of its 26 neighbours where it maps farther; ``NB``'s where that maps
+        within the zone, else for a ``refinement`` sample zero where that does; anything (``NB``'s,
+        else zero) for a free sample."""
+        cdef const double* z = self.Z + 3 * sample
+        cdef int ch
+        if not self.on:
+            return
+        nearest(co.frames, co.segments, st.card, pred, f, st.sc, z, self.dist2, r)
+        if self.NB != NULL and fits(co.frames, co.segments, st.card, pred, self.NB + column, f, st.sc, z,
+                                    self.dist2):
+            for ch in range(3):  # the neighbour's residual will do: its difference is zero
+                r[ch] = self.NB[column + ch]
+        elif refinement and fits(co.frames, co.segments, st.card, pred, ZERO, f, st.sc, z, self.dist2):
+            r[0] = 0
+            r[1] = 0
+            r[2] = 0
+        if self.FREE != NULL and self.FREE[sample]:
+            for ch in range(3):
+                r[ch] = self.NB[column + ch] if self.NB != NULL else 0
+
+
 def invert_points(const double[:, ::1] frames, int segments, const i64[::1] card, double[:, ::1] uvd,
                   const double[:, ::1] goal, int steps, double[::1] miss_out):
     """Card coordinates of world points, in place: from ``uvd[i]``, up to ``steps`` Newton steps on
@@ -84,138 +148,97 @@ def invert_points(const double[:, ::1] frames, int segments, const i64[::1] card
                 uvd[i, ch] = c[ch]
 
 
-def encode_strands(const i64[::1] strands_to_code, const double[:, ::1] frames, int segments,
-                   const i64[::1] strand_card, const double[:, ::1] scale,
-                   const i64[::1] base, const i64[::1] base_order, const i64[::1] level_start,
-                   const i64[::1] level_taps, const i64[::1] idx,
-                   const i64[:, ::1] nb, const double[:, ::1] wt, int newton_steps, int newton_halvings,
-                   double stretch_max, int base_guide, double[:, :, ::1] rec, double[:, :, ::1] world,
-                   i64[:, :, ::1] res, const double[:, :, ::1] y, const double[:, :, ::1] dz_points=None,
-                   double dz_dist=-1.0, bint neighbour_zone=False, const i64[::1] row_seg=None,
-                   i64[:, ::1] level_ref=None, Py_ssize_t first=0, const uint8_t[:, ::1] dz_free=None):
+def encode_strands(plan, layout, const i64[::1] strands_to_code, const double[:, :, ::1] y, state, zone=None,
+                   Py_ssize_t first=0):
     """The writer's side of spec 4.3 for the strands ``strands_to_code`` (as :func:`._decoder.decode_strands`
-    takes them, with the same plan): the residuals ``res [S, len(base) + R, 3]`` of the scaled card
-    coordinates ``y [S, n, 3]``, and the reconstruction a decoder will get, scaled (``rec [S, n, 3]``)
-    and in world space (``world``). Each residual is the rounded difference from the decoder's
-    prediction (:func:`predict_base`, :func:`predict_level`), then, with a dead zone (``dz_dist >= 0``:
-    within ``dz_dist`` of ``dz_points``), the nearest of its 26 neighbours where it maps farther, a
-    refinement residual zero where the prediction alone will do and, with ``neighbour_zone``, first
-    the card neighbour's residual (or the level reference's; its stored difference is then zero).
-    Where ``dz_free [S, n]`` is set (placeholders a decoder drops and no kept sample is predicted from,
-    spec 3) any residual will do: the card neighbour's with ``neighbour_zone``, else zero.
+    takes them, with the same ``plan`` and ``layout``): into ``state`` (:class:`.strand_coder.Coded`),
+    the residuals ``residuals [S, len(base) + R, 3]`` of the scaled card coordinates ``y [S, n, 3]``,
+    and the reconstruction a decoder will get, scaled (``rec [S, n, 3]``) and in world space
+    (``world``). Each residual is the rounded difference from the decoder's prediction
+    (:func:`predict_base`, :func:`predict_level`), then, with a dead zone (``zone``,
+    :class:`.strand_coder.ZoneArrays` with ``distance >= 0``: within it of its ``points``), the nearest
+    of its 26 neighbours where it maps farther, a refinement residual zero where the prediction alone
+    will do and, with ``zone.neighbour``, first the card neighbour's residual (or the level
+    reference's; its stored difference is then zero). Where ``zone.free [S, n]`` is set (placeholders
+    a decoder drops and no kept sample is predicted from, spec 3) any residual will do: the card
+    neighbour's with ``zone.neighbour``, else zero.
 
-    With ``row_seg`` (``level_guide``) each base segment of a strand with a card neighbour has a
-    reference strand (:func:`segment_references`), written to ``level_ref [S, len(base) - 1]`` (-1:
-    none; the caller takes the differences). The strands before position ``first`` are coded already
-    (their ``rec``, ``world`` and ``res`` as the writer left them, before the level differences): the
-    ones after follow them as if coded in one run."""
-    cdef Py_ssize_t t, s, j, li, row, i, ch, nbase = base.shape[0], levels = level_start.shape[0] - 1
-    cdef int dead_zone = dz_points is not None and dz_dist >= 0
-    cdef bint level_guide = row_seg is not None
+    With ``plan.row_seg`` (``level_guide``) each base segment of a strand with a card neighbour has a
+    reference strand (:func:`segment_references`), written to ``state.level_ref [S, len(base) - 1]``
+    (-1: none; the caller takes the differences). The strands before position ``first`` are coded
+    already (their ``rec``, ``world`` and ``residuals`` as the writer left them, before the level
+    differences): the ones after follow them as if coded in one run."""
+    cdef PlanView plan_view
+    cdef CodingView coding_view
+    cdef ZoneView dz
+    cdef const Plan* pl
+    cdef const Coding* co
+    cdef Strand st
+    cdef i64[:, :, ::1] res
+    cdef i64[:, ::1] level_ref
+    cdef Py_ssize_t t, s, j, li, row, i, ch, nbase
+    cdef bint dead_zone
     cdef double pred[3]
     cdef double f[3]
-    cdef double dist2 = dz_dist * dz_dist
-    cdef const double* fr
-    cdef const double* sc
-    cdef double* R
-    cdef double* W
-    cdef const double* RN
-    cdef const double* WN
     cdef const double* Y
-    cdef const double* Z = NULL
-    cdef const uint8_t* FREE = NULL
     cdef i64* BR
     cdef i64* LR
-    cdef i64* NB = NULL
-    cdef i64 zero[3]
-    cdef i64 card, c, m
+    cdef i64 c, m
     cdef i64* segref = NULL
-    zero[0] = 0
-    zero[1] = 0
-    zero[2] = 0
     if strands_to_code.shape[0] == 0:
         return 0
-    check_plan(strands_to_code, frames, segments, strand_card, scale, base, level_start, level_taps, idx, nb, wt,
-               stretch_max, res, row_seg, strand_card.shape[0], rec.shape[1], rec, world)
-    shape = (strand_card.shape[0], rec.shape[1], 3)
-    if (tuple(y.shape)[:3] != shape or (dz_points is not None and tuple(dz_points.shape)[:3] != shape)
-            or (dz_free is not None and (dz_free.shape[0] != shape[0] or dz_free.shape[1] != shape[1]))
-            or (level_guide and level_ref is not None and (level_ref.shape[0] != shape[0]
-                                                           or level_ref.shape[1] != max(nbase - 1, 0)))):
+    plan_view = PlanView(plan)
+    coding_view = CodingView(layout, strands_to_code, state.rec, state.world, False)
+    res, level_ref = state.residuals, state.level_ref
+    coding_view.check_residuals(plan_view, res)
+    pl, co, nbase = &plan_view.c, &coding_view.c, plan_view.c.nbase
+    shape = (res.shape[0], co.points, 3)
+    dz = ZoneView(zone, shape)
+    dead_zone = dz.on
+    if (tuple(y.shape)[:3] != shape
+            or (pl.row_seg != NULL and level_ref is not None
+                and (level_ref.shape[0] != shape[0] or level_ref.shape[1] != max(nbase - 1, 0)))):
         raise ValueError("encode_strands: mismatched shapes")
-    if first < 0 or first > strands_to_code.shape[0]:
+    if first < 0 or first > co.count:
         raise ValueError("encode_strands: first must lie in [0, strands]")
     segref = <i64*> calloc(max(nbase, 1), sizeof(i64))
     if segref == NULL:
         raise MemoryError()
-    fr = &frames[0, 0]
     with nogil:
-        for t in range(first, strands_to_code.shape[0]):
-            s = strands_to_code[t]
-            card = strand_card[s]
-            sc = &scale[s, 0]
-            R = &rec[s, 0, 0]
-            W = &world[s, 0, 0]
-            RN = card_neighbour(t, strands_to_code, strand_card, rec, False) if base_guide > 0 else NULL
-            WN = card_neighbour(t, strands_to_code, strand_card, world, False)
+        for t in range(first, co.count):
+            s = co.order[t]
+            start_strand(pl, co, t, &st)
             BR = &res[s, 0, 0]
             LR = BR + 3 * nbase
             Y = &y[s, 0, 0]
-            NB = NULL  # the residuals of this strand's card neighbour, for the neighbour zone
-            if dead_zone:
-                Z = &dz_points[s, 0, 0]
-                if neighbour_zone and WN != NULL:
-                    NB = &res[strands_to_code[t - 1], 0, 0]
-            FREE = &dz_free[s, 0] if dead_zone and dz_free is not None else NULL
+            dz.start(co, s, &res[co.order[t - 1], 0, 0] if st.WN != NULL else NULL)
             for j in range(nbase):
-                c = base[j]
-                predict_base(t, j, strands_to_code, strand_card, rec, world, False, fr, segments, card, sc, base,
-                             base_order, base_guide, newton_steps, newton_halvings, stretch_max, R, W, RN, WN,
-                             pred, f)
+                c = pl.base[j]
+                predict_base(pl, co, &st, j, pred, f)
                 for ch in range(3):
                     BR[3 * j + ch] = <i64> rint((Y[3 * c + ch] - pred[ch]) / f[ch])
-                if dead_zone:
-                    nearest(fr, segments, card, pred, f, sc, Z + 3 * c, dist2, BR + 3 * j)
-                if NB != NULL and fits(fr, segments, card, pred, NB + 3 * j, f, sc, Z + 3 * c, dist2):
-                    for ch in range(3):  # the neighbour's residual will do: its difference is zero
-                        BR[3 * j + ch] = NB[3 * j + ch]
-                if FREE != NULL and FREE[c]:
-                    for ch in range(3):
-                        BR[3 * j + ch] = NB[3 * j + ch] if NB != NULL else 0
+                dz.settle(co, &st, pred, f, c, BR + 3 * j, 3 * j, False)
                 for ch in range(3):
-                    R[3 * c + ch] = pred[ch] + BR[3 * j + ch] * f[ch]
-                to_world(fr, segments, card, R + 3 * c, sc, W + 3 * c)
-            if level_guide:
-                segment_references(t, strands_to_code, strand_card, world, False, W, base, WN != NULL, segref)
+                    st.R[3 * c + ch] = pred[ch] + BR[3 * j + ch] * f[ch]
+                to_world(co.frames, co.segments, st.card, st.R + 3 * c, st.sc, st.W + 3 * c)
+            if pl.row_seg != NULL:
+                segment_references(pl, co, &st, segref)
                 if level_ref is not None:
                     for j in range(nbase - 1):
                         level_ref[s, j] = segref[j]
-            for li in range(levels):
-                for row in range(level_start[li], level_start[li + 1]):
-                    i = idx[row]
-                    predict_level(row, level_taps[li], nb, wt, R, W, fr, segments, card, sc, newton_steps,
-                                  newton_halvings, stretch_max, pred, f)
-                    if level_guide and dead_zone and neighbour_zone:
-                        m = segref[row_seg[row]]
-                        NB = &res[m, 0, 0] if m >= 0 else NULL
+            for li in range(pl.levels):
+                for row in range(pl.level_start[li], pl.level_start[li + 1]):
+                    i = pl.idx[row]
+                    predict_level(pl, co, &st, li, row, pred, f)
+                    if pl.row_seg != NULL and dead_zone and dz.neighbour:
+                        m = segref[pl.row_seg[row]]
+                        dz.NB = &res[m, 0, 0] if m >= 0 else NULL
                     for ch in range(3):
                         LR[3 * row + ch] = <i64> rint((Y[3 * i + ch] - pred[ch]) / f[ch])
-                    if dead_zone:
-                        nearest(fr, segments, card, pred, f, sc, Z + 3 * i, dist2, LR + 3 * row)
-                    if NB != NULL and fits(fr, segments, card, pred, NB + 3 * (nbase + row), f, sc, Z + 3 * i,
-                                           dist2):
-                        for ch in range(3):  # the neighbour's residual will do: its difference is zero
-                            LR[3 * row + ch] = NB[3 * (nbase + row) + ch]
-                    elif dead_zone and fits(fr, segments, card, pred, zero, f, sc, Z + 3 * i, dist2):
-                        LR[3 * row] = 0
-                        LR[3 * row + 1] = 0
-                        LR[3 * row + 2] = 0
-                    if FREE != NULL and FREE[i]:
-                        for ch in range(3):
-                            LR[3 * row + ch] = NB[3 * (nbase + row) + ch] if NB != NULL else 0
+                    dz.settle(co, &st, pred, f, i, LR + 3 * row, 3 * (nbase + row), True)
                     for ch in range(3):
-                        R[3 * i + ch] = pred[ch] + LR[3 * row + ch] * f[ch]
-                    to_world(fr, segments, card, R + 3 * i, sc, W + 3 * i)
+                        st.R[3 * i + ch] = pred[ch] + LR[3 * row + ch] * f[ch]
+                    to_world(co.frames, co.segments, st.card, st.R + 3 * i, st.sc, st.W + 3 * i)
     free(segref)
     return 0
 

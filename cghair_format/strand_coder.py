@@ -15,6 +15,7 @@ array by array and channel by channel where that is smaller.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -60,6 +61,23 @@ class DeadZone(NamedTuple):
         """The dead zone of the strands ``strands`` (indices)."""
         return self._replace(points=self.points[strands],
                              counts=None if self.counts is None else self.counts[strands])
+
+    def arrays(self, n: int, plan: Prediction) -> ZoneArrays:
+        """The dead zone as :func:`._writer.encode_strands` reads it, for strands of ``n`` points coded
+        with ``plan``."""
+        free = None if self.counts is None else free_samples(self.counts, n, plan)
+        return ZoneArrays(np.ascontiguousarray(self.points, np.float64), float(self.distance), self.neighbour, free)
+
+
+class ZoneArrays(NamedTuple):
+    """A :class:`DeadZone` as the compiled writer reads it: ``points [S, n, 3]`` float64 C-ordered, the
+    ``distance`` and ``neighbour``, and ``free [S, n]`` uint8 (:func:`free_samples`; None: every sample
+    is kept)."""
+
+    points: np.ndarray
+    distance: float
+    neighbour: bool
+    free: np.ndarray | None
 
 
 def free_samples(counts: np.ndarray, n: int, plan: Prediction) -> np.ndarray:
@@ -124,46 +142,77 @@ def base_residuals(y: np.ndarray, base: np.ndarray, orders: tuple[int, int, int]
     return out
 
 
-def _run_strands(cmap: CardMap, strand_card: np.ndarray, scale: np.ndarray, residuals: np.ndarray, n: int,
-                 plan: Prediction, after: int = 0, **arrays) -> int:
-    """The compiled recurrence (:func:`._decoder.decode_strands`, :func:`._writer.encode_strands`) over
-    blocks of whole cards in parallel, card
-    by card, each strand after its neighbour (which the base samples' guide reads and the dead zone may
-    copy; a card's triangles stay in cache while its strands are coded). ``arrays``: encoding, ``rec``,
-    ``world``, ``y`` and the dead zone's arguments; decoding, ``uvd`` (each block then gets its own
-    scratch: a strand and those before it that its base samples may follow). Encoding with ``after``,
-    the strands before it are coded already, and each card's others come last on it."""
+class Recurrence(NamedTuple):
+    """A :class:`Prediction` for strands of ``n`` points as the compiled recurrence reads it
+    (:func:`._decoder.decode_strands`, :func:`._writer.encode_strands`): the ``base`` samples and their
+    predictor order per channel; levels: ``level_start [L + 1]`` delimits the rows of ``idx [R]`` (the
+    samples they predict), ``nb [R, W]`` and ``wt [R, W]`` (interpolation neighbours and weights, the
+    first ``level_taps[l]`` columns of level ``l``); with ``level_guide``, ``row_seg [R]``, each row's
+    base segment (else None); and the options of the Newton search and of the residuals' steps."""
+
+    base: np.ndarray
+    base_order: np.ndarray
+    level_start: np.ndarray
+    level_taps: np.ndarray
+    idx: np.ndarray
+    nb: np.ndarray
+    wt: np.ndarray
+    row_seg: np.ndarray | None
+    newton_steps: int
+    newton_halvings: int
+    stretch_max: float
+    base_guide: int
+
+
+def recurrence(n: int, plan: Prediction) -> Recurrence:
+    """``plan``'s :class:`Recurrence` for strands of ``n`` points."""
     base, levels = level_plan(n, plan.base_stride, plan.level_taps)
-    level_start = np.cumsum([0] + [len(idx) for idx, _, _ in levels], dtype=np.int64)
-    idx = np.concatenate([np.zeros(0, np.int64)] + [lv[0] for lv in levels]).astype(np.int64)
     width = levels[0][1].shape[1] if levels else 4
-    nb = np.concatenate([np.zeros((0, width), np.int64)] + [lv[1] for lv in levels]).astype(np.int64)
-    wt = np.concatenate([np.zeros((0, width))] + [lv[2] for lv in levels])
+    return Recurrence(
+        base=base.astype(np.int64), base_order=np.asarray(plan.base_order, np.int64),
+        level_start=np.cumsum([0] + [len(idx) for idx, _, _ in levels], dtype=np.int64),
+        level_taps=np.asarray(plan.level_taps or (4,) * len(levels), np.int64),
+        idx=np.concatenate([np.zeros(0, np.int64)] + [lv[0] for lv in levels]).astype(np.int64),
+        nb=np.concatenate([np.zeros((0, width), np.int64)] + [lv[1] for lv in levels]).astype(np.int64),
+        wt=np.concatenate([np.zeros((0, width))] + [lv[2] for lv in levels]),
+        row_seg=_row_segments(n, plan.base_stride) if plan.level_guide else None,
+        newton_steps=plan.newton_steps, newton_halvings=plan.newton_halvings, stretch_max=plan.stretch_max,
+        base_guide=plan.base_guide)
+
+
+class Layout(NamedTuple):
+    """Where strands lie, as the compiled recurrence reads it: the cards' triangle ``frames [T, 18]`` and
+    ``segments`` (:class:`.geometry.CardMap`), each strand's card ``strand_card [S]`` (int64) and its
+    ``scale [S, 3]`` (float64)."""
+
+    frames: np.ndarray
+    segments: int
+    strand_card: np.ndarray
+    scale: np.ndarray
+
+
+# A block of the compiled recurrence: (plan, layout, strands in coding order, first) -> its result
+Block = Callable[[Recurrence, Layout, np.ndarray, int], int]
+
+
+def _run_strands(cmap: CardMap, strand_card: np.ndarray, scale: np.ndarray, n: int, plan: Prediction, run: Block,
+                 after: int = 0) -> int:
+    """The compiled recurrence (``run``: :func:`._decoder.decode_strands` or :func:`._writer.encode_strands`
+    on the strands it is given) over blocks of whole cards in parallel, card by card, each strand after
+    its neighbour (which the base samples' guide reads and the dead zone may copy; a card's triangles
+    stay in cache while its strands are coded); the sum of what ``run`` returns. Encoding with
+    ``after``, the strands before it are coded already, and each card's others come last on it (``run``
+    gets, per card, the position of its first strand to code)."""
     card = np.ascontiguousarray(strand_card, np.int64)
     by_card, starts = neighbour_order(card)
-    scale = np.ascontiguousarray(scale, np.float64)
-    base, orders = base.astype(np.int64), np.asarray(plan.base_order, np.int64)
-    taps = np.asarray(plan.level_taps or (4,) * len(levels), np.int64)  # the columns of nb, wt each level uses
-
-    if plan.level_guide:
-        arrays["row_seg"] = _row_segments(n, plan.base_stride)
-
-    def block(b: slice, first: int = 0) -> int:
-        given = dict(arrays)
-        args = (by_card[b], cmap.frames, cmap.segments, card, scale, base, orders, level_start, taps, idx, nb, wt,
-                plan.newton_steps, plan.newton_halvings, plan.stretch_max, plan.base_guide)
-        if "uvd" in given:  # decoding: per block, the scratch of a strand and those its base samples may follow
-            scratch = [np.empty((_decoder.SCRATCH_STRANDS, n, 3)) for _ in range(2)]
-            return _decoder.decode_strands(*args, *scratch, residuals, **given)
-        rec, world = given.pop("rec"), given.pop("world")
-        return _writer.encode_strands(*args, rec, world, residuals, first=first, **given)
-
+    layout = Layout(cmap.frames, cmap.segments, card, np.ascontiguousarray(scale, np.float64))
+    rec = recurrence(n, plan)
     if after == 0:
-        return sum(map_threads(block, card_blocks(starts)))
+        return sum(map_threads(lambda b: run(rec, layout, by_card[b], 0), card_blocks(starts)))
     bounds = np.r_[np.flatnonzero(starts), len(card)]
     cards = [(slice(a, b), int(np.count_nonzero(by_card[a:b] < after)))
              for a, b in zip(bounds[:-1], bounds[1:], strict=True) if by_card[b - 1] >= after]
-    return sum(map_threads(lambda c: block(*c), cards))
+    return sum(map_threads(lambda c: run(rec, layout, by_card[c[0]], c[1]), cards))
 
 
 def card_blocks(starts: np.ndarray, rows: int = BLOCK_ROWS) -> list[slice]:
@@ -212,15 +261,12 @@ def encode_uvd(cmap: CardMap, strand_card: np.ndarray, y: np.ndarray, scale: np.
         raw = np.empty((rows, sum(widths), 3), np.int64)
         rec, world = np.empty((rows, n, 3)), np.empty((rows, n, 3))
         ref = np.full((rows, widths[0] - 1), -1, np.int64) if plan.level_guide else None
-    zone = {} if dead_zone is None else {
-        "dz_points": np.ascontiguousarray(dead_zone.points, np.float64), "dz_dist": float(dead_zone.distance),
-        "neighbour_zone": dead_zone.neighbour}
-    if dead_zone is not None and dead_zone.counts is not None:
-        zone["dz_free"] = free_samples(dead_zone.counts, n, plan)
-    if ref is not None:
-        zone["level_ref"] = ref[:s]
-    _run_strands(cmap, strand_card, scale, raw[:s], n, plan, after, rec=rec[:s], world=world[:s],
-                 y=np.ascontiguousarray(y, np.float64), **zone)
+    zone = None if dead_zone is None else dead_zone.arrays(n, plan)
+    state = Coded(raw[:s], rec[:s], world[:s], None if ref is None else ref[:s], s)
+    y = np.ascontiguousarray(y, np.float64)
+    _run_strands(cmap, strand_card, scale, n, plan,
+                 lambda r, layout, strands, first: _writer.encode_strands(r, layout, strands, y, state, zone, first),
+                 after)
     # (the levels' differences go to a copy where the raw residuals may be gone on from)
     residuals = raw[:s].copy() if plan.level_guide and (len(raw) > s or before is not None) else raw[:s]
     if plan.level_guide:  # the levels as differences from each base segment's reference's (spec 4.3)
@@ -255,7 +301,14 @@ def decode_coordinates(cmap: CardMap, strand_card: np.ndarray, residuals: np.nda
     then each level). Raises InvalidContentError where float32 cannot hold them (a corrupt step or
     residuals)."""
     coords = np.empty((len(strand_card), n, 3))
-    bad = _run_strands(cmap, strand_card, scale, np.ascontiguousarray(residuals, np.int64), n, plan, uvd=coords)
+    residuals = np.ascontiguousarray(residuals, np.int64)
+
+    def block(rec: Recurrence, layout: Layout, strands: np.ndarray, _first: int) -> int:
+        # each block its own scratch: a strand and those before it that its base samples may follow
+        scratch = [np.empty((_decoder.SCRATCH_STRANDS, n, 3)) for _ in range(2)]
+        return _decoder.decode_strands(rec, layout, strands, residuals, coords, *scratch)
+
+    bad = _run_strands(cmap, strand_card, scale, n, plan, block)
     if bad:
         raise InvalidContentError(f"{bad} strand point coordinates decode beyond float32's range (a corrupt "
                                   f"step, scale or residuals)", chunk="STRD")

@@ -21,9 +21,11 @@ from libc.math cimport ceil, expf, floor, isfinite, log, sqrt
 from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t
 from libc.stdlib cimport free, malloc
 
-cdef enum:
+cpdef enum:  # read by training.native_splat as module attributes: stated here alone
     TILE = 16  # tile side in pixels
     NF = 10  # per-Gaussian features the rasterizer reads, see project()
+
+cdef enum:
     AHEAD = 16  # entries prefetched ahead: the features of a tile's list are scattered in memory
 
 cdef extern from *:
@@ -192,28 +194,38 @@ cdef void colour_of(const float* mean, const float* sh, int nc, const double* ca
         colour[ch] = dmax(col + 0.5, 0.0)
 
 
+cdef struct Ewa:  # a Gaussian's EWA projection (ewa_rows), which the backward pass recomputes
+    double q[4]  # the unit quaternion, ...
+    double inv_n  # ... its inverse norm ...
+    double r[9]  # ... and rotation matrix
+    double jw0[3]  # the rows of J W ...
+    double jw1[3]
+    double a0[3]  # ... and of A = J W R_q S
+    double a1[3]
+    double ca  # the dilated 2D covariance (ca, cb; cb, cc)
+    double cb
+    double cc
+
+
 cdef void ewa_rows(const float* quat, const float* scale, const double* cam, double x, double y, double iz,
-                   double* q, double* inv_n, double* r, double* jw0, double* jw1, double* a0, double* a1,
-                   double* ca, double* cb, double* cc) noexcept nogil:
-    """The EWA projection of a Gaussian at camera-space (x, y, 1 / iz): the rows ``jw0``, ``jw1`` of
-    J W, of A = J W R_q S (``a0``, ``a1``) and the dilated 2D covariance (ca, cb; cb, cc); also the
-    unit quaternion ``q``, its inverse norm and rotation matrix ``r``, which the backward pass needs."""
+                   Ewa* e) noexcept nogil:
+    """The EWA projection ``e`` of a Gaussian at camera-space (x, y, 1 / iz)."""
     cdef double fx = cam[15], fy = cam[16], m
     cdef int k, j
-    quat_rotmat(quat, q, inv_n, r)
+    quat_rotmat(quat, e.q, &e.inv_n, e.r)
     for k in range(3):
-        jw0[k] = fx * iz * cam[k] - fx * x * iz * iz * cam[6 + k]
-        jw1[k] = fy * iz * cam[3 + k] - fy * y * iz * iz * cam[6 + k]
+        e.jw0[k] = fx * iz * cam[k] - fx * x * iz * iz * cam[6 + k]
+        e.jw1[k] = fy * iz * cam[3 + k] - fy * y * iz * iz * cam[6 + k]
     for j in range(3):  # A = J W R_q S, by rows
-        a0[j] = 0.0
-        a1[j] = 0.0
+        e.a0[j] = 0.0
+        e.a1[j] = 0.0
         for k in range(3):
-            m = r[3 * k + j] * scale[j]
-            a0[j] += jw0[k] * m
-            a1[j] += jw1[k] * m
-    ca[0] = a0[0] * a0[0] + a0[1] * a0[1] + a0[2] * a0[2] + DILATION
-    cb[0] = a0[0] * a1[0] + a0[1] * a1[1] + a0[2] * a1[2]
-    cc[0] = a1[0] * a1[0] + a1[1] * a1[1] + a1[2] * a1[2] + DILATION
+            m = e.r[3 * k + j] * scale[j]
+            e.a0[j] += e.jw0[k] * m
+            e.a1[j] += e.jw1[k] * m
+    e.ca = e.a0[0] * e.a0[0] + e.a0[1] * e.a0[1] + e.a0[2] * e.a0[2] + DILATION
+    e.cb = e.a0[0] * e.a1[0] + e.a0[1] * e.a1[1] + e.a0[2] * e.a1[2]
+    e.cc = e.a1[0] * e.a1[0] + e.a1[1] * e.a1[1] + e.a1[2] * e.a1[2] + DILATION
 
 
 cdef void project_one(const float* mean, const float* quat, const float* scale, float opacity,
@@ -221,13 +233,8 @@ cdef void project_one(const float* mean, const float* quat, const float* scale, 
                       int64_t* ntiles) noexcept nogil:
     cdef double fx = cam[15], fy = cam[16], cx = cam[17], cy = cam[18]
     cdef double t[3]
-    cdef double q[4]
-    cdef double r[9]
-    cdef double jw0[3]
-    cdef double jw1[3]
-    cdef double a0[3]
-    cdef double a1[3]
-    cdef double inv_n, x, y, z, iz, ca, cb, cc, det, idet, mid, lam, rad, qmax, hx, hy, mx, my
+    cdef Ewa e
+    cdef double x, y, z, iz, ca, cb, cc, det, idet, mid, lam, rad, qmax, hx, hy, mx, my
     cdef int k, x0, x1, y0, y1
     for k in range(3):
         t[k] = cam[3 * k] * mean[0] + cam[3 * k + 1] * mean[1] + cam[3 * k + 2] * mean[2] + cam[9 + k]
@@ -241,7 +248,8 @@ cdef void project_one(const float* mean, const float* quat, const float* scale, 
     y = t[1]
     z = t[2]
     iz = 1.0 / z
-    ewa_rows(quat, scale, cam, x, y, iz, q, &inv_n, r, jw0, jw1, a0, a1, &ca, &cb, &cc)
+    ewa_rows(quat, scale, cam, x, y, iz, &e)
+    ca, cb, cc = e.ca, e.cb, e.cc
     det = ca * cc - cb * cb
     idet = 1.0 / det
     f[2] = <float>(cc * idet)
@@ -395,21 +403,76 @@ cdef inline float raw_alpha(const float* f, int x, float dy, float* gauss, float
     return f[5] * gauss[0]
 
 
-cdef void raster_tile(int tile, int tiles_x, int width, int height, const float* feat,
-                      const int32_t* tile_start, const int32_t* entries, const float* means, const float* sh,
-                      const int32_t* sh_row, int nc, const double* cam, const float* bg, float* rgb, float* alpha,
-                      float* depth, double* t_final, int32_t* last, float* entry_colour,
-                      uint8_t* contributes) noexcept nogil:
-    """Composites one tile. With ``contributes`` (and no SH) it only marks the Gaussians that
+cdef struct Tiles:  # one frame's tile lists (bin_tiles) and the image they cover
+    const float* feat  # [G, NF], project()'s
+    const int32_t* tile_start  # [tiles + 1]
+    const int32_t* entries  # the Gaussian of each entry, tile by tile, front to back
+    int tiles_x
+    int width
+    int height
+
+
+cdef struct Shading:  # how rasterize() colours a Gaussian: its mean and SH, seen from cam
+    const float* means  # [G, 3]
+    const float* sh  # [rows, nc, 3]
+    const int32_t* sh_row  # [G] Gaussian -> SH row, or NULL: row g
+    int nc
+    const double* cam  # as project() takes it
+    const float* bg  # [3]
+
+
+cdef struct Pixels:  # what the forward pass writes: per pixel [height, width], per entry
+    float* rgb
+    float* alpha
+    float* depth
+    double* t_final
+    int32_t* last
+    float* entry_colour  # [entries, 3]
+    uint8_t* contributes  # [G], or NULL: composite colours, else only mark (contributors())
+
+
+cdef struct PixelGrads:  # what the backward pass reads per pixel and entry, and writes per pair
+    const int32_t* entry_pair
+    const float* entry_colour
+    const float* bg
+    const float* grad_rgb
+    const float* grad_alpha
+    const double* t_final
+    const int32_t* last
+    float* pair_grad  # [pairs, 9]
+
+
+cdef class TileView:
+    """A frame's :class:`.native_splat.Tiles` held for one kernel call, and its :c:type:`Tiles`."""
+    cdef const float[:, ::1] feat
+    cdef const int32_t[::1] tile_start, entries
+    cdef Tiles c
+    cdef int count  # tiles
+
+    def __cinit__(self, tiles):
+        self.feat, self.tile_start, self.entries = tiles.feat, tiles.tile_start, tiles.entries
+        if self.feat.shape[1] != NF or self.tile_start.shape[0] < 1:
+            raise ValueError("rasterize: mismatched shapes")
+        self.c.feat = &self.feat[0, 0] if self.feat.shape[0] > 0 else NULL
+        self.c.tile_start = &self.tile_start[0]
+        self.c.entries = &self.entries[0] if self.entries.shape[0] > 0 else NULL
+        self.c.tiles_x, self.c.width, self.c.height = tiles.tiles_x, tiles.width, tiles.height
+        self.count = self.tile_start.shape[0] - 1
+
+
+cdef void raster_tile(int tile, const Tiles* tl, const Shading* sg, Pixels* px) noexcept nogil:
+    """Composites one tile. With ``px.contributes`` (and no SH in ``sg``) it only marks the Gaussians that
     contribute, taking exactly the decisions of the full pass, whose colours are then black."""
-    cdef int tx0 = (tile % tiles_x) * TILE, ty0 = (tile // tiles_x) * TILE
-    cdef int tw = min(TILE, width - tx0), th = min(TILE, height - ty0)
+    cdef const float* feat = tl.feat
+    cdef const int32_t* entries = tl.entries
+    cdef int tx0 = (tile % tl.tiles_x) * TILE, ty0 = (tile // tl.tiles_x) * TILE
+    cdef int tw = min(TILE, tl.width - tx0), th = min(TILE, tl.height - ty0)
     cdef double trans[TILE * TILE]
     cdef double acc[TILE * TILE * 4]
     cdef int32_t lst[TILE * TILE]
     cdef char done[TILE * TILE]
     cdef int rowleft[TILE]  # pixels of each row still compositing
-    cdef int start = tile_start[tile], end = tile_start[tile + 1], npix = tw * th, ndone = 0
+    cdef int start = tl.tile_start[tile], end = tl.tile_start[tile + 1], npix = tw * th, ndone = 0
     cdef int e, k, y, x, x0, x1, y0, y1, pix, ch, have
     cdef int64_t g
     cdef const float* f
@@ -455,16 +518,17 @@ cdef void raster_tile(int tile, int tiles_x, int width, int height, const float*
                     ndone += 1
                     rowleft[y - ty0] -= 1
                     continue
-                if not have and contributes != NULL:
-                    contributes[g] = 1
+                if not have and px.contributes != NULL:
+                    px.contributes[g] = 1
                     col[0] = 0.0
                     col[1] = 0.0
                     col[2] = 0.0
                     have = 1
                 elif not have:  # kept per entry for the backward pass (each entry is this tile's alone)
-                    colour_of(means + 3 * g, sh + 3 * nc * (sh_row[g] if sh_row != NULL else g), nc, cam, col)
+                    colour_of(sg.means + 3 * g, sg.sh + 3 * sg.nc * (sg.sh_row[g] if sg.sh_row != NULL else g),
+                              sg.nc, sg.cam, col)
                     for ch in range(3):
-                        entry_colour[3 * e + ch] = <float>col[ch]
+                        px.entry_colour[3 * e + ch] = <float>col[ch]
                     have = 1
                 w = a * trans[pix]
                 acc[4 * pix] += w * col[0]
@@ -476,84 +540,103 @@ cdef void raster_tile(int tile, int tiles_x, int width, int height, const float*
     for y in range(th):
         for x in range(tw):
             pix = y * TILE + x
-            k = (ty0 + y) * width + tx0 + x
+            k = (ty0 + y) * tl.width + tx0 + x
             for ch in range(3):
-                rgb[3 * k + ch] = <float>(acc[4 * pix + ch] + trans[pix] * bg[ch])
-            alpha[k] = <float>(1.0 - trans[pix])
-            depth[k] = <float>acc[4 * pix + 3]
-            t_final[k] = trans[pix]
-            last[k] = lst[pix]
+                px.rgb[3 * k + ch] = <float>(acc[4 * pix + ch] + trans[pix] * sg.bg[ch])
+            px.alpha[k] = <float>(1.0 - trans[pix])
+            px.depth[k] = <float>acc[4 * pix + 3]
+            px.t_final[k] = trans[pix]
+            px.last[k] = lst[pix]
 
 
-def rasterize(const float[:, ::1] feat, const int32_t[::1] tile_start, const int32_t[::1] entries,
-              const float[:, ::1] means, const float[:, :, ::1] sh, const int32_t[::1] sh_row,
-              const double[::1] cam, int tiles_x, int width, int height, const float[::1] bg,
-              float[:, :, ::1] rgb, float[:, ::1] alpha, float[:, ::1] depth, double[:, ::1] t_final,
-              int32_t[:, ::1] last, float[:, ::1] entry_colour):
-    """Front-to-back compositing of every tile; also keeps per pixel the final transmittance and the
-    index (within its tile's list) of the last contribution, -1 where none, and per entry the colour
-    of the Gaussian (written only for entries that contribute: those the backward pass reads).
-    Gaussian g's SH are row ``sh_row[g]`` of ``sh`` (row g where ``sh_row`` is empty)."""
-    cdef int tile, tiles = tile_start.shape[0] - 1
-    cdef const float* fp = &feat[0, 0] if feat.shape[0] > 0 else NULL
-    cdef const int32_t* ep = &entries[0] if entries.shape[0] > 0 else NULL
-    cdef const float* mp = &means[0, 0] if means.shape[0] > 0 else NULL
-    cdef const float* shp = &sh[0, 0, 0] if sh.shape[0] > 0 else NULL
-    cdef const int32_t* rp = &sh_row[0] if sh_row.shape[0] > 0 else NULL
-    cdef float* cp = &entry_colour[0, 0] if entry_colour.shape[0] > 0 else NULL
-    cdef int nc = sh.shape[1]
-    for tile in prange(tiles, nogil=True, schedule="dynamic"):
-        raster_tile(tile, tiles_x, width, height, fp, &tile_start[0], ep, mp, shp, rp, nc, &cam[0], &bg[0],
-                    &rgb[0, 0, 0], &alpha[0, 0], &depth[0, 0], &t_final[0, 0], &last[0, 0], cp, NULL)
+def rasterize(tiles, shading, pixels):
+    """Front-to-back compositing of every tile of ``tiles`` (:class:`.native_splat.Tiles`), colours by
+    ``shading`` (:class:`.native_splat.Shading`: Gaussian g's SH are row ``sh_row[g]`` of ``sh``, row g
+    where ``sh_row`` is empty), into ``pixels`` (:class:`.native_splat.Pixels`): the image, and per
+    pixel the final transmittance and the index (within its tile's list) of the last contribution, -1
+    where none, and per entry the colour of the Gaussian (written only for entries that contribute:
+    those the backward pass reads)."""
+    cdef TileView tl = TileView(tiles)
+    cdef const float[:, ::1] means = shading.means
+    cdef const float[:, :, ::1] sh = shading.sh
+    cdef const int32_t[::1] sh_row = shading.sh_row
+    cdef const double[::1] cam = shading.cam
+    cdef const float[::1] bg = shading.bg
+    cdef float[:, :, ::1] rgb = pixels.rgb
+    cdef float[:, ::1] alpha = pixels.alpha, depth = pixels.depth
+    cdef double[:, ::1] t_final = pixels.t_final
+    cdef int32_t[:, ::1] last = pixels.last
+    cdef float[:, ::1] entry_colour = pixels.entry_colour
+    cdef Shading sg
+    cdef Pixels px
+    cdef int tile
+    sg.means = &means[0, 0] if means.shape[0] > 0 else NULL
+    sg.sh = &sh[0, 0, 0] if sh.shape[0] > 0 else NULL
+    sg.sh_row = &sh_row[0] if sh_row.shape[0] > 0 else NULL
+    sg.nc = sh.shape[1]
+    sg.cam = &cam[0]
+    sg.bg = &bg[0]
+    px.rgb = &rgb[0, 0, 0]
+    px.alpha = &alpha[0, 0]
+    px.depth = &depth[0, 0]
+    px.t_final = &t_final[0, 0]
+    px.last = &last[0, 0]
+    px.entry_colour = &entry_colour[0, 0] if entry_colour.shape[0] > 0 else NULL
+    px.contributes = NULL
+    for tile in prange(tl.count, nogil=True, schedule="dynamic"):
+        raster_tile(tile, &tl.c, &sg, &px)
 
 
-def contributors(const float[:, ::1] feat, const int32_t[::1] tile_start, const int32_t[::1] entries,
-                 int tiles_x, int width, int height, uint8_t[::1] contributes):
+def contributors(tiles, uint8_t[::1] contributes):
     """Marks (sets to 1) the Gaussians that :func:`rasterize` would take a colour from: the same
-    compositing, on opacities alone. ``contributes`` must start zeroed."""
-    cdef int tile, tiles = tile_start.shape[0] - 1
+    compositing of ``tiles`` (:class:`.native_splat.Tiles`), on opacities alone. ``contributes`` must
+    start zeroed."""
+    cdef TileView tl = TileView(tiles)
+    cdef int tile, width = tl.c.width, height = tl.c.height
     cdef float bg[3]
-    cdef double cam[19]
-    cdef float* rgb
-    cdef float* alpha
-    cdef float* depth
-    cdef double* t_final
-    cdef int32_t* last
-    if entries.shape[0] == 0:
+    cdef Shading sg  # no SH: only the background (black) is read
+    cdef Pixels px  # scratch images, thrown away
+    if tl.entries.shape[0] == 0:
         return
     bg[0] = 0
     bg[1] = 0
     bg[2] = 0
-    rgb = <float*>malloc(3 * width * height * sizeof(float))
-    alpha = <float*>malloc(width * height * sizeof(float))
-    depth = <float*>malloc(width * height * sizeof(float))
-    t_final = <double*>malloc(width * height * sizeof(double))
-    last = <int32_t*>malloc(width * height * sizeof(int32_t))
-    for tile in prange(tiles, nogil=True, schedule="dynamic"):
-        raster_tile(tile, tiles_x, width, height, &feat[0, 0], &tile_start[0], &entries[0], NULL, NULL, NULL, 0,
-                    cam, bg, rgb, alpha, depth, t_final, last, NULL, &contributes[0])
-    free(rgb)
-    free(alpha)
-    free(depth)
-    free(t_final)
-    free(last)
+    sg.means = NULL
+    sg.sh = NULL
+    sg.sh_row = NULL
+    sg.nc = 0
+    sg.cam = NULL
+    sg.bg = bg
+    px.rgb = <float*>malloc(3 * width * height * sizeof(float))
+    px.alpha = <float*>malloc(width * height * sizeof(float))
+    px.depth = <float*>malloc(width * height * sizeof(float))
+    px.t_final = <double*>malloc(width * height * sizeof(double))
+    px.last = <int32_t*>malloc(width * height * sizeof(int32_t))
+    px.entry_colour = NULL
+    px.contributes = &contributes[0]
+    for tile in prange(tl.count, nogil=True, schedule="dynamic"):
+        raster_tile(tile, &tl.c, &sg, &px)
+    free(px.rgb)
+    free(px.alpha)
+    free(px.depth)
+    free(px.t_final)
+    free(px.last)
 
 
-cdef void raster_tile_backward(int tile, int tiles_x, int width, int height, const float* feat,
-                               const int32_t* tile_start, const int32_t* entries,
-                               const int32_t* entry_pair, const float* entry_colour, const float* bg,
-                               const float* grad_rgb,
-                               const float* grad_alpha, const double* t_final, const int32_t* last,
-                               float* pair_grad) noexcept nogil:
-    cdef int tx0 = (tile % tiles_x) * TILE, ty0 = (tile // tiles_x) * TILE
-    cdef int tw = min(TILE, width - tx0), th = min(TILE, height - ty0)
+cdef void raster_tile_backward(int tile, const Tiles* tl, const PixelGrads* pg) noexcept nogil:
+    """One tile's (Gaussian, tile) pair gradients: its pixels' contributions walked back to front."""
+    cdef const float* feat = tl.feat
+    cdef const int32_t* entries = tl.entries
+    cdef int width = tl.width
+    cdef int tx0 = (tile % tl.tiles_x) * TILE, ty0 = (tile // tl.tiles_x) * TILE
+    cdef int tw = min(TILE, width - tx0), th = min(TILE, tl.height - ty0)
     cdef double trans[TILE * TILE]
     cdef double rec[TILE * TILE * 3]  # colour behind, per unit transmittance (3DGS's accum_rec)
     cdef double dc[TILE * TILE * 3]
     cdef double dfin[TILE * TILE]  # (dL/dalpha - bg . dL/drgb) * T_final
     cdef int32_t lst[TILE * TILE]
     cdef int rowlast[TILE]  # the last contribution of each row
-    cdef int start = tile_start[tile], n = tile_start[tile + 1] - start, maxlast = -1
+    cdef int start = tl.tile_start[tile], n = tl.tile_start[tile + 1] - start, maxlast = -1
     cdef int le, k, y, x, x0, x1, y0, y1, pix, ch
     cdef const float* col
     cdef const float* f
@@ -569,18 +652,18 @@ cdef void raster_tile_backward(int tile, int tiles_x, int width, int height, con
         for x in range(tw):
             pix = y * TILE + x
             k = (ty0 + y) * width + tx0 + x
-            lst[pix] = last[k]
-            if last[k] > rowlast[y]:
-                rowlast[y] = last[k]
-            if last[k] > maxlast:
-                maxlast = last[k]
-            trans[pix] = t_final[k]
-            dfin[pix] = grad_alpha[k]
+            lst[pix] = pg.last[k]
+            if pg.last[k] > rowlast[y]:
+                rowlast[y] = pg.last[k]
+            if pg.last[k] > maxlast:
+                maxlast = pg.last[k]
+            trans[pix] = pg.t_final[k]
+            dfin[pix] = pg.grad_alpha[k]
             for ch in range(3):
                 rec[3 * pix + ch] = 0.0
-                dc[3 * pix + ch] = grad_rgb[3 * k + ch]
-                dfin[pix] -= bg[ch] * grad_rgb[3 * k + ch]
-            dfin[pix] *= t_final[k]
+                dc[3 * pix + ch] = pg.grad_rgb[3 * k + ch]
+                dfin[pix] -= pg.bg[ch] * pg.grad_rgb[3 * k + ch]
+            dfin[pix] *= pg.t_final[k]
     for le in range(n - 1, -1, -1):
         for k in range(9):
             gr[k] = 0.0
@@ -588,7 +671,7 @@ cdef void raster_tile_backward(int tile, int tiles_x, int width, int height, con
             if le >= AHEAD:
                 PREFETCH(feat + NF * entries[start + le - AHEAD])
             f = feat + NF * entries[start + le]
-            col = entry_colour + 3 * (start + le)
+            col = pg.entry_colour + 3 * (start + le)
             y0 = first_pixel(f[1] - f[9], ty0, ty0 + th - 1)
             y1 = last_pixel(f[1] + f[9], ty0, ty0 + th - 1)
             for y in range(y0, y1 + 1):
@@ -620,26 +703,39 @@ cdef void raster_tile_backward(int tile, int tiles_x, int width, int height, con
                         gr[2] -= 0.5 * dpow * dx * dx
                         gr[3] -= dpow * dx * dy
                         gr[4] -= 0.5 * dpow * dy * dy
-        out = pair_grad + 9 * <int64_t>entry_pair[start + le]
+        out = pg.pair_grad + 9 * <int64_t>pg.entry_pair[start + le]
         for k in range(9):
             out[k] = <float>gr[k]
 
 
-def rasterize_backward(const float[:, ::1] feat, const int32_t[::1] tile_start,
-                       const int32_t[::1] entries, const int32_t[::1] entry_pair,
-                       const float[:, ::1] entry_colour, int tiles_x, int width,
-                       int height, const float[::1] bg, const float[:, :, ::1] grad_rgb,
-                       const float[:, ::1] grad_alpha, const double[:, ::1] t_final,
-                       const int32_t[:, ::1] last, float[:, ::1] pair_grad):
-    """Gradients per (Gaussian, tile) pair, ``pair_grad [P, 9]``: centre (2), conic (3), opacity,
-    colour (3). Each tile writes only its own pairs, so threads never share an output."""
-    cdef int tile, tiles = tile_start.shape[0] - 1
-    if entries.shape[0] == 0:
+def rasterize_backward(tiles, grads):
+    """Gradients per (Gaussian, tile) pair of ``tiles`` (:class:`.native_splat.Tiles`) from those of the
+    pixels, ``grads`` (:class:`.native_splat.PixelGrads`), into its ``pair_grad [P, 9]``: centre (2),
+    conic (3), opacity, colour (3). Each tile writes only its own pairs, so threads never share an
+    output."""
+    cdef TileView tl = TileView(tiles)
+    cdef const int32_t[::1] entry_pair = grads.entry_pair
+    cdef const float[:, ::1] entry_colour = grads.entry_colour
+    cdef const float[::1] bg = grads.bg
+    cdef const float[:, :, ::1] grad_rgb = grads.grad_rgb
+    cdef const float[:, ::1] grad_alpha = grads.grad_alpha
+    cdef const double[:, ::1] t_final = grads.t_final
+    cdef const int32_t[:, ::1] last = grads.last
+    cdef float[:, ::1] pair_grad = grads.pair_grad
+    cdef PixelGrads pg
+    cdef int tile
+    if tl.entries.shape[0] == 0:
         return
-    for tile in prange(tiles, nogil=True, schedule="dynamic"):
-        raster_tile_backward(tile, tiles_x, width, height, &feat[0, 0], &tile_start[0], &entries[0],
-                             &entry_pair[0], &entry_colour[0, 0], &bg[0], &grad_rgb[0, 0, 0], &grad_alpha[0, 0],
-                             &t_final[0, 0], &last[0, 0], &pair_grad[0, 0])
+    pg.entry_pair = &entry_pair[0]
+    pg.entry_colour = &entry_colour[0, 0]
+    pg.bg = &bg[0]
+    pg.grad_rgb = &grad_rgb[0, 0, 0]
+    pg.grad_alpha = &grad_alpha[0, 0]
+    pg.t_final = &t_final[0, 0]
+    pg.last = &last[0, 0]
+    pg.pair_grad = &pair_grad[0, 0]
+    for tile in prange(tl.count, nogil=True, schedule="dynamic"):
+        raster_tile_backward(tile, &tl.c, &pg)
 
 
 cdef void project_backward_one(const float* mean, const float* quat, const float* scale, const float* sh,
@@ -649,8 +745,6 @@ cdef void project_backward_one(const float* mean, const float* quat, const float
     cdef double fx = cam[15], fy = cam[16]
     cdef double gs[9]
     cdef double t[3]
-    cdef double q[4]
-    cdef double r[9]
     cdef double gr[9]
     cdef double b[16]
     cdef double bx[16]
@@ -660,16 +754,14 @@ cdef void project_backward_one(const float* mean, const float* quat, const float
     cdef double gd[3]
     cdef double gt[3]
     cdef double gq[4]
-    cdef double jw0[3]
-    cdef double jw1[3]
-    cdef double a0[3]
-    cdef double a1[3]
     cdef double ga0[3]
     cdef double ga1[3]
     cdef double gj0[3]
     cdef double gj1[3]
     cdef double gcol[3]
-    cdef double inv_n, x, y, z, iz, ca, cb, cc, idet, idet2, gca, gcb, gcc, nd, col, dot, m, w
+    cdef Ewa e
+    cdef const double* q = e.q  # the unit quaternion
+    cdef double x, y, z, iz, ca, cb, cc, idet, idet2, gca, gcb, gcc, nd, col, dot, m, w
     cdef int64_t p
     cdef int k, j, ch
     for k in range(9):
@@ -722,7 +814,8 @@ cdef void project_backward_one(const float* mean, const float* quat, const float
     y = t[1]
     z = t[2]
     iz = 1.0 / z
-    ewa_rows(quat, scale, cam, x, y, iz, q, &inv_n, r, jw0, jw1, a0, a1, &ca, &cb, &cc)
+    ewa_rows(quat, scale, cam, x, y, iz, &e)
+    ca, cb, cc = e.ca, e.cb, e.cc
     idet = 1.0 / (ca * cc - cb * cb)
     idet2 = idet * idet
     # conic (cc, -cb, ca) / det back to the 2D covariance
@@ -730,17 +823,17 @@ cdef void project_backward_one(const float* mean, const float* quat, const float
     gcc = gs[2] * (idet - cc * ca * idet2) + gs[3] * (cb * ca * idet2) + gs[4] * (-ca * ca * idet2)
     gcb = gs[2] * (2 * cc * cb * idet2) + gs[3] * (-idet - 2 * cb * cb * idet2) + gs[4] * (2 * ca * cb * idet2)
     for j in range(3):
-        ga0[j] = 2 * gca * a0[j] + gcb * a1[j]
-        ga1[j] = 2 * gcc * a1[j] + gcb * a0[j]
+        ga0[j] = 2 * gca * e.a0[j] + gcb * e.a1[j]
+        ga1[j] = 2 * gcc * e.a1[j] + gcb * e.a0[j]
         gj0[j] = 0.0
         gj1[j] = 0.0
     for j in range(3):  # A = J W M with M = R_q S: to J W's rows, M, then S and R_q
         w = 0.0
         for k in range(3):
-            gj0[k] += ga0[j] * r[3 * k + j] * scale[j]
-            gj1[k] += ga1[j] * r[3 * k + j] * scale[j]
-            m = ga0[j] * jw0[k] + ga1[j] * jw1[k]  # dL/dM[k, j]
-            w += m * r[3 * k + j]
+            gj0[k] += ga0[j] * e.r[3 * k + j] * scale[j]
+            gj1[k] += ga1[j] * e.r[3 * k + j] * scale[j]
+            m = ga0[j] * e.jw0[k] + ga1[j] * e.jw1[k]  # dL/dM[k, j]
+            w += m * e.r[3 * k + j]
             gr[3 * k + j] = m * scale[j]
         g_scale[j] = <float>w
     # J W's rows and the centre's projection, by camera-space x, y, z
@@ -764,7 +857,7 @@ cdef void project_backward_one(const float* mean, const float* quat, const float
                  + q[2] * gr[5] + q[1] * gr[6] + q[2] * gr[7])
     dot = q[0] * gq[0] + q[1] * gq[1] + q[2] * gq[2] + q[3] * gq[3]
     for k in range(4):
-        g_quat[k] = <float>((gq[k] - q[k] * dot) * inv_n)
+        g_quat[k] = <float>((gq[k] - q[k] * dot) * e.inv_n)
 
 
 def project_backward(const float[:, ::1] means, const float[:, ::1] quats, const float[:, ::1] scales,

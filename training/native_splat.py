@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 import torch
@@ -38,15 +38,58 @@ try:
 except ImportError:  # not built: render() says how to build it
     _raster = None
 
-TILE = 16  # tile side in pixels, as in _raster.pyx
 # Gaussians per pixel from which an SH function is asked for the contributing Gaussians only: the
 # extra opacity-only compositing pays where most Gaussians are hidden (docs/training.md, "Around
 # the rasterizer")
 SHOWN_ONLY_PER_PIXEL = 16
-FEATURES = 10  # per-Gaussian features the kernel keeps, as NF in _raster.pyx
 
 
 ShSource = Callable[[Tensor | None], Tensor]  # Gaussian indices -> their SH [n, C, 3]; None: all
+
+
+class Tiles(NamedTuple):
+    """A frame's Gaussians per tile (``_raster.bin_tiles``), as the kernels read them."""
+
+    feat: np.ndarray  # [G, _raster.NF] float32, _raster.project's
+    tile_start: np.ndarray  # [tiles + 1] int32, the first entry of each tile
+    entries: np.ndarray  # [entries] int32, the Gaussian of each, tile by tile, front to back
+    tiles_x: int
+    width: int
+    height: int
+
+
+class Shading(NamedTuple):
+    """How ``_raster.rasterize`` colours a Gaussian: its SH seen from the camera."""
+
+    means: np.ndarray  # [G, 3] float32
+    sh: np.ndarray  # [rows, C, 3] float32
+    sh_row: np.ndarray  # [G] int32 Gaussian -> row of sh; empty: row g
+    cam: np.ndarray  # [19] float64, _camera_vector's
+    bg: np.ndarray  # [3] float32
+
+
+class Pixels(NamedTuple):
+    """What ``_raster.rasterize`` writes: the image and what its backward pass needs."""
+
+    rgb: np.ndarray  # [H, W, 3] float32
+    alpha: np.ndarray  # [H, W] float32
+    depth: np.ndarray  # [H, W] float32
+    t_final: np.ndarray  # [H, W] float64, the transmittance left
+    last: np.ndarray  # [H, W] int32, the last contribution within its tile's list, -1: none
+    entry_colour: np.ndarray  # [entries, 3] float32
+
+
+class PixelGrads(NamedTuple):
+    """What ``_raster.rasterize_backward`` reads, and its output ``pair_grad``."""
+
+    entry_pair: np.ndarray  # [entries] int32, the (Gaussian, tile) pair of each entry
+    entry_colour: np.ndarray  # [entries, 3] float32, Pixels'
+    bg: np.ndarray  # [3] float32
+    grad_rgb: np.ndarray  # [H, W, 3] float32
+    grad_alpha: np.ndarray  # [H, W] float32
+    t_final: np.ndarray  # [H, W] float64, Pixels'
+    last: np.ndarray  # [H, W] int32, Pixels'
+    pair_grad: np.ndarray  # [pairs, 9] float32, written
 
 
 class NativeSplatterMissing(CghError, ImportError):
@@ -129,10 +172,11 @@ class _Frame:
         self.cam = _camera_vector(camera)
         self.width, self.height = int(camera.width), int(camera.height)
         self.background = background
-        self.tiles_x = (self.width + TILE - 1) // TILE
-        tiles = self.tiles_x * ((self.height + TILE - 1) // TILE)
+        tile = _raster.TILE  # the tile side in pixels and the features kept per Gaussian: the kernel's
+        self.tiles_x = (self.width + tile - 1) // tile
+        tiles = self.tiles_x * ((self.height + tile - 1) // tile)
         g = means.shape[0]
-        self.feat = _POOL.take((g, FEATURES), np.float32)
+        self.feat = _POOL.take((g, _raster.NF), np.float32)
         rect = _POOL.take((g, 4), np.int32)
         ntiles = _POOL.take((g,), np.int64)
         _raster.project(means, quats, scales, opac, self.cam, self.width, self.height, self.feat, rect, ntiles)
@@ -143,12 +187,13 @@ class _Frame:
         self.entry_pair = _POOL.take((pairs,), np.int32)
         self.visible = _raster.bin_tiles(self.feat, rect, ntiles, self.tiles_x, tiles // self.tiles_x,
                                          self.pair_start, self.tile_start, self.entries, self.entry_pair)
+        self.tiles = Tiles(self.feat, self.tile_start, self.entries, self.tiles_x, self.width, self.height)
         self.sh, self.sh_row = None, np.empty(0, np.int32)
 
     def contributors(self) -> np.ndarray:
         """Indices of the Gaussians that :meth:`rasterize` takes a colour from, ascending."""
         flags = np.zeros(len(self.geometry[0]), np.uint8)
-        _raster.contributors(self.feat, self.tile_start, self.entries, self.tiles_x, self.width, self.height, flags)
+        _raster.contributors(self.tiles, flags)
         return np.flatnonzero(flags)
 
     def rasterize(self, sh: np.ndarray, rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -157,24 +202,21 @@ class _Frame:
         self.sh = sh
         if rows is not None:
             self.sh_row = rows
-        rgb = np.empty((h, w, 3), np.float32)
-        alpha, depth = np.empty((h, w), np.float32), np.empty((h, w), np.float32)
-        self.t_final = np.empty((h, w), np.float64)
-        self.last = np.empty((h, w), np.int32)
-        self.entry_colour = _POOL.take((len(self.entries), 3), np.float32)
-        _raster.rasterize(self.feat, self.tile_start, self.entries, self.geometry[0], sh, self.sh_row, self.cam,
-                          self.tiles_x, w, h, self.background, rgb, alpha, depth, self.t_final, self.last,
-                          self.entry_colour)
-        return rgb, alpha, depth
+        self.pixels = Pixels(np.empty((h, w, 3), np.float32), np.empty((h, w), np.float32),
+                             np.empty((h, w), np.float32), np.empty((h, w), np.float64), np.empty((h, w), np.int32),
+                             _POOL.take((len(self.entries), 3), np.float32))
+        _raster.rasterize(self.tiles, Shading(self.geometry[0], sh, self.sh_row, self.cam, self.background),
+                          self.pixels)
+        return self.pixels.rgb, self.pixels.alpha, self.pixels.depth
 
     def backward(self, grad_rgb: np.ndarray, grad_alpha: np.ndarray, geometry: bool = True) -> list[np.ndarray]:
         """Gradients of means, quats, scales, opacities and sh; without ``geometry`` the first three
         are not computed (and the arrays returned for them hold garbage)."""
         means, quats, scales, _ = self.geometry
         pair_grad = _POOL.take((len(self.entries), 9), np.float32)
-        _raster.rasterize_backward(self.feat, self.tile_start, self.entries, self.entry_pair, self.entry_colour,
-                                   self.tiles_x, self.width, self.height, self.background, grad_rgb, grad_alpha,
-                                   self.t_final, self.last, pair_grad)
+        px = self.pixels
+        _raster.rasterize_backward(self.tiles, PixelGrads(self.entry_pair, px.entry_colour, self.background, grad_rgb,
+                                                          grad_alpha, px.t_final, px.last, pair_grad))
         grads = [_POOL.take(a.shape, np.float32) for a in (*self.geometry, self.sh)]
         _raster.project_backward(means, quats, scales, self.sh, self.sh_row, self.cam, self.pair_start, pair_grad,
                                  geometry, *grads)

@@ -563,3 +563,31 @@ def test_the_compiled_kernels_refuse_card_indices_they_would_read_outside():
     with pytest.raises(ValueError, match="mismatched"):
         _decoder.map_points(cmap.frames, asset.cards.segments, np.zeros(2, np.int64), np.zeros((1, 3)),
                            np.zeros((2, 3)))
+
+
+def test_the_compiled_recurrence_refuses_plans_and_layouts_it_would_read_outside():
+    """The kernels read the plan's and the layout's arrays unchecked: their boundary checks them once."""
+    from cghair_format import _decoder
+    from cghair_format.examples import example_asset
+    from cghair_format.geometry import CardMap
+    from cghair_format.strand_coder import Layout, Prediction, level_widths, recurrence
+
+    asset = example_asset(2, strands=5, points=12, cards=2)
+    cmap = CardMap(asset.cards)
+    plan = recurrence(12, Prediction(4, (2, 2, 2), 2, level_guide=True))
+    layout = Layout(cmap.frames, cmap.segments, asset.strand_card.astype(np.int64), np.ones((5, 3)))
+    res = np.zeros((5, sum(level_widths(12, 4)), 3), np.int64)
+
+    def decode(plan=plan, layout=layout):
+        scratch = [np.empty((_decoder.SCRATCH_STRANDS, 12, 3)) for _ in range(2)]
+        return _decoder.decode_strands(plan, layout, np.arange(5), res, np.empty((5, 12, 3)), *scratch)
+
+    assert decode() == 0 and len(plan.row_seg) > 0
+    for match, bad in (("base segment is out of range", plan._replace(row_seg=plan.row_seg + 5)),
+                       ("stretch_max", plan._replace(stretch_max=0.5)),
+                       ("mismatched", plan._replace(base_order=np.ones(2, np.int64))),
+                       ("interpolation width", plan._replace(level_taps=plan.level_taps + 9))):
+        with pytest.raises(ValueError, match=match):
+            decode(plan=bad)
+    with pytest.raises(ValueError, match="card index 2 outside"):
+        decode(layout=layout._replace(strand_card=layout.strand_card + 2))

@@ -159,7 +159,7 @@ def test_early_termination_is_within_its_bound():
     ref = splatter.render(*[t.double() for t in scene], cam, BACKGROUND)
     frame = native_splat._Frame([native_splat._f32(t) for t in scene[:4]], cam, np.asarray(BACKGROUND, np.float32))
     rgb, alpha, _ = (torch.from_numpy(a).double() for a in frame.rasterize(native_splat._f32(scene[4])))
-    t_final = torch.from_numpy(frame.t_final)
+    t_final = torch.from_numpy(frame.pixels.t_final)
     stopped = (t_final >= 1e-4) & (1 - ref.alpha < 1e-4)
     assert int(stopped.sum()) > 20  # early termination did trigger
     # the contributions it skips weigh t_final in all: the error is at most t_final x the largest
@@ -221,6 +221,19 @@ def test_bad_shapes_are_rejected():
     scene[2] = scene[2][:, :2]
     with pytest.raises(ValueError, match="shape mismatch"):
         native_splat.render(*scene, camera())
+
+
+def test_the_kernel_refuses_tiles_of_another_feature_width():
+    """The tile side and the features per Gaussian are the kernel's (``_raster.TILE``, ``_raster.NF``):
+    feature rows of another width are refused, not read past."""
+    from training import _raster
+
+    frame = native_splat._Frame([native_splat._f32(t) for t in random_scene(20, 0, seed=0)[:4]], camera(),
+                                np.zeros(3, np.float32))
+    assert frame.tiles_x == -(-frame.width // _raster.TILE) and frame.feat.shape[1] == _raster.NF
+    wide = frame.tiles._replace(feat=np.zeros((20, _raster.NF + 1), np.float32))
+    with pytest.raises(ValueError, match="mismatched"):
+        _raster.contributors(wide, np.zeros(20, np.uint8))
 
 
 def test_sh_asked_only_for_contributing_gaussians_gives_the_same_render_and_gradients(monkeypatch):
