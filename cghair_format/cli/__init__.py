@@ -26,6 +26,7 @@ VERBS: dict[str, tuple[str, str]] = {
     "convert": ("cghair_format.cli.convert", "convert strands between formats (.cgh accepted as input)"),
     "export": ("cghair_format.cli.export", "export a .cgh or strands to USD, 3DGS PLY, Alembic or .blend"),
     "cards": ("cghair_format.cli.cards", "build hair cards from strands and write a .cgh"),
+    "batch": ("batch.cli", "convert, encode and check a library of strand files on Dask, with a report"),
     "render-dataset": ("training.cli_dataset", "render a multi-view dataset of strands"),
     "train": ("training.cli_train", "fit the compact appearance model to a multi-view dataset"),
     "eval": ("training.cli_eval", "PSNR, SSIM and LPIPS of a .cgh on a dataset's held-out views"),
