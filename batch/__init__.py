@@ -33,7 +33,7 @@ def run_batch(jobs: list[Job], out_dir: str | os.PathLike, *, scheduler: str | N
               limits: Limits | None = None, progress: bool = True) -> tuple[list[dict], dict]:
     """Run ``jobs`` (files an earlier run finished with the same input and options are skipped) and write
     the report (``report.json``, ``report.csv``, ``summary.json``, ``report.png``) to ``out_dir``."""
-    out_dir = Path(out_dir)
+    out_dir = Path(out_dir).resolve()  # the workers' own working folders may differ from this one
     out_dir.mkdir(parents=True, exist_ok=True)
     rows, todo = [], []
     for job in jobs:

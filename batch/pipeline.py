@@ -55,7 +55,9 @@ def run_file(job: Job, out_dir: Path) -> dict:
     with timed(row, "cards_s"):
         build = build_cards(strands, n_cards=cards, n_groups=groups, points=opts.points, seed=opts.seed,
                             progress=False)
-    row.update(cards=build.info["cards"], groups=build.info["groups"])
+    # the builder's own error before quantization, against the points it kept (the input's own, unless resampled)
+    row.update(cards=build.info["cards"], groups=build.info["groups"],
+               cards_error=float(f"{build.error.max_abs / row['bbox_diagonal']:.4g}"))
     outputs = []
     for profile in opts.profiles:
         outputs.append(_profile(row, build, strands, profile, job.output(out_dir, f".{profile}.cgh"), opts.check))
@@ -65,8 +67,10 @@ def run_file(job: Job, out_dir: Path) -> dict:
     if opts.dataset is not None:
         with timed(row, "train_s"):
             outputs.append(_train(build, opts, job.output(out_dir, ".trained.cgh")))
+    usage = resource.getrusage(resource.RUSAGE_SELF)  # of this file's process (forked: counted from zero)
     row["total_s"] = round(time.perf_counter() - start, 4)
-    row["peak_rss_mb"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)
+    row["cpu_s"] = round(usage.ru_utime + usage.ru_stime, 3)  # what the file costs a core, whatever the load
+    row["peak_rss_mb"] = round(usage.ru_maxrss / 1024, 1)
     row["outputs"] = ";".join(str(p.relative_to(out_dir)) for p in outputs)
     records.write(out_dir, job, fingerprint, row)
     return row
@@ -83,7 +87,8 @@ def _profile(row: dict, build, strands, profile: str, path: Path, check: bool) -
     prof = get_profile(profile)
     if not prof.lossless:  # the baseline at this profile's bound, on the same points
         bound = prof.position_tolerance * report.bbox_diagonal
-        row[f"baseline_bytes_{profile}"], _ = baseline_coder.encode(strands.points, strands.offsets, bound)
+        with timed(row, f"baseline_s_{profile}"):
+            row[f"baseline_bytes_{profile}"], _ = baseline_coder.encode(strands.points, strands.offsets, bound)
         row[f"ratio_{profile}"] = round(geometry / row[f"baseline_bytes_{profile}"], 4)
     if check:
         with timed(row, f"decode_s_{profile}"):

@@ -2,12 +2,14 @@
 
 A row's columns: ``input`` (below the inputs' folder), ``status`` (ok, failed), ``run`` (this, or earlier:
 skipped on a rerun), ``error``; ``strands``, ``points`` (all strands'), ``min_points``, ``max_points``,
-``bbox_diagonal``, ``cards``, ``groups``; per profile P: ``bytes_P`` (the file), ``bits_per_point_P``,
+``bbox_diagonal``, ``cards``, ``groups``, ``cards_error`` (the card builder's largest point error before
+quantization, over the diagonal); per profile P: ``bytes_P`` (the file), ``bits_per_point_P``,
 ``geometry_bytes_P`` (the chunks holding the points), ``baseline_bytes_P`` (the quantize + delta + zstd
 coder at P's bound on the same points, :mod:`.baseline_coder`), ``ratio_P`` (geometry over baseline),
 ``max_error_P`` (largest distance of a decoded point from the input's own, over the bounding-box
-diagonal), ``encode_s_P``, ``decode_s_P``; ``import_s``, ``cards_s``, ``export_EXT_s``, ``train_s``,
-``total_s``, ``peak_rss_mb`` (the file's process), ``outputs``.
+diagonal), ``encode_s_P``, ``decode_s_P``, ``baseline_s_P``; ``import_s``, ``cards_s``, ``export_EXT_s``, ``train_s``,
+``total_s``, ``cpu_s`` (the file's process's CPU time), ``peak_rss_mb`` (its peak resident memory),
+``outputs``.
 """
 
 from __future__ import annotations
@@ -25,11 +27,12 @@ from cghair_format.errors import CghError
 
 PERCENTILES = (0, 50, 90, 99, 100)
 # the columns the summary gives percentiles of (P: each profile's)
-SUMMARIZED = ("strands", "points", "bytes_P", "bits_per_point_P", "ratio_P", "max_error_P", "encode_s_P",
-              "decode_s_P", "import_s", "cards_s", "total_s", "peak_rss_mb")
+SUMMARIZED = ("strands", "points", "cards_error", "bytes_P", "bits_per_point_P", "ratio_P", "max_error_P",
+              "encode_s_P", "decode_s_P", "import_s", "cards_s", "total_s", "cpu_s",
+              "peak_rss_mb")
 # the time split: stage -> the columns of its seconds (P: any profile, EXT: any export)
 STAGES = {"import": "import_s", "cards": "cards_s", "encode": "encode_s_P", "decode": "decode_s_P",
-          "export": "export_EXT_s", "train": "train_s"}
+          "baseline": "baseline_s_P", "export": "export_EXT_s", "train": "train_s"}
 
 
 def profiles_of(rows: list[dict]) -> list[str]:
@@ -65,7 +68,7 @@ def summarize(rows: list[dict], run: dict) -> dict:
     patterns = {stage: re.compile(p.replace("P", "[^_]+").replace("EXT", "[^_]+")) for stage, p in STAGES.items()}
     split = {stage: sum(v for r in this for k, v in r.items() if pattern.fullmatch(k))
              for stage, pattern in patterns.items()}
-    split["other"] = total - sum(split.values())  # the baseline coder, the error measure, writing files
+    split["other"] = total - sum(split.values())  # the error measure, writing files
     summary["time_split"] = {k: {"s": round(v, 2), "share": round(v / total, 4) if total else 0.0}
                              for k, v in split.items()}
     if run.get("wall_s") and this:
