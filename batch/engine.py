@@ -82,7 +82,7 @@ def run_jobs(client, jobs: list[Job], out_dir: Path, limits: Limits, bar) -> lis
     """Every job's row, run on ``client``'s cluster, largest input first (a long file does not finish last);
     ``bar`` (a tqdm bar, or None) counts them."""
     dist = distributed()
-    jobs = sorted(jobs, key=lambda j: -j.input.stat().st_size)
+    jobs = sorted(jobs, key=lambda j: -_size(j.input))
     futures = client.map(file_task, jobs, out_dir=out_dir, limits=limits, pure=False,
                          key=[f"cgh-batch-{i}-{os.urandom(4).hex()}" for i in range(len(jobs))])
     job_of = dict(zip((f.key for f in futures), jobs, strict=True))
@@ -98,6 +98,14 @@ def run_jobs(client, jobs: list[Job], out_dir: Path, limits: Limits, bar) -> lis
     finally:
         client.cancel(futures)  # an interrupted run leaves nothing queued on a shared cluster
     return rows
+
+
+def _size(path: Path) -> int:
+    """The file's size; 0 for a missing one, which fails in its task, saying so, while the rest run."""
+    try:
+        return path.stat().st_size
+    except OSError:
+        return 0
 
 
 def _row(future, job: Job) -> dict:

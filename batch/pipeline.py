@@ -57,7 +57,7 @@ def run_file(job: Job, out_dir: Path) -> dict:
                             progress=False)
     # the builder's own error before quantization, against the points it kept (the input's own, unless resampled)
     row.update(cards=build.info["cards"], groups=build.info["groups"],
-               cards_error=float(f"{build.error.max_abs / row['bbox_diagonal']:.4g}"))
+               cards_error=_relative(build.error.max_abs, row["bbox_diagonal"]))
     outputs = []
     for profile in opts.profiles:
         outputs.append(_profile(row, build, strands, profile, job.output(out_dir, f".{profile}.cgh"), opts.check))
@@ -74,6 +74,11 @@ def run_file(job: Job, out_dir: Path) -> dict:
     row["outputs"] = ";".join(str(p.relative_to(out_dir)) for p in outputs)
     records.write(out_dir, job, fingerprint, row)
     return row
+
+
+def _relative(distance: float, diagonal: float) -> float:
+    """A distance over the bounding-box diagonal, to 4 digits (the distance itself where the points coincide)."""
+    return float(f"{distance / diagonal if diagonal > 0 else distance:.4g}")
 
 
 def _profile(row: dict, build, strands, profile: str, path: Path, check: bool) -> Path:
@@ -94,7 +99,7 @@ def _profile(row: dict, build, strands, profile: str, path: Path, check: bool) -
         with timed(row, f"decode_s_{profile}"):
             decoded = cgh.decode(data)
         error = build.error_of(decoded, report)  # against the points the build kept: the input's own ...
-        row[f"max_error_{profile}"] = float(f"{error.max_abs / row['bbox_diagonal']:.4g}")
+        row[f"max_error_{profile}"] = _relative(error.max_abs, row["bbox_diagonal"])
         if build.resampling is not None:  # ... unless --points resampled them: how far that moved them
             row["resampling_error"] = float(f"{build.resampling.shape_error:.4g}")
     path.parent.mkdir(parents=True, exist_ok=True)
