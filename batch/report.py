@@ -111,8 +111,9 @@ def format_summary(summary: dict) -> str:
     lines = [f"{summary['files']:,} files: {summary['ok']:,} ok ({summary['skipped']:,} done earlier), "
              f"{summary['failed']:,} failed"]
     if "files_per_minute" in summary:
-        lines.append(f"{summary['done_this_run']:,} done in {summary['wall_s']:.1f} s on {summary['workers']} "
-                     f"workers: {summary['files_per_minute']:.1f} files a minute (load average "
+        workers = f"{summary['workers']} worker{'s' if summary['workers'] != 1 else ''}"
+        lines.append(f"{summary['done_this_run']:,} done in {summary['wall_s']:.1f} s on {workers}: "
+                     f"{summary['files_per_minute']:.1f} files a minute (load average "
                      f"{summary['load_start']} at the start, {summary['load_end']} at the end)")
     split = summary.get("time_split", {})
     if any(v["s"] > 0 for v in split.values()):

@@ -63,6 +63,10 @@ def cluster(tmp_path_factory):
             procs.append(subprocess.Popen(py + ["distributed.cli.dask_worker", address, "--host", "127.0.0.1",
                                                 "--nthreads", "1", "--no-nanny", "--no-dashboard"], env=_env(),
                                           cwd=folder, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        from distributed import Client
+
+        with Client(address, timeout="30s") as client:
+            client.wait_for_workers(2, timeout=60)
         yield address, [p.pid for p in procs[1:]]
     finally:
         for p in procs:
