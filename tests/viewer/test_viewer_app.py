@@ -134,7 +134,7 @@ def test_adaptive_budget_while_dragging_full_quality_at_rest(gl_ctx, monkeypatch
 
 def test_paused_clip_draws_once(gl_ctx, monkeypatch):
     """A step key pauses the clip on its next frame: that pose is drawn once, then nothing is redrawn."""
-    from tests.viewer.test_animation import moving_cards
+    from tests.viewer.test_viewer_animation import moving_cards
     from viewer import app
 
     glfw = _fake_glfw(64, 48)
@@ -196,7 +196,7 @@ def test_ctrl_drag_turns_the_live_head(gl_ctx, monkeypatch):
 
 def test_ctrl_drag_is_the_time_slider(gl_ctx, monkeypatch):
     """With a clip, ctrl-drag pauses at the time the pointer's x gives across the window's width."""
-    from tests.viewer.test_animation import moving_cards
+    from tests.viewer.test_viewer_animation import moving_cards
     from viewer import app
 
     glfw = _fake_glfw(65, 48)

@@ -85,7 +85,7 @@ import sys
 import numpy as np
 from cghair_format.animation import frame_asset
 from cghair_format.examples import example_asset
-from tests.viewer.test_animation import moving_cards
+from tests.viewer.test_viewer_animation import moving_cards
 from viewer.app import run_viewer
 from viewer.camera_control import OrbitController
 from viewer.render_jobs import RenderJob, render_job
