@@ -16,14 +16,14 @@ from training.datasets.synthetic import reference_gaussians, render_dataset
 from training.datasets.types import Dataset, DatasetError, View, split_indices
 
 
-def _views(n, res=10, seed=0):
+def _views(n, res=10, seed=0, first_angle=0.0):
     rng = np.random.default_rng(seed)
-    return [View(Camera.orbit((0, 0, 0), 3.0, 40.0 * i, 10.0, res, res),
+    return [View(Camera.orbit((0, 0, 0), 3.0, first_angle + 40.0 * i, 10.0, res, res),
                  rng.random((res, res, 4)).astype(np.float32), f"r_{i:03d}") for i in range(n)]
 
 
 def test_round_trip(tmp_path):
-    ds = Dataset(_views(3), _views(2, seed=1), {"engine": "test"}, _views(1, seed=2))
+    ds = Dataset(_views(3), _views(2, seed=1), {"engine": "test"}, _views(1, seed=2, first_angle=20.0))
     write_dataset(tmp_path, ds)
     back = read_dataset(tmp_path)
     assert [v.name for v in back.train] == ["r_000", "r_001", "r_002"] and len(back.test) == 2
@@ -58,6 +58,16 @@ def test_a_dataset_without_val_views_falls_back_to_train(tmp_path):
     assert ds.split("test") is ds.test
     with pytest.raises(DatasetError, match="choose train, val, test"):
         ds.split("held-out")
+
+
+def test_val_views_that_are_test_views_are_refused(tmp_path):
+    write_dataset(tmp_path, Dataset(_views(3), _views(2, seed=1), {}, _views(2, seed=2, first_angle=20.0)))
+    assert len(read_dataset(tmp_path).val) == 2
+    write_dataset(tmp_path, Dataset(_views(3), _views(2, seed=1), {}, _views(1, seed=2)))  # test view 0's pose
+    with pytest.raises(DatasetError, match="1 validation views .* have the pose of a test view"):
+        read_dataset(tmp_path)
+    write_dataset(tmp_path, Dataset(_views(3), _views(2, seed=1)))  # rewritten without val: none left behind
+    assert read_dataset(tmp_path).val == [] and not (tmp_path / "transforms_val.json").exists()
 
 
 def test_bad_folders(tmp_path):

@@ -51,6 +51,8 @@ def write_dataset(root: str | Path, dataset: Dataset) -> None:
         views = getattr(dataset, split)
         if split != "val" or views:
             write_split(root, split, views)
+        elif (root / "transforms_val.json").is_file():  # left by an earlier dataset in this folder
+            (root / "transforms_val.json").unlink()
     write_text(root / "dataset.json", json.dumps(dataset.meta, indent=2) + "\n")
 
 
@@ -94,5 +96,12 @@ def read_nerf(root: str | Path) -> Dataset:
     root = Path(root)
     meta_path = root / "dataset.json"
     meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
+    test = read_split(root, "test")
     val = read_split(root, "val") if (root / "transforms_val.json").is_file() else []
-    return Dataset(read_split(root, "train"), read_split(root, "test"), meta, val)
+    test_poses = {v.camera.world_to_camera.tobytes() for v in test}
+    shared = [v.name for v in val if v.camera.world_to_camera.tobytes() in test_poses]
+    if shared:
+        raise DatasetError(f"{root}: {len(shared)} validation views (first {shared[0]}) have the pose of a test view: "
+                           "choosing settings on test views would flatter the reported scores; give "
+                           "transforms_val.json other views, or remove it")
+    return Dataset(read_split(root, "train"), test, meta, val)
