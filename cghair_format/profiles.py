@@ -15,8 +15,9 @@ class Profile:
     name: str
     lossless: bool = False
     position_tolerance: float = 2e-4  # max point error / bounding-box diagonal
-    # opacity = round(o * scale) / scale: max error 0.5 / scale (compact: 1/15; on four trained files 0.01-0.06 dB
-    # held out against 1/63, 31-55 % fewer opacity bytes; docs/ablation.md, "The trained file")
+    # opacity = round(o * scale) / scale: max error 0.5 / scale (compact: 1/15, chosen of 1/7 ... 1/63 on one small
+    # model's validation views, 0.02 dB there and 0.05 dB on another model's test views against 1/63, 40 % fewer
+    # opacity bytes; docs/ablation.md, "Validation"; on four trained files 0.01-0.07 dB, "The trained file")
     opacity_scale: float = 7.5
     logit_levels: int = 63  # soft logits stored as round(levels * exp((logit - max) / temperature)) ...
     logit_floor: float = -16.0  # ... and a stored 0 decodes to this logit
@@ -61,8 +62,10 @@ PROFILES: dict[str, Profile] = {
 }
 DEFAULT_PROFILE = "compact"
 # what a trained file's quantized opacities may give up: the Gaussians that together carry this share of the
-# training views' blend weight may be stored less opaque (training/visibility.py; on the paper-scale model
-# 0.1 takes 42-48 % off OPAC for 0.01-0.05 dB held out: docs/ablation.md, "Negligible opacities")
+# training views' blend weight may be stored less opaque (training/visibility.py). 0.1 was chosen of 0 ... 0.3
+# on one small model's validation views (0.01 dB there) and costs 0.10 dB on another's test views (with 1/15:
+# 0.15 dB for 62 % off OPAC); on the paper-scale model 42-48 % off OPAC for 0.01-0.05 dB held out
+# (docs/ablation.md, "Validation" and "Negligible opacities")
 DEFAULT_OPACITY_BUDGET = 0.1
 
 

@@ -1,6 +1,6 @@
 """``cgh render-dataset STRANDS -o DIR --views N --res R --engine cycles|splat``.
 
-Writes a NeRF-synthetic dataset (transforms_train/test.json + RGBA PNGs, alpha = hair mask). The
+Writes a NeRF-synthetic dataset (transforms_train/val/test.json + RGBA PNGs, alpha = hair mask). The
 paper's scale (docs/ablation.md): ``--resample 100 --densify 25000 --engine cycles --views 64
 --res 256 --denoise``, and ``--multitone 3`` for its multi-tone synthetic case.
 """
@@ -21,7 +21,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("strands", metavar="STRANDS", help="input strands (.hair .data .tfx .ply .usd* .npz .cgh)")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="output dataset folder")
     p.add_argument("--views", type=int_at_least(2), default=32, help="number of views (default: 32; every "
-                   "8th is held out for testing)")
+                   "8th is held out for testing, every 8th from the 4th for validation)")
     p.add_argument("--res", type=int_at_least(8), default=128, help="image width and height (default: 128)")
     p.add_argument("--engine", choices=ENGINES, default="splat",
                    help="splat: our splatter from a known appearance (fast); cycles: Blender Cycles with the "
@@ -58,6 +58,6 @@ def run(args: argparse.Namespace) -> int:
                         preset=args.preset, seed=args.seed, samples=args.samples, thickness=args.thickness,
                         progress=not args.no_progress, device=args.device, multitone=args.multitone,
                         denoise=args.denoise, backend=args.backend)
-    print(f"wrote {len(ds.train)} train + {len(ds.test)} test views ({args.res} x {args.res}, "
+    print(f"wrote {len(ds.train)} train + {len(ds.val)} val + {len(ds.test)} test views ({args.res} x {args.res}, "
           f"engine {args.engine}, {strands.count} strands) to {args.output}")
     return 0

@@ -1,17 +1,22 @@
 """``cgh eval FILE.cgh DIR``: PSNR, SSIM and LPIPS (AlexNet, or ``--lpips vgg``) on the dataset's
-held-out views, with full-size side-by-side PNGs (ground truth | render | 4 x difference)."""
+held-out (test) views, or with ``--split val`` its validation views (for choosing settings), with
+full-size side-by-side PNGs (ground truth | render | 4 x difference)."""
 
 from __future__ import annotations
 
 import argparse
 
 from .cli_train import add_backend_argument
+from .datasets.types import SPLITS
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("file", metavar="FILE.cgh", help="trained .cgh file")
     p.add_argument("dataset", metavar="DIR", help="dataset folder: NeRF-synthetic, COLMAP or GaussianHaircut layout")
-    p.add_argument("--split", choices=("test", "train"), default="test", help="views to evaluate (default: test)")
+    p.add_argument("--split", choices=SPLITS, default="test",
+                   help="views to evaluate (default: test, the held-out views to report); val: the validation "
+                        "views, for choosing settings (a dataset without them falls back to its train views, "
+                        "with a warning)")
     p.add_argument("--out", default=None, help="folder for side-by-side PNGs and metrics.json "
                    "(default: FILE.eval next to the file)")
     p.add_argument("--lpips", choices=("alex", "vgg"), default="alex", help="LPIPS backbone (default: alex); "
@@ -26,6 +31,7 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from .datasets.layouts import detect_layout
+    from .datasets.read import read_dataset
     from .evaluate import evaluate
 
     if args.threads:
@@ -33,10 +39,11 @@ def run(args: argparse.Namespace) -> int:
 
         torch.set_num_threads(args.threads)
     out = Path(args.out) if args.out else Path(args.file).with_suffix(".eval")
-    result = evaluate(args.file, args.dataset, out, split=args.split, use_lpips=not args.no_lpips, device=args.device,
-                      lpips_net=args.lpips, backend=args.backend)
+    ds = read_dataset(args.dataset)
     print(f"read {args.dataset}: {detect_layout(args.dataset).describe()}")
-    print(f"{args.file} on {args.dataset} ({args.split}): {result.summary()}")
+    result = evaluate(args.file, ds, out, split=args.split, use_lpips=not args.no_lpips, device=args.device,
+                      lpips_net=args.lpips, backend=args.backend)
+    print(f"{args.file} on {args.dataset} ({result.split}): {result.summary()}")
     for rec in result.per_view:
         lp = f", LPIPS {rec['lpips']:.4f}" if "lpips" in rec else ""
         print(f"  {rec['view']}: PSNR {rec['psnr']:.2f} dB, SSIM {rec['ssim']:.4f}{lp}")

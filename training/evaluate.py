@@ -29,14 +29,15 @@ class EvalResult:
     lpips_note: str  # why LPIPS is missing, or which network
     per_view: list[dict] = field(default_factory=list)
     images: list[Path] = field(default_factory=list)
+    split: str = ""  # the dataset's views scored: test (reported), val (choosing settings) or train
 
     def summary(self) -> str:
         lp = f"{self.lpips:.4f} ({self.lpips_note})" if self.lpips is not None else f"skipped ({self.lpips_note})"
         return (f"{len(self.per_view)} views: PSNR {self.psnr:.2f} dB, SSIM {self.ssim:.4f}, LPIPS {lp}")
 
     def to_dict(self) -> dict:
-        return {"psnr": self.psnr, "ssim": self.ssim, "lpips": self.lpips, "lpips_note": self.lpips_note,
-                "per_view": self.per_view, "images": [str(p) for p in self.images]}
+        return {"split": self.split, "psnr": self.psnr, "ssim": self.ssim, "lpips": self.lpips,
+                "lpips_note": self.lpips_note, "per_view": self.per_view, "images": [str(p) for p in self.images]}
 
 
 def _lpips_model(net: str, size: int) -> tuple[Callable | None, str]:
@@ -93,7 +94,9 @@ def evaluate(cgh: str | Path | HairAsset, dataset: str | Path | Dataset, out_dir
              split: str = "test", background=(0.0, 0.0, 0.0), use_lpips: bool = True,
              device: str = "cpu", lpips_net: str = "alex", backend: str | None = None) -> EvalResult:
     """Render a .cgh (decoded exactly as stored) at the dataset's ``split`` views on the torch
-    ``device`` with ``backend`` (default: the fastest that runs there) and compare."""
+    ``device`` with ``backend`` (default: the fastest that runs there) and compare. ``split`` is
+    ``test`` for the held-out scores to report, ``val`` for choosing settings (a dataset without
+    validation views gives its training views, with a warning, and the result's ``split`` says so)."""
     from cghair_format import decode_gaussians, read_with_gaussians
 
     from .backends import render_gaussians, resolve_backend
@@ -105,6 +108,7 @@ def evaluate(cgh: str | Path | HairAsset, dataset: str | Path | Dataset, out_dir
     ds = dataset if isinstance(dataset, Dataset) else read_dataset(dataset)
     result = evaluate_renders(lambda v: render_gaussians(g, v.camera, tuple(background), device, backend)["rgb"],
                               ds.split(split), out_dir, background, use_lpips, lpips_net)
+    result.split = split if split != "val" or ds.val else "train (no val views)"
     if out_dir is not None:
         write_text(Path(out_dir) / "metrics.json", json.dumps(result.to_dict(), indent=2) + "\n")
     return result

@@ -1,13 +1,14 @@
 """How much each quantization costs in the picture: render PSNR against the unquantized asset.
 
-    python -m training.precision MODEL.cgh DATASET_DIR [--split test] [--weight-steps 0.02,0.35,0.5]
+    python -m training.precision MODEL.cgh DATASET_DIR [--split val] [--weight-steps 0.02,0.35,0.5]
                                  [--logit-levels 1023,63]
 
 ``MODEL.cgh`` is the reference (write it with ``--profile lossless`` to measure every profile);
-the cameras come from the dataset's split. For each profile the file is encoded, decoded and
-rendered; for each weight step (a fraction of each array's RMS, as the profiles give it) only the
-codebooks and MLP weights are quantized, and for each logit level count only the soft logits, each
-as the writer stores them, which isolates each one's share of the error.
+the cameras come from the dataset's split (default ``val``: the validation views, since these
+figures choose settings; see :meth:`training.datasets.types.Dataset.split`). For each profile the
+file is encoded, decoded and rendered; for each weight step (a fraction of each array's RMS, as the
+profiles give it) only the codebooks and MLP weights are quantized, and for each logit level count
+only the soft logits, each as the writer stores them, which isolates each one's share of the error.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from cghair_format.quantize import (
 )
 
 from .datasets.read import read_dataset
-from .datasets.types import View
+from .datasets.types import SPLITS, View
 from .losses import psnr
 from .splatter import render_gaussians
 
@@ -84,7 +85,8 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m training.precision", description=__doc__.split("\n\n")[0])
     p.add_argument("cgh", help="the reference asset (.cgh, ideally lossless)")
     p.add_argument("dataset", help="a NeRF-synthetic dataset folder, for its cameras")
-    p.add_argument("--split", default="test", choices=("train", "test"))
+    p.add_argument("--split", default="val", choices=SPLITS,
+                   help="views whose cameras are used (default: val, the views for choosing settings)")
     p.add_argument("--weight-steps", default="0.02,0.35,0.5",
                    help="weight steps to try, as fractions of each array's RMS (0 < step <= 4)")
     p.add_argument("--logit-levels", default="1023,63", help="soft-logit level counts to try (1..65535)")

@@ -41,8 +41,9 @@ def scene(tmp_path_factory):
 
 def _same_views(a, b):
     assert [v.name for v in a.train] == [v.name for v in b.train]
+    assert [v.name for v in a.val] == [v.name for v in b.val]
     assert [v.name for v in a.test] == [v.name for v in b.test]
-    for va, vb in zip(a.train + a.test, b.train + b.test, strict=True):
+    for va, vb in zip(a.train + a.val + a.test, b.train + b.val + b.test, strict=True):
         ca, cb = va.camera, vb.camera
         assert (ca.width, ca.height, ca.fx, ca.fy, ca.cx, ca.cy) == (cb.width, cb.height, cb.fx, cb.fy, cb.cx, cb.cy)
         # the pose goes through a quaternion: equal to float64 rounding
@@ -61,7 +62,9 @@ def test_capture_reads_the_same_views(scene, tmp_path, form):
     assert ("images_2/" if form == "haircut" else "images/") in layout.describe()
     assert (".txt" if form == "text" else ".bin") in layout.describe()
     nerf, capture = read_dataset(root / "nerf"), read_dataset(tmp_path)
-    assert len(capture.train) == 11 and len(capture.test) == 1  # every 8th view held out, as render-dataset does
+    # every 8th view held out for testing and every 8th from the 4th for validation, as render-dataset does
+    assert [v.name for v in capture.val] == ["r_003", "r_011"] and [v.name for v in capture.test] == ["r_007"]
+    assert len(capture.train) == 9
     _same_views(nerf, capture)
 
 

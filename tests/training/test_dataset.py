@@ -1,4 +1,5 @@
-"""NeRF-synthetic datasets: write/read round trip, the splat engine, bad folders."""
+"""NeRF-synthetic datasets: write/read round trip, the train / val / test split, the splat engine,
+bad folders."""
 
 from __future__ import annotations
 
@@ -8,25 +9,27 @@ import numpy as np
 import pytest
 
 from cghair_format.camera import Camera
+from training.datasets.layouts import detect_layout
 from training.datasets.nerf import write_dataset
 from training.datasets.read import read_dataset
 from training.datasets.synthetic import reference_gaussians, render_dataset
 from training.datasets.types import Dataset, DatasetError, View, split_indices
 
 
-def _views(n, res=10, seed=0):
+def _views(n, res=10, seed=0, first_angle=0.0):
     rng = np.random.default_rng(seed)
-    return [View(Camera.orbit((0, 0, 0), 3.0, 40.0 * i, 10.0, res, res),
+    return [View(Camera.orbit((0, 0, 0), 3.0, first_angle + 40.0 * i, 10.0, res, res),
                  rng.random((res, res, 4)).astype(np.float32), f"r_{i:03d}") for i in range(n)]
 
 
 def test_round_trip(tmp_path):
-    ds = Dataset(_views(3), _views(2, seed=1), {"engine": "test"})
+    ds = Dataset(_views(3), _views(2, seed=1), {"engine": "test"}, _views(1, seed=2, first_angle=20.0))
     write_dataset(tmp_path, ds)
     back = read_dataset(tmp_path)
     assert [v.name for v in back.train] == ["r_000", "r_001", "r_002"] and len(back.test) == 2
+    assert len(back.val) == 1 and (tmp_path / "transforms_val.json").is_file()
     assert back.meta == {"engine": "test"}
-    for a, b in zip(ds.train + ds.test, back.train + back.test, strict=True):
+    for a, b in zip(ds.train + ds.val + ds.test, back.train + back.val + back.test, strict=True):
         assert np.abs(a.image - b.image).max() <= 0.5 / 255 + 1e-6  # 8-bit PNG rounding
         assert np.allclose(a.camera.world_to_camera, b.camera.world_to_camera, atol=1e-9)
         assert np.isclose(a.camera.fx, b.camera.fx) and a.camera.width == b.camera.width
@@ -35,9 +38,36 @@ def test_round_trip(tmp_path):
 
 
 def test_split_indices():
-    train, test = split_indices(16)
-    assert test == [7, 15] and len(train) == 14 and not set(train) & set(test)
-    assert split_indices(4) == ([0, 1, 2], [3])
+    train, val, test = split_indices(16)
+    assert test == [7, 15] and val == [3, 11] and len(train) == 12
+    assert sorted(train + val + test) == list(range(16))  # disjoint, and every view in one split
+    assert split_indices(32)[1:] == ([3, 11, 19, 27], [7, 15, 23, 31])
+    assert split_indices(5) == ([0, 1, 2], [3], [4])
+    # too few views to spare one for validation: none, and at least one to train on
+    assert split_indices(4) == ([0, 1, 2], [], [3])
+    assert split_indices(2) == ([0], [], [1])
+
+
+def test_a_dataset_without_val_views_falls_back_to_train(tmp_path):
+    write_dataset(tmp_path, Dataset(_views(3), _views(1, seed=1)))
+    assert not (tmp_path / "transforms_val.json").exists()
+    ds = read_dataset(tmp_path)
+    assert ds.val == [] and "no val views" in detect_layout(tmp_path).describe()
+    with pytest.warns(UserWarning, match="no validation views: using its training views"):
+        assert ds.split("val") is ds.train
+    assert ds.split("test") is ds.test
+    with pytest.raises(DatasetError, match="choose train, val, test"):
+        ds.split("held-out")
+
+
+def test_val_views_that_are_test_views_are_refused(tmp_path):
+    write_dataset(tmp_path, Dataset(_views(3), _views(2, seed=1), {}, _views(2, seed=2, first_angle=20.0)))
+    assert len(read_dataset(tmp_path).val) == 2
+    write_dataset(tmp_path, Dataset(_views(3), _views(2, seed=1), {}, _views(1, seed=2)))  # test view 0's pose
+    with pytest.raises(DatasetError, match="1 validation views .* have the pose of a test view"):
+        read_dataset(tmp_path)
+    write_dataset(tmp_path, Dataset(_views(3), _views(2, seed=1)))  # rewritten without val: none left behind
+    assert read_dataset(tmp_path).val == [] and not (tmp_path / "transforms_val.json").exists()
 
 
 def test_bad_folders(tmp_path):
@@ -60,9 +90,10 @@ def test_bad_folders(tmp_path):
 
 def test_render_splat_dataset(tmp_path, strands):
     ds = render_dataset(strands, tmp_path, views=8, res=24, engine="splat")
-    assert len(ds.train) == 7 and len(ds.test) == 1
+    assert [v.name for v in ds.val] == ["r_003"] and [v.name for v in ds.test] == ["r_007"] and len(ds.train) == 6
     back = read_dataset(tmp_path)
-    for v in back.train + back.test:
+    assert [v.name for v in back.val] == ["r_003"] and "transforms_val.json" in detect_layout(tmp_path).describe()
+    for v in back.train + back.val + back.test:
         mask = v.image[..., 3]
         assert 0.03 < mask.mean() < 0.9  # the hair is in frame, not filling it
         assert mask[0].max() < 0.5 and mask[:, 0].max() < 0.5  # the framing leaves a border
@@ -132,7 +163,7 @@ def test_cli_paper_scale_options(tmp_path, strands_file, capsys):
     out = tmp_path / "ds"
     assert main(["render-dataset", str(strands_file), "-o", str(out), "--resample", "8", "--densify", "200",
                  "--multitone", "--views", "9", "--res", "32", "--no-progress"]) == 0
-    assert "8 train + 1 test views (32 x 32, engine splat, 200 strands)" in capsys.readouterr().out
+    assert "7 train + 1 val + 1 test views (32 x 32, engine splat, 200 strands)" in capsys.readouterr().out
     meta = json.loads((out / "dataset.json").read_text())
     assert (meta["strands"], meta["points"], meta["multitone"]) == (200, 8, 3)
     with pytest.raises(SystemExit):

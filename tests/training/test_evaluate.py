@@ -1,5 +1,5 @@
 """Evaluation output: LPIPS reported per view and on average, full-size side-by-side PNGs, the
-`cgh eval --lpips` choice, and the clear note when views are too small for the network."""
+`cgh eval --lpips` and `--split` choices, and the clear note when views are too small for the network."""
 
 from __future__ import annotations
 
@@ -73,3 +73,18 @@ def test_cgh_eval_reports_lpips(tmp_path, strands_file, capsys):
     assert metrics["lpips_note"] == "vgg" and 0 < metrics["lpips"] < 1
     assert f"LPIPS {metrics['lpips']:.4f}" in text
     assert Image.open(next((tmp_path / "ev").glob("*_gt_render_diff.png"))).size == (96, 32)
+    assert metrics["split"] == "test" and [r["view"] for r in metrics["per_view"]] == ["r_007"]
+    # the validation views, for choosing settings: never the test views
+    assert main(["eval", str(out), str(ds), "--split", "val", "--out", str(tmp_path / "val"), "--no-lpips",
+                 "--threads", "1"]) == 0
+    metrics = json.loads((tmp_path / "val" / "metrics.json").read_text())
+    assert metrics["split"] == "val" and [r["view"] for r in metrics["per_view"]] == ["r_003"]
+    assert "(val): 1 views" in capsys.readouterr().out
+    # a dataset without them: one line says so, and the training views stand in
+    (ds / "transforms_val.json").unlink()
+    assert main(["eval", str(out), str(ds), "--split", "val", "--out", str(tmp_path / "fb"), "--no-lpips",
+                 "--threads", "1"]) == 0
+    captured = capsys.readouterr()
+    assert captured.err.count("no validation views: using its training views") == 1
+    assert "Traceback" not in captured.err and "(train (no val views)): 6 views" in captured.out
+    assert json.loads((tmp_path / "fb" / "metrics.json").read_text())["split"] == "train (no val views)"

@@ -13,7 +13,7 @@ from training.precision import main, measure, with_weight_step
 def test_coarser_weights_and_profiles_cost_picture_quality(tmp_path, capsys):
     strands = hair_cap(60, 10, seed=2)
     asset = build_cards(strands, n_cards=8, n_groups=2, points=10, seed=0, progress=False).asset
-    render_dataset(strands, tmp_path / "ds", views=4, res=24, engine="splat")
+    render_dataset(strands, tmp_path / "ds", views=5, res=24, engine="splat")  # 3 train, 1 val, 1 test
     from training.datasets.read import read_dataset
 
     views = read_dataset(tmp_path / "ds").split("test")
@@ -30,5 +30,6 @@ def test_coarser_weights_and_profiles_cost_picture_quality(tmp_path, capsys):
     assert main([str(tmp_path / "ref.cgh"), str(tmp_path / "ds"), "--weight-steps", "0.2"]) == 0
     out = capsys.readouterr().out
     assert "compact file" in out and "weight step 0.2 only" in out
+    assert "on 1 val views" in out  # settings are chosen on the validation views by default
     assert main([str(tmp_path / "missing.cgh"), str(tmp_path / "ds")]) == 1
     assert "error" in capsys.readouterr().err

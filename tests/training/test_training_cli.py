@@ -15,7 +15,7 @@ def test_render_train_eval(tmp_path, strands_file, capsys):
     ds = tmp_path / "ds"
     assert main(["render-dataset", str(strands_file), "-o", str(ds), "--views", "8", "--res", "24",
                  "--no-progress"]) == 0
-    assert "7 train + 1 test views" in capsys.readouterr().out
+    assert "6 train + 1 val + 1 test views" in capsys.readouterr().out
     cfg = tmp_path / "cfg.json"
     cfg.write_text(json.dumps({"codebook_size": 4, "latent_dim": 8, "mlp_hidden": [16], "sh_degree": 1,
                                "card_segments": 4, "log_every": 5}))

@@ -35,7 +35,7 @@ def nerf_to_colmap(src, dst, text: bool = False, haircut: bool = False, scale: i
 
     src, dst = Path(src), Path(dst)
     ds = read_dataset(src)
-    views = sorted(ds.train + ds.test, key=lambda v: v.name)
+    views = sorted(ds.train + ds.val + ds.test, key=lambda v: v.name)
     images, masks = (dst / "images_2", dst / "masks_2" / "hair") if haircut else (dst / "images", dst / "masks")
     images.mkdir(parents=True)
     masks.mkdir(parents=True)

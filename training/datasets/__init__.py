@@ -2,7 +2,7 @@
 
 Modules, each importing only those above it in this list:
 
-- :mod:`.types`: :class:`View`, :class:`Dataset`, :class:`DatasetError`, the train / test split;
+- :mod:`.types`: :class:`View`, :class:`Dataset`, :class:`DatasetError`, the train / val / test split;
 - :mod:`.colmap`: COLMAP sparse models (binary or text);
 - :mod:`.nerf`: the NeRF-synthetic layout, read and written;
 - :mod:`.layouts`: which layout a folder holds; :mod:`.capture`: COLMAP and GaussianHaircut captures;

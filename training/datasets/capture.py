@@ -11,7 +11,8 @@ present is read); the cameras are scaled to the images' size.
 A mask is ``<masks>/<image stem>.png``, ``<masks>/<image name>`` or ``<masks>/<image name>.png``,
 a greyscale (or RGB, read as luminance) image of the image's size, 255 = hair. Without masks, an
 RGBA image's alpha is the mask, else the whole image counts as hair. Views are sorted by image
-name and every 8th (the 8th, 16th, ...) is held out, as :func:`.types.split_indices` does.
+name; every 8th (the 8th, 16th, ...) is held out for testing and every 8th from the 4th (the 4th,
+12th, ...) for validation, as :func:`.types.split_indices` does.
 Only undistorted pinhole cameras are read (see :mod:`.colmap`).
 """
 
@@ -52,8 +53,9 @@ def read_capture(layout: Layout) -> Dataset:
         warnings.warn(f"{layout.root}: {no_mask} of {len(views)} images have no hair mask (no masks/ folder, "
                       "no alpha), so the whole image is fitted as hair; add masks/ for a capture with a background",
                       stacklevel=2)
-    train, test = split_indices(len(views))
-    return Dataset([views[i] for i in train], [views[i] for i in test], {"layout": layout.name})
+    train, val, test = split_indices(len(views))
+    return Dataset([views[i] for i in train], [views[i] for i in test], {"layout": layout.name},
+                   [views[i] for i in val])
 
 
 def _read_mask(folder: Path, name: str, image_path: Path, size: tuple[int, int]) -> np.ndarray:

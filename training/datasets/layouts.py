@@ -26,7 +26,8 @@ class Layout:
 
     def describe(self) -> str:
         if self.name == "NeRF-synthetic":
-            return f"{self.name} layout (transforms_train.json, transforms_test.json)"
+            val = ", transforms_val.json" if (self.root / "transforms_val.json").is_file() else ", no val views"
+            return f"{self.name} layout (transforms_train.json, transforms_test.json{val})"
         ext = colmap.find_model(self.sparse)[1]
         masks = f"masks {self.masks.relative_to(self.root)}/" if self.masks else "no masks"
         return (f"{self.name} layout (sparse model {self.sparse.relative_to(self.root)}/ .{ext}, "

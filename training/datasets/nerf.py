@@ -1,6 +1,7 @@
 """The NeRF-synthetic layout, read and written.
 
-``transforms_train.json`` and ``transforms_test.json``, each with ``camera_angle_x`` and
+``transforms_train.json``, ``transforms_test.json`` and, optionally, ``transforms_val.json`` (the
+validation views), each with ``camera_angle_x`` and
 ``frames: [{file_path: "./train/r_000", transform_matrix: 4x4}]`` (OpenGL camera-to-world), images
 ``train/r_000.png`` as 8-bit RGBA with straight (not premultiplied) colour; alpha is the hair mask.
 ``dataset.json`` records how the views were made.
@@ -43,10 +44,15 @@ def write_split(root: str | Path, split: str, views: list[View]) -> None:
 
 
 def write_dataset(root: str | Path, dataset: Dataset) -> None:
+    """Every split (the validation split only where it has views) and ``dataset.json``."""
     root = Path(root)
     root.mkdir(parents=True, exist_ok=True)
     for split in SPLITS:
-        write_split(root, split, dataset.split(split))
+        views = getattr(dataset, split)
+        if split != "val" or views:
+            write_split(root, split, views)
+        elif (root / "transforms_val.json").is_file():  # left by an earlier dataset in this folder
+            (root / "transforms_val.json").unlink()
     write_text(root / "dataset.json", json.dumps(dataset.meta, indent=2) + "\n")
 
 
@@ -85,8 +91,17 @@ def read_split(root: str | Path, split: str) -> list[View]:
 
 
 def read_nerf(root: str | Path) -> Dataset:
-    """Both splits (a missing test split is an error: evaluation needs held-out views) and ``dataset.json``."""
+    """Every split (a missing test split is an error: evaluation needs held-out views; a missing
+    validation split is not, see :meth:`.types.Dataset.split`) and ``dataset.json``."""
     root = Path(root)
     meta_path = root / "dataset.json"
     meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
-    return Dataset(read_split(root, "train"), read_split(root, "test"), meta)
+    test = read_split(root, "test")
+    val = read_split(root, "val") if (root / "transforms_val.json").is_file() else []
+    test_poses = {v.camera.world_to_camera.tobytes() for v in test}
+    shared = [v.name for v in val if v.camera.world_to_camera.tobytes() in test_poses]
+    if shared:
+        raise DatasetError(f"{root}: {len(shared)} validation views (first {shared[0]}) have the pose of a test view: "
+                           "choosing settings on test views would flatter the reported scores; give "
+                           "transforms_val.json other views, or remove it")
+    return Dataset(read_split(root, "train"), test, meta, val)

@@ -82,7 +82,7 @@ def render_dataset(strands: Strands, out_dir: str | Path, views: int = 32, res: 
     there); ``engine="cycles"`` renders curves with Blender Cycles and the Principled Hair BSDF (needs
     bpy), ``denoise`` with its OpenImageDenoise pass. ``multitone`` > 0 colours every strand in that many
     segments (:func:`multitone_colours`) instead of its own colours or the preset. Every 8th view goes to
-    the test split.
+    the test split and every 8th from the 4th to the validation split (:func:`.types.split_indices`).
     """
     if engine not in ENGINES:
         raise DatasetError(f"unknown engine {engine!r}; choose {' or '.join(ENGINES)}")
@@ -116,13 +116,15 @@ def render_dataset(strands: Strands, out_dir: str | Path, views: int = 32, res: 
 
         images = render_cycles(strands, cams, thickness=thickness, preset=preset, samples=samples,
                                seed=seed, progress=progress, denoise=denoise)
-    train_idx, test_idx = split_indices(views)
+    train_idx, val_idx, test_idx = split_indices(views)
     meta = {"engine": engine, "views": views, "res": res, "preset": preset, "seed": seed,
             "thickness": thickness, "strands": strands.count, "samples": samples if engine == "cycles" else None,
             "up_axis": strands.up_axis, "points": int(strands.point_counts.max()), "multitone": multitone,
             "denoise": denoise if engine == "cycles" else None, "backend": backend if engine == "splat" else None}
-    ds = Dataset([View(cams[i], images[i], f"r_{i:03d}") for i in train_idx],
-                 [View(cams[i], images[i], f"r_{i:03d}") for i in test_idx], meta)
+    def views_at(indices: list[int]) -> list[View]:
+        return [View(cams[i], images[i], f"r_{i:03d}") for i in indices]
+
+    ds = Dataset(views_at(train_idx), views_at(test_idx), meta, views_at(val_idx))
     write_dataset(out_dir, ds)
     return ds
 

@@ -26,9 +26,11 @@ from .scalp import Roots, check_roots_in_hull, estimate_scalp, load_scalp_mesh, 
 STAGES = ("orientation", "hull", "scalp", "growth", "refine")
 CHECKPOINT_VERSION = 1
 # growth keeps this many pixel footprints inside the hull: the closed, dilated masks of strands a
-# pixel or more wide make the hull about that much larger than the hair (3 px: on splat renders of
-# harolongo and ruby at 128 px, 95 % of the ground-truth points lie deeper than 2.4 voxels ~ 2.3 px)
-INSET_PIXELS = 3.0
+# pixel or more wide make the hull about that much larger than the hair. 4 px: the best of 1 ... 6 by
+# grown-strand F1 (3 mm / 30 deg) on harolongo (2000 strands, 128 px splat renders); reported on ruby,
+# where it gives 0.606 against 3 px's 0.650: the best inset depends on the model (docs/reconstruct.md,
+# "Re-checked on another model")
+INSET_PIXELS = 4.0
 
 
 @dataclass
