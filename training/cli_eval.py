@@ -31,7 +31,6 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from .datasets.layouts import detect_layout
-    from .datasets.read import read_dataset
     from .evaluate import evaluate
 
     if args.threads:
@@ -39,10 +38,9 @@ def run(args: argparse.Namespace) -> int:
 
         torch.set_num_threads(args.threads)
     out = Path(args.out) if args.out else Path(args.file).with_suffix(".eval")
-    ds = read_dataset(args.dataset)
+    result = evaluate(args.file, args.dataset, out, split=args.split, use_lpips=not args.no_lpips,
+                      device=args.device, lpips_net=args.lpips, backend=args.backend)  # the file is checked first
     print(f"read {args.dataset}: {detect_layout(args.dataset).describe()}")
-    result = evaluate(args.file, ds, out, split=args.split, use_lpips=not args.no_lpips, device=args.device,
-                      lpips_net=args.lpips, backend=args.backend)
     print(f"{args.file} on {args.dataset} ({result.split}): {result.summary()}")
     for rec in result.per_view:
         lp = f", LPIPS {rec['lpips']:.4f}" if "lpips" in rec else ""

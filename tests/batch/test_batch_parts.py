@@ -187,7 +187,7 @@ def test_the_command_line_refuses_in_one_line(tmp_path, args, message):
 @pytest.mark.slow
 def test_a_file_with_a_dataset_is_trained(tmp_path):
     pytest.importorskip("torch", reason="training needs torch: pip install -e '.[training]'")
-    from training.dataset import render_dataset
+    from training.datasets.synthetic import render_dataset
 
     src = _strands(tmp_path / "h.npz", strands=40, points=8)
     render_dataset(synthesize("wavy", 40, 8, seed=0), tmp_path / "data", views=4, res=32)
