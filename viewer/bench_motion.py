@@ -31,7 +31,9 @@ def animated_runs(renderer: Any, asset: Any, cam: Any, settings: Any, budgets: t
     """Per budget (``None``: full quality): the static and the animated frame by stage, and their ratio.
     ``renderer`` must have been made with ``animated=True``; its cards are left at rest. ``clock(ctx)``
     makes a frame's stage clock (:class:`viewer.bench.StageClock`)."""
-    from .motion import LiveSimulation, simulated_animation
+    from cghair_format.animation import simulated_animation
+
+    from .motion import LiveSimulation
 
     live = LiveSimulation(asset, fps=MOTION_FPS) if simulate else None
     if live is None and animation is None:

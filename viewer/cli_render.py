@@ -91,9 +91,10 @@ def run(args: argparse.Namespace) -> int:
 
 def _animation(args: argparse.Namespace, asset):
     """The animation and the frames of it to render (``None, None``: the rest pose)."""
+    from cghair_format.animation import simulated_animation
     from cghair_format.errors import CghError
 
-    from .motion import file_animation, parse_frames, simulated_animation
+    from .motion import file_animation, parse_frames
 
     if args.frames is None and not args.animate and args.motion is None:
         return None, None

@@ -121,14 +121,14 @@ class LiveSimulation:
     set by the mouse (:meth:`turn`, :meth:`move`) about the head fitted to the strand roots."""
 
     def __init__(self, asset: HairAsset, settings: Any = None, fps: float = LIVE_FPS):
-        from cghair_format import decode_points
-        from cghair_format.animation import SolverSettings, StrandState, fit_head
+        from cghair_format.animation import SolverSettings, StrandState, settle
         from cghair_format.animation.solver import GRAVITY
+        from cghair_format.animation.tracks import head_of
 
         self.settings = settings or SolverSettings()
         self.settings.check()
         self.rest, self.fps = asset.cards, float(fps)
-        head = fit_head(decode_points(asset)[:, 0], asset.cards.spine[:, 1:], asset.up_axis)
+        head = head_of(asset)
         self.centre, self.up, self.radius, self.capsules = head.centre, head.up, head.radius, head.capsules()
         unit = 1.0 / asset.meters_per_unit
         self.gravity = -head.up * GRAVITY * unit if self.settings.gravity else np.zeros(3)
@@ -139,8 +139,8 @@ class LiveSimulation:
         self.playing = True
         self.seconds = 0.0  # wall-clock time of the last frame's simulation
         self._fresh = True
-        self._substeps(int(round(self.settings.settle * self.fps)) * self.settings.substeps, self.target)
-        self.state.x_prev[...] = self.state.x  # settled: at rest, as drive.simulate starts
+        settle(self.state, self.settings, *self.target, self.gravity, self.wind, self.capsules,
+               1.0 / (self.fps * self.settings.substeps))  # at rest, as drive.simulate starts
 
     @property
     def active(self) -> bool:
@@ -206,20 +206,6 @@ class LiveSimulation:
     def status(self) -> str:
         state = "live" if self.playing else "paused"
         return f"simulation {state}, {1000 * self.seconds:.1f} ms/frame for {len(self.rest.spine)} cards"
-
-
-def simulated_animation(asset: HairAsset, motion: str, frames: int, fps: float, settings: Any = None) -> Animation:
-    """An animation of ``asset`` made by the solver: its cards under the built-in head ``motion``."""
-    from cghair_format import decode_points
-    from cghair_format.animation import Scene, SolverSettings, builtin_track, card_frames, fit_head
-
-    if frames < 1:
-        raise CghError(f"a simulated animation needs at least one frame, got {frames}")
-    head = fit_head(decode_points(asset)[:, 0], asset.cards.spine[:, 1:], asset.up_axis)
-    track = builtin_track(motion, head, frames, fps, asset.meters_per_unit)
-    scene = Scene(track, head.capsules(), asset.meters_per_unit, head.up)
-    cards = list(card_frames(asset.cards, scene, settings or SolverSettings()))
-    return Animation.of_frames(cards, fps, source=f"simulate {motion}")
 
 
 def file_animation(path: str) -> Animation | None:

@@ -5,11 +5,12 @@ follows through the format's own decoding (spec 6.1, 6.2).
 """
 
 from .clip import Animation, frame_asset, frame_points
-from .drive import Scene, card_frames, carried_normals, simulate
+from .drive import Scene, card_frames, carried_normals, settle, simulate, simulated_animation
 from .shading import frame_gaussians, rotate_sh, segment_rotations
 from .solver import Capsules, SolverSettings, StrandState, UnstableSimulation
 from .tracks import MOTIONS, Head, HeadTrack, builtin_track, fit_head
 
 __all__ = ["MOTIONS", "Animation", "Capsules", "Head", "HeadTrack", "Scene", "SolverSettings", "StrandState",
            "UnstableSimulation", "builtin_track", "card_frames", "carried_normals", "fit_head", "frame_asset",
-           "frame_gaussians", "frame_points", "rotate_sh", "segment_rotations", "simulate"]
+           "frame_gaussians", "frame_points", "rotate_sh", "segment_rotations", "settle", "simulate",
+           "simulated_animation"]

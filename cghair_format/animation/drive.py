@@ -14,9 +14,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..asset import Cards
+from ..errors import CghError
 from ..geometry import spine_tangents
+from .clip import Animation
 from .solver import GRAVITY, Capsules, SolverSettings, StrandState, rotate_between, step
-from .tracks import HeadTrack
+from .tracks import HeadTrack, builtin_track, head_of
 
 # damping while the groom settles: heavy, so that it comes to rest within the settle and the first frame
 # starts still (a swing stopped half way would start again once the motion begins)
@@ -58,10 +60,7 @@ def simulate(rest: np.ndarray, scene: Scene, settings: SolverSettings) -> Iterat
     rotation, translation = scene.track.at(0.0)
     state.x[...] = state.rest @ rotation.T + translation
     state.x_prev[...] = state.x
-    settling = replace(settings, damping=max(settings.damping, SETTLE_DAMPING))
-    for _ in range(int(round(settings.settle / dt))):  # the groom settles under gravity, head still
-        step(state, settling, rotation, translation, gravity, wind, scene.capsules, dt)
-    state.x_prev[...] = state.x
+    settle(state, settings, rotation, translation, gravity, wind, scene.capsules, dt)
     yield state.x.copy()
     for f in range(1, scene.track.frames):
         for s in range(sub):
@@ -69,6 +68,17 @@ def simulate(rest: np.ndarray, scene: Scene, settings: SolverSettings) -> Iterat
             rotation, translation = scene.track.at(i * dt)
             step(state, settings, rotation, translation, gravity, wind * gusts[i], scene.capsules, dt)
         yield state.x.copy()
+
+
+def settle(state: StrandState, settings: SolverSettings, rotation: np.ndarray, translation: np.ndarray,
+           gravity: np.ndarray, wind: np.ndarray, capsules: Capsules | None, dt: float) -> None:
+    """``settings.settle`` seconds of substeps of ``dt`` with the head held at its transform and the damping
+    at least :data:`SETTLE_DAMPING`, then the velocity dropped: the groom at rest as gravity and its shape
+    constraints hold it, from which a clip or a live simulation starts."""
+    settling = replace(settings, damping=max(settings.damping, SETTLE_DAMPING))
+    for _ in range(int(round(settings.settle / dt))):
+        step(state, settling, rotation, translation, gravity, wind, capsules, dt)
+    state.x_prev[...] = state.x
 
 
 def carried_normals(rest: Cards, spine: np.ndarray, rotation: np.ndarray) -> np.ndarray:
@@ -88,3 +98,16 @@ def card_frames(cards: Cards, scene: Scene, settings: SolverSettings) -> Iterato
         rotation, _ = scene.track.at(f / scene.track.fps)
         yield Cards(spine.astype(np.float32), carried_normals(cards, spine, rotation).astype(np.float32),
                     cards.half_width, cards.group)
+
+
+def simulated_animation(asset, motion: str, frames: int, fps: float, settings: SolverSettings | None = None,
+                        seed: int = 0) -> Animation:
+    """An animation of a :class:`~cghair_format.asset.HairAsset`: its cards simulated under the built-in head
+    ``motion`` (:data:`~.tracks.MOTIONS`) for ``frames`` frames at ``fps``, the head fitted to its roots."""
+    if frames < 1:
+        raise CghError(f"a simulated animation needs at least one frame, got {frames}")
+    head = head_of(asset)
+    track = builtin_track(motion, head, frames, fps, asset.meters_per_unit)
+    scene = Scene(track, head.capsules(), asset.meters_per_unit, head.up, seed)
+    frames_ = list(card_frames(asset.cards, scene, settings or SolverSettings()))
+    return Animation.of_frames(frames_, fps, source=f"simulate {motion}")

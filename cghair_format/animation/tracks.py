@@ -80,6 +80,16 @@ def fit_head(roots: np.ndarray, others: np.ndarray, up_axis: str) -> Head:
     return Head(centre, min(radius, nearest) * 0.98, up)
 
 
+def head_of(asset) -> Head:
+    """The head of a :class:`~cghair_format.asset.HairAsset` (:func:`fit_head`): a sphere through its strand
+    roots, clear of every strand point and card spine."""
+    from ..geometry import strand_points
+
+    points = strand_points(asset.cards, asset.strand_card, asset.uvd)
+    others = np.concatenate([points[:, 1:].reshape(-1, 3), asset.cards.spine[:, 1:].reshape(-1, 3)])
+    return fit_head(points[:, 0], others, asset.up_axis)
+
+
 def builtin_track(motion: str, head: Head, frames: int, fps: float, meters_per_unit: float) -> HeadTrack:
     """One of :data:`MOTIONS` over ``frames`` frames at ``fps``."""
     if motion not in MOTIONS:

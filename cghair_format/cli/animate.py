@@ -25,7 +25,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="with --from: Gauss-Newton steps on the exact card model after the linear fit (default 0)")
     p.add_argument("--frames", type=int_at_least(1), default=120, help="frames to simulate (default 120)")
     p.add_argument("--fps", type=positive_float, default=30.0, help="frames a second (default 30)")
-    p.add_argument("--substeps", type=int_at_least(1), default=None, help="solver steps a frame (default 4)")
+    p.add_argument("--substeps", type=int_at_least(1), default=None, help="solver steps a frame (default 8)")
     p.add_argument("--stiffness", type=share, default=None,
                    help="bend stiffness, 0..1: the pull toward each segment's rest bend a step (default 0.9)")
     p.add_argument("--damping", type=share, default=None, help="velocity lost a step, 0..1 (default 0.04)")
@@ -71,21 +71,10 @@ def run(args: argparse.Namespace) -> int:
 def _simulated(asset, args: argparse.Namespace):
     from dataclasses import replace
 
-    import numpy as np
+    from ..animation import SolverSettings, simulated_animation
 
-    from ..animation import Animation, Scene, SolverSettings, builtin_track, card_frames, fit_head
-    from ..geometry import strand_points
-
-    settings = SolverSettings()
     changes = {"substeps": args.substeps, "local_stiffness": args.stiffness, "damping": args.damping,
                "wind": args.wind, "wind_gust": args.gust}
-    settings = replace(settings, **{k: v for k, v in changes.items() if v is not None})
+    settings = replace(SolverSettings(), **{k: v for k, v in changes.items() if v is not None})
     settings.check()
-    points = strand_points(asset.cards, asset.strand_card, asset.uvd)
-    others = np.concatenate([points[:, 1:].reshape(-1, 3), asset.cards.spine[:, 1:].reshape(-1, 3)])
-    head = fit_head(points[:, 0], others, asset.up_axis)
-    motion = args.motion or "nod"
-    track = builtin_track(motion, head, args.frames, args.fps, asset.meters_per_unit)
-    scene = Scene(track, head.capsules(), asset.meters_per_unit, head.up, args.seed)
-    frames = list(card_frames(asset.cards, scene, settings))
-    return Animation.of_frames(frames, args.fps, source=f"simulate {motion}")
+    return simulated_animation(asset, args.motion or "nod", args.frames, args.fps, settings, args.seed)

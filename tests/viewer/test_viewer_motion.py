@@ -8,9 +8,10 @@ import pytest
 
 import cghair_format
 from cghair_format import Cards
+from cghair_format.animation import simulated_animation
 from cghair_format.errors import CghError
 from cghair_format.examples import example_asset
-from viewer.motion import ClipPlayer, LiveSimulation, file_animation, parse_frames, simulated_animation
+from viewer.motion import ClipPlayer, LiveSimulation, file_animation, parse_frames
 
 
 @pytest.fixture(scope="module")
