@@ -101,18 +101,23 @@ def test_gsplat_missing_package_says_what_to_install(monkeypatch):
         backends.renderer("gsplat")(*random_scene(3, 0), camera())
 
 
-def test_gsplat_that_breaks_on_import_says_why(monkeypatch):
-    """An installed gsplat whose import fails with anything but ImportError (a CUDA library or torch ABI
-    mismatch) is a BackendError naming the cause, so `cgh train --device cuda` says why."""
+def _gsplat_import_fails(monkeypatch, error: Exception) -> None:
+    """As on a CUDA machine whose installed gsplat raises ``error`` (not ImportError) when imported."""
     monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
     real_import = importlib.import_module
 
     def import_module(name, *args):
         if name == "gsplat":
-            raise OSError("libcudart.so.12: cannot open shared object file")
+            raise error
         return real_import(name, *args)
 
     monkeypatch.setattr(importlib, "import_module", import_module)
+
+
+def test_gsplat_that_breaks_on_import_says_why(monkeypatch):
+    """An installed gsplat whose import fails with anything but ImportError (a CUDA library or torch ABI
+    mismatch) is a BackendError naming the cause, so `cgh train --device cuda` says why."""
+    _gsplat_import_fails(monkeypatch, OSError("libcudart.so.12: cannot open shared object file"))
     with pytest.raises(BackendError, match=r"gsplat is installed but fails to import \(OSError: libcudart.so.12"):
         backends.check_backend("gsplat", "cuda")
     assert backends.default_backend("cuda") == "reference"
@@ -125,15 +130,7 @@ def test_gsplat_that_breaks_on_import_says_why(monkeypatch):
 def test_train_on_cuda_says_why_gsplat_cannot_run(monkeypatch, capsys, tmp_path, backend_args, message):
     from cghair_format.cli import main
 
-    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
-    real_import = importlib.import_module
-
-    def import_module(name, *args):
-        if name == "gsplat":
-            raise RuntimeError("CUDA driver too old")
-        return real_import(name, *args)
-
-    monkeypatch.setattr(importlib, "import_module", import_module)
+    _gsplat_import_fails(monkeypatch, RuntimeError("CUDA driver too old"))
     code = main(["train", str(tmp_path), "--strands", "s.npz", "-o", str(tmp_path / "x.cgh"), "--device", "cuda",
                  *backend_args])
     assert code == 2 and message in capsys.readouterr().err  # the empty dataset folder stops the second
