@@ -42,23 +42,29 @@ def _view(display, *args, cwd):
     return subprocess.run(cmd, env=env, cwd=cwd, capture_output=True, text=True, timeout=300)
 
 
+def _assert_the_screenshot_is_the_headless_render(folder) -> None:
+    """The window's one screenshot in ``folder`` against ``folder/headless.png``, the same view rendered
+    headless: within the 8-bit rounding of the window's framebuffer."""
+    shots = sorted(folder.glob("cgh_view_*.png"))
+    assert len(shots) == 1
+    window = np.asarray(Image.open(shots[0])).astype(int)
+    headless = np.asarray(Image.open(folder / "headless.png")).astype(int)
+    assert headless.max() > 40
+    assert np.abs(window - headless).max() <= 1
+
+
 def test_window_screenshot_matches_headless_render(xvfb_display, tmp_path, capsys):
     path = tmp_path / "hair.cgh"
     cghair_format.write(example_asset(seed=8, strands=60, points=10, sh_degree=1), path)
     done = _view(xvfb_display, path, "--width", 96, "--height", 72, "--frames", 3, "--press", "P",
                  "--screenshots", tmp_path, cwd=tmp_path)
     assert done.returncode == 0, done.stderr
-    shots = sorted(tmp_path.glob("cgh_view_*.png"))
-    assert len(shots) == 1
-    window = np.asarray(Image.open(shots[0])).astype(int)
 
     from cghair_format.cli import main
 
     assert main(["render", str(path), "-o", str(tmp_path / "headless.png"), "--width", "96", "--height", "72",
                  "--elevation", "0"]) == 0
-    headless = np.asarray(Image.open(tmp_path / "headless.png")).astype(int)
-    assert headless.max() > 40
-    assert np.abs(window - headless).max() <= 1  # 8-bit rounding of the window's framebuffer
+    _assert_the_screenshot_is_the_headless_render(tmp_path)
 
 
 def test_window_toggles_run(xvfb_display, tmp_path):
@@ -112,12 +118,7 @@ def test_window_plays_an_animation(xvfb_display, tmp_path):
     done = subprocess.run([sys.executable, "-c", PLAY_SCRIPT, str(tmp_path)], env=env, cwd=tmp_path,
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
-    shots = sorted(tmp_path.glob("cgh_view_*.png"))
-    assert len(shots) == 1
-    window = np.asarray(Image.open(shots[0])).astype(int)
-    headless = np.asarray(Image.open(tmp_path / "headless.png")).astype(int)
-    assert headless.max() > 40
-    assert np.abs(window - headless).max() <= 1  # 8-bit rounding of the window's framebuffer
+    _assert_the_screenshot_is_the_headless_render(tmp_path)
 
 
 def test_window_simulates_live(xvfb_display, tmp_path):
