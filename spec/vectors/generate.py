@@ -99,6 +99,7 @@ def main() -> None:
     children, family = _children_vector(built)
     counts_file = _variable_counts_vector(built)
     _reject_vectors(minimal, compact, children, family, counts_file)
+    _lowered_vectors()
     _animation_vectors()
 
 
@@ -132,6 +133,24 @@ def _animation_vectors() -> None:
     bad("reject_anim_without_meta", _rechunk(compact, lambda c: _meta_edit(c, lambda m: m.pop("animation"))),
         "InvalidContentError", "exactly when")
     bad("reject_anim_nan_frame", with_anim(lossless, _nan_first_block(lossless)), "InvalidContentError", "NaN")
+    (HERE / "reject.json").write_text(json.dumps(reject, indent=2) + "\n")
+
+
+def _lowered_vectors() -> None:
+    """A compact file whose writer lowered the opacities marked negligible (spec 4.4, "Lowered opacities"),
+    and the must-reject file that says it lowered more opacities than it holds, added to reject.json."""
+    asset = example_asset(1, strands=12, points=8, cards=8, segments=6, k=4)
+    rng = np.random.default_rng(1)
+    asset.opacity = rng.random(asset.opacity.shape).astype(np.float32)  # rough, so the marks pay
+    negligible = rng.random(asset.opacity.shape) < 0.5
+    data, report = cgh.encode(asset, "compact", negligible=negligible, opacity_budget=0.1)
+    assert report.opacity.kept, "the marks must pay for the vector to record lowered opacities"
+    _expected("lowered_opacities_compact", data)
+    held = asset.opacity.size
+    (HERE / "reject_opacity_lowered.cgh").write_bytes(_rechunk(data, lambda c: _meta_edit(
+        c, lambda m: m["quant"].update(opacity_lowered=held + 1))))
+    reject = json.loads((HERE / "reject.json").read_text())
+    reject["reject_opacity_lowered.cgh"] = {"error": "InvalidContentError", "message": "opacity_lowered"}
     (HERE / "reject.json").write_text(json.dumps(reject, indent=2) + "\n")
 
 

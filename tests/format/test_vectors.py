@@ -2,7 +2,11 @@
 independent computation confirms; must-reject files raise the named error."""
 
 import json
+import os
 import re
+import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +27,25 @@ def test_vector_folder_is_complete():
     assert any("point_counts" in np.load(p.with_name(p.stem + ".expected.npz")) for p in VALID)
     assert sorted(p.name for p in VECTORS.glob("reject_*.cgh")) == sorted(REJECT)
     assert {cgh.read_info(p)["profile"] for p in VALID if cgh.read_info(p)["animation"]} == {"compact", "lossless"}
+
+
+@pytest.mark.slow
+def test_generator_reproduces_the_committed_vectors(tmp_path):
+    """`python spec/vectors/generate.py` writes every committed file again, byte for byte (the expected
+    values array for array): vectors the writer can no longer make are stale, and this says which."""
+    shutil.copy(VECTORS / "generate.py", tmp_path)  # it writes beside itself
+    root = str(VECTORS.parents[1])
+    env = os.environ | {"PYTHONPATH": os.pathsep.join([root, os.environ.get("PYTHONPATH", "")])}
+    subprocess.run([sys.executable, str(tmp_path / "generate.py")], check=True, env=env, cwd=root, timeout=300)
+    written = sorted(p.name for p in tmp_path.iterdir() if p.name != "generate.py")
+    assert written == sorted(p.name for p in VECTORS.iterdir() if p.name != "generate.py")
+    stale = [name for name in written if not name.endswith(".npz")
+             and (tmp_path / name).read_bytes() != (VECTORS / name).read_bytes()]
+    assert not stale, f"regenerate the vectors (python spec/vectors/generate.py): {stale} differ"
+    for name in (n for n in written if n.endswith(".npz")):
+        fresh, kept = np.load(tmp_path / name), np.load(VECTORS / name)
+        assert sorted(fresh.files) == sorted(kept.files), name
+        assert all(np.array_equal(fresh[k], kept[k], equal_nan=True) for k in fresh.files), name
 
 
 @pytest.mark.parametrize("path", VALID, ids=lambda p: p.stem)
