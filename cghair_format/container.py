@@ -26,8 +26,8 @@ from .parallel import map_threads
 
 MAGIC = b"\x89CGH\r\n\x1a\n"
 VERSION_MAJOR = 2
-CHUNK_MINORS = {"PCNT": 1}  # the minor version that added a chunk; a file states the lowest that describes
-# it, so that a file without these is byte for byte what 2.0 wrote (spec 1.1)
+CHUNK_MINORS = {"PCNT": 1, "ANIM": 1}  # the minor version that added a chunk; a file states the lowest that
+# describes it, so that a file without these is byte for byte what 2.0 wrote (spec 1.1)
 # 1.x files hold the same chunks; only the arithmetic of quantized files' decoding changed (spec 4,
 # "Arithmetic"), so a 1.x lossless file is read as before and a 1.x quantized one refused by the codec
 READ_MAJORS = (1, 2)

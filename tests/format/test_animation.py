@@ -37,6 +37,14 @@ def files(asset, clip):
     return {p: cgh.encode(asset, p, animation=clip) for p in ("compact", "high", "lossless")}
 
 
+def test_an_animated_file_says_2_1_in_its_header(asset, files):
+    """2.1 is the first version that describes ANIM (spec 1.1): a file that moves says so in its header, a
+    still one without PCNT stays byte for byte what 2.0 wrote."""
+    for data, _ in files.values():
+        assert container.unpack(data, set(cgh.codec.KNOWN_CHUNKS))[0] == (2, 1)
+    assert container.unpack(cgh.encode(asset, "compact")[0], set(cgh.codec.KNOWN_CHUNKS))[0] == (2, 0)
+
+
 @pytest.mark.parametrize("profile", ["compact", "high"])
 def test_quantized_frames_meet_the_stated_bound(files, clip, profile):
     data, report = files[profile]
