@@ -34,6 +34,7 @@ def main() -> None:
     ap.add_argument("--fps", type=float, default=30.0)
     ap.add_argument("--rings", type=int, default=64, help="bands of the head mesh, pole to pole")
     ap.add_argument("--resolution", type=int, default=64)
+    ap.add_argument("--stiffness", type=float, default=None, help="bend stiffness (default: the solver's)")
     args = ap.parse_args()
     asset = read(args.groom)
     unit = asset.meters_per_unit
@@ -44,7 +45,8 @@ def main() -> None:
     field = collider_field(asset, mesh, args.resolution)
     print(f"field: {'x'.join(map(str, field.distance.shape))}, cell {field.cell * unit * 1e3:.2f} mm, "
           f"built in {time.perf_counter() - t:.2f} s")
-    head, settings, still = head_of(asset), SolverSettings(), (np.eye(3), np.zeros(3))
+    settings = SolverSettings() if args.stiffness is None else SolverSettings(local_stiffness=args.stiffness)
+    head, still = head_of(asset), (np.eye(3), np.zeros(3))
     track = builtin_track(args.motion, head, args.frames, args.fps, unit)
     runs = {}
     for name, collider in (("sphere", None), ("mesh", field)):
