@@ -118,4 +118,4 @@ def test_an_alembic_track_written_by_blender_reads_back_through_blender(tmp_path
     r, t = _relative(rotation, translation * 0.01)
     assert track.frames == 4 and track.fps == pytest.approx(24.0)
     assert np.allclose(track.rotation, r, atol=1e-5) and np.allclose(track.translation, t * 100, atol=1e-4)
-    assert load_xforms(abc).prim.endswith("/head")
+    assert load_xforms(abc).prim == "/rig/head" and load_xforms(abc, "/rig/head").frames == 4  # as in the .abc
