@@ -19,6 +19,7 @@ from ..errors import CghError, require
 
 BAND = 2  # cells around each triangle where the distance is exact
 RESOLUTION = 64  # nodes along the longest side of the grid
+MAX_RESOLUTION = 256  # 16.7 million nodes: some 3 GB of arrays while the field is built
 PAIRS_PER_CHUNK = 1 << 18  # (triangle, node) pairs evaluated at once: bounds the memory of a build
 
 
@@ -172,9 +173,9 @@ def mesh_field(vertices: np.ndarray, triangles: np.ndarray, lo: np.ndarray, hi: 
     ndimage = require("scipy.ndimage", "cards", "the collider's distance field", package="scipy")
     v, t = np.asarray(vertices, np.float64), np.asarray(triangles, np.int64)
     lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
-    if not (hi > lo).all() or not 4 <= resolution <= 512:
-        raise CghError(f"a distance field needs a box with hi > lo and 4..512 nodes a side, got {lo}..{hi} and "
-                       f"{resolution}")
+    if not (hi > lo).all() or not 4 <= resolution <= MAX_RESOLUTION:
+        raise CghError(f"a distance field needs a box with hi > lo and 4..{MAX_RESOLUTION} nodes a side, got "
+                       f"{lo}..{hi} and {resolution}")
     cell = float((hi - lo).max()) / (resolution - 1)
     shape = np.maximum(np.ceil((hi - lo) / cell).astype(np.int64) + 1, 2)
     signed, surface = _band(v, t, lo, cell, shape)
