@@ -17,6 +17,7 @@ from ..asset import Cards
 from ..errors import CghError
 from ..geometry import spine_tangents
 from .clip import Animation
+from .sdf import DistanceField
 from .solver import GRAVITY, Capsules, SolverSettings, StrandState, rotate_between, step
 from .tracks import HeadTrack, builtin_track, head_of
 
@@ -27,13 +28,15 @@ SETTLE_DAMPING = 0.3
 
 @dataclass(frozen=True)
 class Scene:
-    """What the strands move in: the head's track and collision capsules, the units and up axis."""
+    """What the strands move in: the head's track, collision capsules and mesh (its distance field), the
+    units and up axis."""
 
     track: HeadTrack
     capsules: Capsules | None
     meters_per_unit: float
     up: np.ndarray  # [3] unit
     seed: int = 0
+    field: DistanceField | None = None
 
 
 def _gusts(seed: int, times: np.ndarray, strength: float) -> np.ndarray:
@@ -60,24 +63,25 @@ def simulate(rest: np.ndarray, scene: Scene, settings: SolverSettings) -> Iterat
     rotation, translation = scene.track.at(0.0)
     state.x[...] = state.rest @ rotation.T + translation
     state.x_prev[...] = state.x
-    settle(state, settings, rotation, translation, gravity, wind, scene.capsules, dt)
+    settle(state, settings, rotation, translation, gravity, wind, scene.capsules, dt, scene.field)
     yield state.x.copy()
     for f in range(1, scene.track.frames):
         for s in range(sub):
             i = (f - 1) * sub + s + 1
             rotation, translation = scene.track.at(i * dt)
-            step(state, settings, rotation, translation, gravity, wind * gusts[i], scene.capsules, dt)
+            step(state, settings, rotation, translation, gravity, wind * gusts[i], scene.capsules, dt, scene.field)
         yield state.x.copy()
 
 
 def settle(state: StrandState, settings: SolverSettings, rotation: np.ndarray, translation: np.ndarray,
-           gravity: np.ndarray, wind: np.ndarray, capsules: Capsules | None, dt: float) -> None:
+           gravity: np.ndarray, wind: np.ndarray, capsules: Capsules | None, dt: float,
+           field: DistanceField | None = None) -> None:
     """``settings.settle`` seconds of substeps of ``dt`` with the head held at its transform and the damping
     at least :data:`SETTLE_DAMPING`, then the velocity dropped: the groom at rest as gravity and its shape
     constraints hold it, from which a clip or a live simulation starts."""
     settling = replace(settings, damping=max(settings.damping, SETTLE_DAMPING))
     for _ in range(int(round(settings.settle / dt))):
-        step(state, settling, rotation, translation, gravity, wind, capsules, dt)
+        step(state, settling, rotation, translation, gravity, wind, capsules, dt, field)
     state.x_prev[...] = state.x
 
 
@@ -101,13 +105,24 @@ def card_frames(cards: Cards, scene: Scene, settings: SolverSettings) -> Iterato
 
 
 def simulated_animation(asset, motion: str, frames: int, fps: float, settings: SolverSettings | None = None,
-                        seed: int = 0) -> Animation:
+                        seed: int = 0, collider: DistanceField | None = None) -> Animation:
     """An animation of a :class:`~cghair_format.asset.HairAsset`: its cards simulated under the built-in head
-    ``motion`` (:data:`~.tracks.MOTIONS`) for ``frames`` frames at ``fps``, the head fitted to its roots."""
+    ``motion`` (:data:`~.tracks.MOTIONS`) for ``frames`` frames at ``fps``, the head fitted to its roots
+    (a sphere that is also the collider unless a head mesh's field is given: :func:`tracked_animation`)."""
     if frames < 1:
         raise CghError(f"a simulated animation needs at least one frame, got {frames}")
-    head = head_of(asset)
-    track = builtin_track(motion, head, frames, fps, asset.meters_per_unit)
-    scene = Scene(track, head.capsules(), asset.meters_per_unit, head.up, seed)
+    track = builtin_track(motion, head_of(asset), frames, fps, asset.meters_per_unit)
+    return tracked_animation(asset, track, settings, seed, collider, f"simulate {motion}")
+
+
+def tracked_animation(asset, track: HeadTrack, settings: SolverSettings | None = None, seed: int = 0,
+                      collider: DistanceField | None = None, source: str = "simulate track") -> Animation:
+    """An animation of a :class:`~cghair_format.asset.HairAsset`: its cards simulated on the head ``track``
+    (built in, or read from a file: :func:`~.track_file.head_track_from_file`), colliding with the head
+    mesh's distance field ``collider`` (:func:`~.collider.collider_field`) or else with a sphere fitted to
+    the roots (:func:`~.tracks.head_of`)."""
+    up = np.array([0.0, 1.0, 0.0]) if asset.up_axis == "Y" else np.array([0.0, 0.0, 1.0])
+    capsules = head_of(asset).capsules() if collider is None else None
+    scene = Scene(track, capsules, asset.meters_per_unit, up, seed, collider)
     frames_ = list(card_frames(asset.cards, scene, settings or SolverSettings()))
-    return Animation.of_frames(frames_, fps, source=f"simulate {motion}")
+    return Animation.of_frames(frames_, track.fps, track.start, source)

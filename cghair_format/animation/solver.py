@@ -7,8 +7,9 @@ Strands are ``[N, P, 3]`` float64 points whose first point (the root) rides the 
 2. :func:`global_shape`: the points near the root are pulled toward the rest pose carried by the head;
 3. :func:`local_shape`: each segment is pulled toward its rest direction seen from its parent segment
    (bending stiffness);
-4. :func:`collide` and :func:`keep_lengths`, alternately: points pushed out of the head's capsules, then
-   every segment given its rest length, root to tip (follow the leader: exact after each pass).
+4. :func:`collide` (and :func:`collide_field`, given a head mesh) and :func:`keep_lengths`, alternately:
+   points pushed out of the head's capsules (and mesh), then every segment given its rest length, root to
+   tip (follow the leader: exact after each pass).
 
 Every pass moves positions only; the Verlet velocity is what they moved, less ``damping``.
 
@@ -23,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import CghError
+from .sdf import DistanceField
 
 GRAVITY = 9.81  # m/s^2
 
@@ -162,6 +164,19 @@ def collide(state: StrandState, capsules: Capsules) -> None:
             x[inside] = closest[inside] + _unit(away[inside]) * r
 
 
+def collide_field(state: StrandState, field: DistanceField, rotation: np.ndarray, translation: np.ndarray) -> None:
+    """Points closer to the head mesh than ``field.margin`` (inside it: a negative distance) are pushed out
+    along the field's gradient to that distance; the field lies in the head's rest frame, which the head
+    has moved by ``x -> rotation x + translation`` (roots stay)."""
+    x = state.x[:, 1:]
+    local = (x - translation) @ rotation  # rotation^T (x - translation), row by row
+    distance, gradient = field.sample(local, within=field.margin)
+    hit = distance < field.margin
+    if hit.any():
+        out = local[hit] + _unit(gradient[hit]) * (field.margin - distance[hit])[:, None]
+        x[hit] = out @ rotation.T + translation
+
+
 def wind_accel(state: StrandState, wind: np.ndarray) -> np.ndarray:
     """Wind on each point: the part of ``wind`` across the point's segment (a strand feels no wind
     blowing along it), ``[N, P, 3]``."""
@@ -173,9 +188,10 @@ def wind_accel(state: StrandState, wind: np.ndarray) -> np.ndarray:
 
 
 def step(state: StrandState, settings: SolverSettings, rotation: np.ndarray, translation: np.ndarray,
-         gravity: np.ndarray, wind: np.ndarray, capsules: Capsules | None, dt: float) -> None:
+         gravity: np.ndarray, wind: np.ndarray, capsules: Capsules | None, dt: float,
+         field: DistanceField | None = None) -> None:
     """One substep of ``dt`` seconds with the head at ``x -> rotation x + translation``; ``gravity`` and
-    ``wind`` in scene units per s^2."""
+    ``wind`` in scene units per s^2; ``field``, the head mesh's distance field, collides beside the capsules."""
     with np.errstate(all="ignore"):  # a blow-up is refused below, in one line, not as numpy's warnings
         target = state.rest @ rotation.T + translation
         state.x[:, 0] = target[:, 0]
@@ -191,6 +207,8 @@ def step(state: StrandState, settings: SolverSettings, rotation: np.ndarray, tra
         for _ in range(settings.length_iterations):
             if moved is not None:
                 collide(state, moved)
+            if field is not None:
+                collide_field(state, field, rotation, translation)
             keep_lengths(state)
     if not np.isfinite(state.x).all():
         raise UnstableSimulation("the simulation produced non-finite points; lower the wind, raise the "

@@ -19,11 +19,13 @@ MOTIONS = ("still", "nod", "shake", "turn", "walk")
 
 @dataclass(frozen=True)
 class HeadTrack:
-    """``frames`` rigid transforms of the head, ``fps`` a second."""
+    """``frames`` rigid transforms of the head, ``fps`` a second; frame 0 lies at ``start`` seconds of the
+    clip's timeline (:meth:`at` counts from frame 0)."""
 
     rotation: np.ndarray  # [F, 3, 3] float64
     translation: np.ndarray  # [F, 3] float64
     fps: float
+    start: float = 0.0
 
     @property
     def frames(self) -> int:

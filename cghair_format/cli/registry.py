@@ -32,8 +32,8 @@ VERBS: dict[str, Verb] = {
     "convert": Verb("cghair_format.cli.convert", "convert strands between formats (.cgh accepted as input)"),
     "export": Verb("cghair_format.cli.export", "export a .cgh or strands to USD, 3DGS PLY, Alembic or .blend"),
     "cards": Verb("cghair_format.cli.cards", "build hair cards from strands and write a .cgh"),
-    "animate": Verb("cghair_format.cli.animate", "move a .cgh's cards by a simulated head motion or an animated "
-                    "strand file"),
+    "animate": Verb("cghair_format.cli.animate", "move a .cgh's cards by a simulated head motion (built in, or a "
+                    "head track from USD or Alembic) or an animated strand file"),
 }
 VERB_GROUP = "cgh.verbs"  # entry points: a package's name -> its table of verbs ("training.verbs:VERBS")
 

@@ -31,11 +31,16 @@ def _time_codes(path: str | Path, stage, prims: list) -> np.ndarray:
             if p.IsA(UsdGeom.Xformable):
                 codes.update(UsdGeom.Xformable(p).GetTimeSamples())
             p = p.GetParent()
+    return even_time_codes(path, codes, "the curves")
+
+
+def even_time_codes(path: str | Path, codes: set[float], what: str) -> np.ndarray:
+    """``codes`` sorted, or a :class:`StrandFileError` saying ``what`` is sampled unevenly."""
     times = np.array(sorted(codes), np.float64)
     if len(times) > 2:
         step = np.diff(times)
         if np.abs(step - step[0]).max() > SPACING_TOLERANCE * max(abs(step[0]), 1.0):
-            raise StrandFileError(path, f"the curves are sampled at uneven time codes ({times[0]:g}, {times[1]:g}, "
+            raise StrandFileError(path, f"{what} are sampled at uneven time codes ({times[0]:g}, {times[1]:g}, "
                                         f"..., {times[-1]:g}); resample the animation to a constant frame rate")
     return times
 

@@ -3,6 +3,8 @@
 - ``abc_to_usd``: import an Alembic file, write a y-up USD stage (read back by :mod:`..usd_curves`).
 - ``abc_frames_to_usd``: the same with every frame of the scene's range (which the import sets to the
   file's) as time samples (read back by :mod:`..usd_cache`).
+- ``abc_xforms_to_usd``: the same for an Alembic file of transforms only (a head's track, read back by
+  :mod:`..xform_track`): no curves needed.
 - ``usd_to_blend``: import our USD stage, give the curves Blender's Principled Hair BSDF (colour
   from the ``displayColor`` attribute) and save a .blend file.
 
@@ -38,17 +40,17 @@ def main(op: str, src: str, dst: str) -> None:
     if op == "usd_to_blend":
         if bpy.ops.wm.usd_import(filepath=src) != {"FINISHED"}:
             raise SystemExit(f"Blender could not import {src}")
-    elif op in ("abc_to_usd", "abc_frames_to_usd"):
+    elif op in ("abc_to_usd", "abc_frames_to_usd", "abc_xforms_to_usd"):
         if bpy.ops.wm.alembic_import(filepath=src) != {"FINISHED"}:
             raise SystemExit(f"Blender could not import {src}")
-        if not any(o.type == "CURVES" for o in bpy.data.objects):
+        if op != "abc_xforms_to_usd" and not any(o.type == "CURVES" for o in bpy.data.objects):
             raise SystemExit(f"{src}: the Alembic file has no curves")
     else:
         raise SystemExit(f"unknown operation {op!r}")
     if op != "usd_to_blend":
         result = bpy.ops.wm.usd_export(filepath=dst, convert_orientation=True, export_global_up_selection="Y",
                                        export_global_forward_selection="NEGATIVE_Z", export_materials=False,
-                                       export_animation=op == "abc_frames_to_usd")
+                                       export_animation=op != "abc_to_usd")
     else:
         material = hair_material(bpy)
         for obj in bpy.data.objects:
