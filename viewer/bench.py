@@ -82,14 +82,14 @@ def benchmark(path: str | None = None, synthetic: int | None = None, points: int
               height: int = 1080, frames: int = 3, sort: str = "auto",
               rasterizers: tuple[str, ...] = ("compute", "raster"),
               budgets: tuple[int, ...] | None = None, reference_size: tuple[int, int] | None = REFERENCE_SIZE,
-              ctx: Any = None, animate: bool = False, simulate: bool = False) -> dict:
+              ctx: Any = None, animate: bool = False, simulate: bool = False, turn_sh: bool = True) -> dict:
     """Figures in seconds (medians over ``frames``) and dB, plus counts, the OpenGL driver and
     device, and the work-group sizes.
 
     ``budgets``: Gaussians per frame of the level-of-detail runs (default: 1/4, 1/8 and 1/16 of
     the asset's); ``reference_size``: ``None`` skips the reference splatter. ``animate`` adds the
     animated frame against the static one (:mod:`viewer.bench_motion`, ``"animated"``), with the live
-    simulation's cost where ``simulate``.
+    simulation's cost where ``simulate``, the SH turned with their segments unless ``turn_sh`` is false.
     """
     from cghair_format.camera import Camera
 
@@ -109,7 +109,8 @@ def benchmark(path: str | None = None, synthetic: int | None = None, points: int
                              f"this context offers {ctx.version_code / 100:.1f}")
     made: list[Renderer] = []
     animated = animate or simulate
-    t_upload = _timed(ctx, lambda: made.append(Renderer.from_asset(ctx, asset, sort=sort, animated=animated)))
+    t_upload = _timed(ctx, lambda: made.append(Renderer.from_asset(ctx, asset, sort=sort, animated=animated,
+                                                                               turn_sh=turn_sh)))
     renderer = made[0]
     if budgets is None:
         budgets = tuple(max(1, int(renderer.count * f)) for f in BUDGET_FRACTIONS)

@@ -5,7 +5,9 @@ An animated frame is a static frame (preprocess, sort, gather, draw) after the c
 the Gaussians' means, rotations and scales on the GPU (the appearance is decoded once, at load). With
 ``simulate`` the cards come from the live solver (:class:`viewer.motion.LiveSimulation`, one display
 frame of 1/30 s a frame, stage ``simulate``); otherwise from a clip (the file's animation, or the
-built-in ``nod`` simulated beforehand). Static and animated frames take turns, frame by frame, so a
+built-in ``nod`` simulated beforehand). Where the renderer turns the SH with their segments (the
+default), the animated frame's decode writes the turns and its preprocess applies them; the static frame
+applies none, as a static file's frame. Static and animated frames take turns, frame by frame, so a
 change of the machine's load weighs on both alike; seconds are medians over the frames, as in
 :mod:`viewer.bench`.
 """
@@ -45,7 +47,9 @@ def animated_runs(renderer: Any, asset: Any, cam: Any, settings: Any, budgets: t
         for _ in range(frames):
             renderer.budget = budget
             timer_static = clock(renderer.ctx)
+            renderer.turn_sh = False  # a static file's frame: no SH turns
             renderer.frame(cam, settings, timer_static)
+            renderer.turn_sh = True
             static.append(timer_static.seconds)
             timer_animated = clock(renderer.ctx)
             step += 1
@@ -63,13 +67,15 @@ def animated_runs(renderer: Any, asset: Any, cam: Any, settings: Any, budgets: t
                      "animated_over_static": sum(moved.values()) / sum(still.values())})
     renderer.move_cards(asset.cards)
     source = "live simulation" if live is not None else (animation.source or "animation")
-    return {"source": source, "cards": len(asset.cards.spine), "runs": rows}
+    return {"source": source, "cards": len(asset.cards.spine), "turn_sh": renderer.scene.geometry.turn is not None,
+            "runs": rows}
 
 
 def format_animated(a: dict) -> list[str]:
     """The report's lines for :func:`animated_runs`."""
     ms = lambda s: f"{1000 * s:8.1f}"  # noqa: E731
-    lines = [f"animated {a['source']}, {a['cards']:,} cards: static frame against animated frame (ms), "
+    turned = "SH turned with their segments" if a.get("turn_sh") else "SH not turned (--no-turn-sh)"
+    lines = [f"animated {a['source']}, {a['cards']:,} cards, {turned}: static frame against animated frame (ms), "
              "animated = simulate + upload + decode + preprocess + sort + gather + draw",
              "rasterizer     budget   static  simulate   upload   decode  splat   animated  animated/static"]
     for run in a["runs"]:

@@ -54,6 +54,7 @@ class RenderJob:
     rasterizer: str = "auto"
     budget: int | None = None  # Gaussians drawn (level of detail); None: all
     frames: range | None = None  # frames of the animation to render (one camera); None: the rest pose
+    turn_sh: bool = True  # with frames: turn each Gaussian's SH with its segment (False: as at rest)
 
     def settings(self) -> ViewSettings:
         return ViewSettings(sh_degree=self.sh_degree, splat_scale=self.splat_scale,
@@ -185,7 +186,7 @@ def render_job(asset: HairAsset, job: RenderJob, out: str | Path, ctx=None, log=
         log(describe_gl(gl_info(ctx)))
     try:
         renderer = create_renderer(ctx, asset, sort=job.sort, rasterizer=job.rasterizer, budget=job.budget,
-                                   animated=job.frames is not None)
+                                   animated=job.frames is not None, turn_sh=job.turn_sh)
         try:
             cameras = job_cameras(job, renderer.bounds, asset.up_axis)
             settings = job.settings()

@@ -70,9 +70,10 @@ def test_animated_decode_matches_frame_points(gl_ctx, asset):
 @pytest.mark.parametrize("budget", [None, 96])
 def test_animated_render_equals_static_render_of_the_frame(gl_ctx, asset, budget):
     """Pixels of a moved frame, at full quality and at a budget that decodes only the strands it draws
-    (then grows to all: the frame decodes the rest first), against a renderer made from the moved asset."""
+    (then grows to all: the frame decodes the rest first), against a renderer made from the moved asset
+    (its SH as at rest: tests/viewer/test_viewer_sh_turn.py turns them)."""
     animation, cam = moving_cards(asset), _camera(asset)
-    moving = Renderer.from_asset(gl_ctx, asset, animated=True, budget=budget)
+    moving = Renderer.from_asset(gl_ctx, asset, animated=True, budget=budget, turn_sh=False)
     still = Renderer.from_asset(gl_ctx, frame_asset(asset, animation, 2), budget=budget)
     try:
         moving.move_cards(animation.cards(asset.cards, 2))
@@ -137,7 +138,8 @@ def test_render_frames_to_mp4(gl_ctx, tmp_path):
 
 def test_render_animate_reads_the_files_animation(gl_ctx, tmp_path, monkeypatch, asset):
     """Where the format package reads animations (cghair_format.read_animation, stood in for here),
-    --animate renders each of its frames; frame 2 equals the static render of that pose (same job)."""
+    --animate renders each of its frames; with --no-turn-sh frame 2 equals the static render of that pose
+    (same job), and without it the SH turn with the hair (tests/viewer/test_viewer_sh_turn.py)."""
     from cghair_format.cli import main
     from viewer.render_jobs import RenderJob, render_job
 
@@ -147,7 +149,8 @@ def test_render_animate_reads_the_files_animation(gl_ctx, tmp_path, monkeypatch,
     animation = moving_cards(stored)
     monkeypatch.setattr(cghair_format, "read_animation", lambda p: animation, raising=False)
     view = ["--width", "48", "--height", "40", "--target", "0", "-0.1", "0", "--distance", "1"]
-    assert main(["render", str(path), "-o", str(tmp_path / "all.gif"), "--animate", *view]) == 0
+    assert main(["render", str(path), "-o", str(tmp_path / "all.gif"), "--animate", "--no-turn-sh", *view]) == 0
+    assert main(["render", str(path), "-o", str(tmp_path / "turned.gif"), "--animate", *view]) == 0
     frames = _gif_frames(tmp_path / "all.gif")
     assert len(frames) == animation.frames
     job = RenderJob(width=48, height=40, target=(0.0, -0.1, 0.0), distance=1.0, turntable=1)
@@ -156,6 +159,7 @@ def test_render_animate_reads_the_files_animation(gl_ctx, tmp_path, monkeypatch,
     assert still.max() > 40
     np.testing.assert_array_equal(frames[2], still)
     assert np.abs(frames[0] - still).mean() > 1  # not the rest pose
+    assert np.abs(_gif_frames(tmp_path / "turned.gif")[2] - still).max() > 8  # the SH turned
 
 
 @pytest.mark.parametrize(("args", "message"), [
@@ -176,12 +180,15 @@ def test_render_frames_bad_arguments(gl_ctx, tmp_path, capsys, args, message):
     assert not (tmp_path / "a.gif").exists()
 
 
-@pytest.mark.parametrize("simulate", [False, True])
-def test_bench_reports_the_animated_split(gl_ctx, simulate):
+@pytest.mark.parametrize(("simulate", "turn_sh"), [(False, True), (True, True), (False, False)])
+def test_bench_reports_the_animated_split(gl_ctx, simulate, turn_sh):
     from viewer.bench import benchmark, format_report
 
     result = benchmark(synthetic=60, points=11, width=64, height=48, frames=1, rasterizers=("compute",),
-                       budgets=(200,), reference_size=None, ctx=gl_ctx, animate=True, simulate=simulate)
+                       budgets=(200,), reference_size=None, ctx=gl_ctx, animate=True, simulate=simulate,
+                       turn_sh=turn_sh)
+    assert result["animated"]["turn_sh"] is turn_sh
+    assert ("SH turned with their segments" if turn_sh else "SH not turned") in format_report(result)
     runs = result["animated"]["runs"]
     assert [r["budget"] for r in runs] == [None, 200]
     for run in runs:
