@@ -24,6 +24,13 @@ MOTION = "nod"  # the clip simulated when the asset has no animation
 MOTION_FPS = 30.0
 
 
+def bench_clip(asset: Any, frames: int) -> Any:
+    """The clip an asset without an animation is timed on: ``frames + 1`` frames of a simulated nod."""
+    from cghair_format.animation import simulated_animation
+
+    return simulated_animation(asset, MOTION, frames + 1, MOTION_FPS)
+
+
 def _medians(rows: list[dict[str, float]], names: tuple[str, ...]) -> dict[str, float]:
     return {f"{k}_s": statistics.median(row.get(k, 0.0) for row in rows) for k in names}
 
@@ -33,13 +40,11 @@ def animated_runs(renderer: Any, asset: Any, cam: Any, settings: Any, budgets: t
     """Per budget (``None``: full quality): the static and the animated frame by stage, and their ratio.
     ``renderer`` must have been made with ``animated=True``; its cards are left at rest. ``clock(ctx)``
     makes a frame's stage clock (:class:`viewer.bench.StageClock`)."""
-    from cghair_format.animation import simulated_animation
-
     from .motion import LiveSimulation
 
     live = LiveSimulation(asset, fps=MOTION_FPS) if simulate else None
     if live is None and animation is None:
-        animation = simulated_animation(asset, MOTION, frames + 1, MOTION_FPS)
+        animation = bench_clip(asset, frames)
     moving_stages = (*(("simulate",) if simulate else ()), *CARD_STAGES, *STAGES)
     rows, step = [], 0
     for budget in budgets:
@@ -86,4 +91,9 @@ def format_animated(a: dict) -> list[str]:
         lines.append(f"{run['rasterizer']:<8} {budget:>12} {ms(run['static_frame_s'])}  {sim} {ms(m['upload_s'])} "
                      f"{ms(m['decode_s'])} {ms(splat)}  {ms(run['animated_frame_s'])}  "
                      f"{run['animated_over_static']:.2f}x")
+    if a.get("psnr"):
+        lines.append("appearance: PSNR (dB) against the native splatter on frame_gaussians(turn_sh=True), frame by "
+                     "frame: the viewer's frame | SH left unturned")
+        lines += [f"  frame {row['frame']:>4}   {row['viewer_db']:7.2f} | {row['unturned_db']:7.2f}"
+                  for row in a["psnr"]]
     return lines

@@ -27,7 +27,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-reference", action="store_true", help="skip the reference splatter (needs torch)")
     parser.add_argument("--animate", action="store_true",
                         help="also time an animated frame (card upload + GPU decode + splat) against the static "
-                             "one, on the file's animation or a simulated nod")
+                             "one, on the file's animation or a simulated nod; with the reference, the PSNR of "
+                             "frames of it against the native splatter on the CPU's Gaussians, SH turned")
     parser.add_argument("--simulate", action="store_true",
                         help="like --animate, with the cards simulated live each frame (simulation time included)")
     add_turn_argument(parser)

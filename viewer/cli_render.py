@@ -28,7 +28,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="use a camera from a NeRF-style transforms.json instead of the orbit")
     parser.add_argument("--frame", type=int, default=0, help="frame index in --camera (default 0)")
     parser.add_argument("--turntable", type=int, default=0, metavar="N",
-                        help="render N views around the up axis into an animated .gif or .mp4")
+                        help="render N views around the up axis into an animated .gif or .mp4 (with --frames, "
+                             "--animate or --motion: N images, the hair moving on a loop as the camera goes round)")
     parser.add_argument("--fps", type=float, default=None,
                         help="frame rate of the .gif/.mp4 (default: the animation's, or 24 for a turntable)")
     anim = parser.add_argument_group("hair that moves (one camera; .gif or .mp4)")

@@ -167,7 +167,8 @@ class CardGeometry:
         bind(prog, Spine=self.spine, Normal=self.normal, HalfWidth=self.half_width, MeshPos=scene.mesh_pos,
              MeshNrm=self.mesh_nrm)
         if turn is not None:
-            bind(prog, RestFrame=turn.rest_frame, Turn=turn.card_turn)
+            bind(prog, RestFrame=turn.rest_frame)
+            bind_images(prog, u_card_turns=turn.card_turns)
         set_uniforms(prog, u_count=c * m1, u_points=m1, u_turn=turn is not None)
         dispatch(ctx, prog, c * m1)
         prog = programs.compute("decode_geometry")
@@ -177,9 +178,8 @@ class CardGeometry:
              Opacity=self.opacity, Points=scene.points, LodStrands=lists)
         bind_images(prog, u_means=scene.means, u_rotations=scene.rotations, u_scales=scene.scales)
         if turn is not None:
-            bind(prog, Turn=turn.card_turn)
             bind_images(prog, u_turns=turn.turns)
-            use_textures(prog, u_rest=turn.rest)
+            use_textures(prog, u_rest=turn.rest, u_card_turns=turn.card_turns)
         set_uniforms(prog, u_points=scene.segments + 1, u_segments=m1 - 1, u_thickness=self.thickness,
                      u_indexed=lod is not None, u_turn=turn is not None)
         for list_base, count, *_ in chunks:
@@ -201,7 +201,7 @@ class SegmentTurns:
     the card frames' turns, then each segment's rotation from rest, which the preprocess reads."""
 
     rest_frame: Any  # [C * (M+1) * 3] vec4: the rest frame's columns t, n, n x t (shading.spine_frames)
-    card_turn: Any  # [C * (M+1)] vec4: F_now F_rest^T as a quaternion (wxyz), written per frame
+    card_turns: Any  # data image, texel c (M+1) + k: F_now F_rest^T as a quaternion (wxyz), written per frame
     rest: Any  # data image, texel g: the segment's rest direction (xyz) and its spine sample k (w)
     turns: Any  # data image, texel g: the segment's rotation from rest (wxyz), written per frame
 
@@ -214,11 +214,11 @@ class SegmentTurns:
         frames = spine_frames(cards).swapaxes(-1, -2).reshape(-1, 3)  # each sample's columns, in order
         directions = segment_directions(strand_points(cards, asset.strand_card, asset.uvd))
         rest = np.concatenate([directions, segment_samples(asset)[..., None]], axis=-1)
-        return cls(rest_frame=_buffer(ctx, _vec4(frames)), card_turn=_buffer(ctx, nbytes=frames.shape[0] // 3 * 16),
+        return cls(rest_frame=_buffer(ctx, _vec4(frames)), card_turns=data_image(ctx, frames.shape[0] // 3, 4, "f4"),
                    rest=_image_of(ctx, rest), turns=data_image(ctx, rest.shape[0] * rest.shape[1], 4, "f4"))
 
     def release(self) -> None:
-        for obj in (self.rest_frame, self.card_turn, self.rest, self.turns):
+        for obj in (self.rest_frame, self.card_turns, self.rest, self.turns):
             obj.release()
 
 

@@ -118,6 +118,26 @@ def test_render_frames_of_a_simulated_motion(gl_ctx, tmp_path):
     assert max(np.abs(frames[0] - f).max() for f in frames[1:]) > 0  # the hair moves
 
 
+def test_render_a_turntable_of_hair_that_moves(gl_ctx, tmp_path):
+    """--turntable N with an animation: N images, the camera going round while the clip loops; image i
+    is pose i % frames from the turntable's camera i."""
+    from cghair_format.cli import main
+
+    path = tmp_path / "hair.cgh"
+    cghair_format.write(example_asset(seed=8, strands=60, points=10, sh_degree=1), path)
+    size = ["--width", "48", "--height", "40"]
+    assert main(["render", str(path), "-o", str(tmp_path / "both.gif"), "--motion", "nod", "--frames", "2:4",
+                 "--turntable", "4", *size]) == 0
+    assert main(["render", str(path), "-o", str(tmp_path / "moving.gif"), "--motion", "nod", "--frames", "2:4",
+                 *size]) == 0
+    assert main(["render", str(path), "-o", str(tmp_path / "still.gif"), "--turntable", "4", *size]) == 0
+    both, moving, still = (_gif_frames(tmp_path / f"{name}.gif") for name in ("both", "moving", "still"))
+    assert len(both) == 4 and len(moving) == 2
+    np.testing.assert_array_equal(both[0], moving[0])  # azimuth 0, pose 2
+    for i in range(1, 4):
+        assert np.abs(both[i] - still[i]).max() > 0 and np.abs(both[i] - moving[i % 2]).max() > 0
+
+
 def test_render_frames_to_mp4(gl_ctx, tmp_path):
     pytest.importorskip("imageio_ffmpeg", reason="MP4 output needs imageio-ffmpeg")
     import imageio.v2 as imageio
@@ -167,7 +187,6 @@ def test_render_animate_reads_the_files_animation(gl_ctx, tmp_path, monkeypatch,
     (["--motion", "nod", "--frames", "x:3"], "A:B or N"),
     (["--motion", "nod", "--frames", "5:3"], "selects no frame"),
     (["--motion", "nod", "--animate", "--frames", "0:2"], "leave out --frames"),
-    (["--motion", "nod", "--turntable", "3"], "choose one"),
 ])
 def test_render_frames_bad_arguments(gl_ctx, tmp_path, capsys, args, message):
     from cghair_format.cli import main
@@ -197,3 +216,28 @@ def test_bench_reports_the_animated_split(gl_ctx, simulate, turn_sh):
         assert run["animated_frame_s"] == pytest.approx(sum(run["animated"].values()))
         assert run["animated_over_static"] == pytest.approx(run["animated_frame_s"] / run["static_frame_s"])
     assert "animated/static" in format_report(result)
+
+
+@pytest.mark.parametrize("turn_sh", [True, False])
+def test_bench_compares_the_animated_appearance(gl_ctx, tmp_path, monkeypatch, asset, turn_sh):
+    """With the reference, bench-viewer --animate reports the PSNR of frames of the file's clip against the
+    native splatter on frame_gaussians(turn_sh=True): the viewer's frame close to it where it turns the SH,
+    about as far as the unturned SH where it does not."""
+    pytest.importorskip("torch", reason="the reference renders need torch")
+    from viewer.bench import benchmark, format_report
+
+    path = tmp_path / "hair.cgh"
+    cghair_format.write(asset, path)
+    animation = moving_cards(cghair_format.read(path))
+    monkeypatch.setattr(cghair_format, "read_animation", lambda p: animation, raising=False)
+    result = benchmark(path=str(path), width=64, height=48, frames=1, rasterizers=("compute",), budgets=(200,),
+                       reference_size=(80, 60), ctx=gl_ctx, animate=True, turn_sh=turn_sh)
+    rows = result["animated"]["psnr"]
+    assert [r["frame"] for r in rows] == [0, 1, 2]  # of the clip's 3 frames
+    assert "the viewer's frame | SH left unturned" in format_report(result)
+    for row in rows[1:]:
+        assert row["unturned_db"] < 60  # the hair turned: the SH left as at rest are visibly off
+        if turn_sh:
+            assert row["viewer_db"] > row["unturned_db"] + 10
+        else:
+            assert abs(row["viewer_db"] - row["unturned_db"]) < 3

@@ -12,10 +12,9 @@ import pytest
 from cghair_format.animation import frame_gaussians, segment_rotations
 from cghair_format.examples import example_asset
 from cghair_format.gaussians import eval_sh
+from tests.viewer.test_viewer_animation import _camera, moving_cards
 from viewer.frame import ViewSettings
 from viewer.renderer import Renderer
-
-from tests.viewer.test_viewer_animation import _camera, moving_cards
 
 splatter = pytest.importorskip("training.splatter", reason="the reference splatter needs torch")
 pytestmark = pytest.mark.gl

@@ -12,12 +12,14 @@ layout(std430, binding = 2) readonly buffer HalfWidth { float half_width[]; };  
 layout(std430, binding = 3) writeonly buffer MeshPos { vec4 mesh_pos[]; };  // [C*2(M+1)]
 layout(std430, binding = 4) writeonly buffer MeshNrm { vec4 mesh_nrm[]; };  // [C*2(M+1)]
 layout(std430, binding = 5) readonly buffer RestFrame { vec4 rest_frame[]; };  // [C*(M+1)*3] t, n, n x t
-layout(std430, binding = 6) writeonly buffer Turn { vec4 turn[]; };            // [C*(M+1)] wxyz
+// The card frames' turns, texel i (wxyz): a data image, which decode_geometry fetches as vectors.
+layout(rgba32f, binding = 0) uniform writeonly image2D u_card_turns;
 
 uniform uint u_count;     // C * (M+1)
 uniform uint u_points;    // M + 1
-uniform bool u_turn;      // write turn (else RestFrame and Turn are bound to any buffer: not read)
+uniform bool u_turn;      // write u_card_turns (else it and RestFrame are bound to nothing: not used)
 
+#include "tile_texel.glsl"
 #include "turn.glsl"
 
 vec3 safe_normalize(vec3 v) { return v / max(length(v), 1e-30); }
@@ -45,6 +47,6 @@ void main() {
         vec3 nt = safe_normalize(n - t * dot(n, t));
         mat3 now = mat3(t, nt, cross(nt, t));
         mat3 rest = mat3(rest_frame[3u * i].xyz, rest_frame[3u * i + 1u].xyz, rest_frame[3u * i + 2u].xyz);
-        turn[i] = mat_to_quat(now * transpose(rest));
+        imageStore(u_card_turns, texel(int(i)), mat_to_quat(now * transpose(rest)));
     }
 }

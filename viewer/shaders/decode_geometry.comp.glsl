@@ -17,7 +17,6 @@ layout(std430, binding = 3) readonly buffer Uvd { float uvd[]; };               
 layout(std430, binding = 4) readonly buffer Opacity { float opacity[]; };        // [G]
 layout(std430, binding = 5) writeonly buffer Points { vec4 points[]; };          // [S*P] xyz
 layout(std430, binding = 6) readonly buffer LodStrands { uint lod_strands[]; };  // per SH chunk, by priority
-layout(std430, binding = 7) readonly buffer Turn { vec4 turn[]; };  // [C*(M+1)] card frame turns, wxyz
 // The Gaussians as data images, texel g (viewer/decode.py GpuScene): the preprocess fetches them.
 layout(rgba32f, binding = 0) uniform writeonly image2D u_means;      // xyz, opacity
 layout(rgba32f, binding = 1) uniform writeonly image2D u_rotations;  // wxyz
@@ -25,8 +24,9 @@ layout(rgba32f, binding = 2) uniform writeonly image2D u_scales;     // xyz, 0
 layout(rgba32f, binding = 3) uniform writeonly image2D u_turns;      // wxyz, where u_turn
 // Per Gaussian, fixed at load (viewer/decode.py): its rest direction and the spine sample it turns with.
 uniform sampler2D u_rest;  // xyz, k
+uniform sampler2D u_card_turns;  // texel c (M+1) + k: card c's frame turn at spine sample k (card_mesh)
 
-uniform bool u_turn;  // write u_turns (else u_turns, u_rest and Turn are bound to anything: not read)
+uniform bool u_turn;  // write u_turns (else it, u_rest and u_card_turns are bound to nothing: not read)
 
 uniform uint u_count;       // Gaussians decoded: G, or this chunk's drawn ones where u_indexed
 uniform bool u_indexed;
@@ -77,7 +77,7 @@ void main() {
     imageStore(u_scales, at, vec4(u_thickness, u_thickness, 0.5 * len, 0.0));
     if (u_turn) {
         vec4 rest = texelFetch(u_rest, at, 0);
-        vec4 card = turn[strand_card[s] * (u_segments + 1u) + uint(rest.w)];
+        vec4 card = texelFetch(u_card_turns, texel(int(strand_card[s] * (u_segments + 1u) + uint(rest.w))), 0);
         vec3 now = len > 0.0 ? d : vec3(0.0);  // as the CPU's: no bend for a segment of zero length
         imageStore(u_turns, at, quat_mul(smallest_turn(quat_rotate(card, rest.xyz), now), card));
     }
