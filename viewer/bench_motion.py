@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import statistics
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 from .frame import CARD_STAGES, STAGES
@@ -46,15 +47,14 @@ def animated_runs(renderer: Any, asset: Any, cam: Any, settings: Any, budgets: t
     if live is None and animation is None:
         animation = bench_clip(asset, frames)
     moving_stages = (*(("simulate",) if simulate else ()), *CARD_STAGES, *STAGES)
+    still_settings = replace(settings, turn_sh=False)  # a static file's frame: no SH turns
     rows, step = [], 0
     for budget in budgets:
         static, moving = [], []
         for _ in range(frames):
             renderer.budget = budget
             timer_static = clock(renderer.ctx)
-            renderer.turn_sh = False  # a static file's frame: no SH turns
-            renderer.frame(cam, settings, timer_static)
-            renderer.turn_sh = True
+            renderer.frame(cam, still_settings, timer_static)
             static.append(timer_static.seconds)
             timer_animated = clock(renderer.ctx)
             step += 1

@@ -122,7 +122,6 @@ class Renderer(SplatRenderer):
         self._warned = False
         self._mesh_vao = self._lines_vao = None  # the overlays' vertex arrays, made on first use
         self._decoded = self.lod.n_strands  # strands whose geometry is decoded for the current cards
-        self.turn_sh = True  # turn the SH with their segments where the scene decodes turns (animated scenes)
 
     def rasterizer_named(self, name: str) -> Rasterizer:
         """The renderer's rasterizer of that name, made on first use."""
@@ -219,7 +218,7 @@ class Renderer(SplatRenderer):
                      u_lod_width=float(plan.width))
         self.rasterizer_named(rasterizer or self.rasterizer).preprocess_outputs(prog)
         self.visible_count.clear()
-        turn = scene.geometry.turn if scene.geometry is not None and self.turn_sh else None
+        turn = scene.geometry.turn if scene.geometry is not None and s.turn_sh else None
         set_uniforms(prog, u_turn_sh=turn is not None)
         for k, chunk in enumerate(scene.sh):
             # without turns, u_turns is bound to any texture: the shader does not read it
