@@ -163,14 +163,16 @@ def _press_keys(keys: WindowInput, state: ViewerState, budgets: BudgetControl, m
 def run_viewer(asset: HairAsset, *, title: str, file_size: int, width: int = 1280, height: int = 720,
                sort: str = "auto", rasterizer: str = "auto", budget: int | None = None,
                screenshot_dir: str | Path = ".", max_frames: int | None = None, press: tuple[str, ...] = (),
-               animation: Animation | None = None, frames: range | None = None, simulate: bool = False) -> int:
+               animation: Animation | None = None, frames: range | None = None, simulate: bool = False,
+               turn_sh: bool = True) -> int:
     """Open a window on ``asset`` and run until it is closed; returns the number of frames drawn.
 
     ``budget``: a fixed splat budget; by default it adapts while the camera (or the hair) moves (see
     :class:`BudgetControl`). The splats are drawn again only when the view, the settings, the budget or
     the cards change, so a resting camera on still hair costs one full-quality frame. ``animation``
     (its ``frames``, default all) plays in real time; ``simulate`` runs the strand solver live instead,
-    the head dragged with ctrl. ``max_frames`` closes the window after that many frames and ``press``
+    the head dragged with ctrl; each Gaussian's SH turn with its segment unless ``turn_sh`` is false.
+    ``max_frames`` closes the window after that many frames and ``press``
     replays key presses before the first frame (scripted sessions and tests).
     """
     import glfw
@@ -179,7 +181,7 @@ def run_viewer(asset: HairAsset, *, title: str, file_size: int, width: int = 128
     try:
         motion = _motion(asset, animation, simulate, frames)
         renderer = create_renderer(ctx, asset, sort=sort, rasterizer=rasterizer, budget=budget,
-                                   animated=motion is not None)
+                                   animated=motion is not None, turn_sh=turn_sh)
         state = ViewerState(OrbitController.framing(*renderer.bounds, asset.up_axis),
                             max_sh_degree=asset.appearance.sh_degree)
         budgets = BudgetControl(renderer.count, fixed=budget)

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from .bench_motion import animated_runs, format_animated
+from .bench_motion import animated_runs, bench_clip, format_animated
 from .frame import STAGES
 from .pipeline import bind, set_uniforms
 from .rasterizer import Target
@@ -34,6 +34,7 @@ from .sort import GpuRadixSort, cpu_sort
 
 BUDGET_FRACTIONS = (1 / 4, 1 / 8, 1 / 16)  # default budgets, as fractions of the Gaussians
 REFERENCE_SIZE = (480, 270)
+SAMPLED = (0.25, 0.5, 0.75, 1.0)  # where in an animated clip the appearance is compared with the reference
 
 
 def _timed(ctx: Any, fn) -> float:
@@ -82,14 +83,15 @@ def benchmark(path: str | None = None, synthetic: int | None = None, points: int
               height: int = 1080, frames: int = 3, sort: str = "auto",
               rasterizers: tuple[str, ...] = ("compute", "raster"),
               budgets: tuple[int, ...] | None = None, reference_size: tuple[int, int] | None = REFERENCE_SIZE,
-              ctx: Any = None, animate: bool = False, simulate: bool = False) -> dict:
+              ctx: Any = None, animate: bool = False, simulate: bool = False, turn_sh: bool = True) -> dict:
     """Figures in seconds (medians over ``frames``) and dB, plus counts, the OpenGL driver and
     device, and the work-group sizes.
 
     ``budgets``: Gaussians per frame of the level-of-detail runs (default: 1/4, 1/8 and 1/16 of
     the asset's); ``reference_size``: ``None`` skips the reference splatter. ``animate`` adds the
     animated frame against the static one (:mod:`viewer.bench_motion`, ``"animated"``), with the live
-    simulation's cost where ``simulate``.
+    simulation's cost where ``simulate``, the SH turned with their segments unless ``turn_sh`` is false;
+    with the reference too (and a clip, not ``simulate``), the animated frames' appearance (``"psnr"``).
     """
     from cghair_format.camera import Camera
 
@@ -109,7 +111,8 @@ def benchmark(path: str | None = None, synthetic: int | None = None, points: int
                              f"this context offers {ctx.version_code / 100:.1f}")
     made: list[Renderer] = []
     animated = animate or simulate
-    t_upload = _timed(ctx, lambda: made.append(Renderer.from_asset(ctx, asset, sort=sort, animated=animated)))
+    t_upload = _timed(ctx, lambda: made.append(Renderer.from_asset(ctx, asset, sort=sort, animated=animated,
+                                                                               turn_sh=turn_sh)))
     renderer = made[0]
     if budgets is None:
         budgets = tuple(max(1, int(renderer.count * f)) for f in BUDGET_FRACTIONS)
@@ -143,13 +146,37 @@ def benchmark(path: str | None = None, synthetic: int | None = None, points: int
         from .motion import file_animation
 
         renderer.rasterizer = rasterizers[0]
-        clip = file_animation(path) if path is not None and not simulate else None
+        clip = None if simulate else (file_animation(path) if path is not None else None) or bench_clip(asset, frames)
         result["animated"] = animated_runs(renderer, asset, cam, settings, (None, *budgets), frames, StageClock, clip,
                                            simulate)
+        if clip is not None and reference is not None:  # the appearance against the CPU's turned SH
+            result["animated"]["psnr"] = appearance_psnr(renderer, asset, clip, small)
     renderer.release()
     if own_ctx:
         ctx.release()
     return result
+
+
+def appearance_psnr(renderer: Any, asset: Any, animation: Any, camera: Any) -> list[dict]:
+    """Per sampled frame of ``animation`` (:data:`SAMPLED`), PSNR (RGB, dB) against the native splatter's
+    image of ``frame_gaussians(..., turn_sh=True)`` (the CPU's Gaussians, SH turned per segment): of the
+    viewer's full-quality frame (SH turned unless the renderer was made with ``turn_sh=False``), and of
+    the same splatter with the SH left as at rest. The renderer's cards are left at rest."""
+    from cghair_format.animation import frame_gaussians
+    from training.backends import default_backend, render_gaussians
+
+    backend = default_backend("cpu")
+    last = animation.frames - 1
+    rows = []
+    for f in sorted({round(x * last) for x in SAMPLED}):
+        want, unturned = (render_gaussians(frame_gaussians(asset, animation, f, turn_sh=turn), camera, (0.0, 0.0, 0.0),
+                                           "cpu", backend)["rgb"] for turn in (True, False))
+        renderer.budget = None
+        renderer.move_cards(animation.cards(asset.cards, f))
+        rows.append({"frame": f, "viewer_db": psnr(renderer.render(camera)[..., :3], want),
+                     "unturned_db": psnr(unturned, want)})
+    renderer.move_cards(asset.cards)
+    return rows
 
 
 def _load(path: str | None, synthetic: int | None, points: int) -> tuple[Any, str, int | None, float]:

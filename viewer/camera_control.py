@@ -92,8 +92,8 @@ class OrbitController:
 # key name -> (action, argument)
 KEYMAP: dict[str, tuple[str, object]] = {
     "C": ("toggle", "show_cards"), "L": ("toggle", "show_strands"), "G": ("toggle", "color_by_group"),
-    "H": ("toggle", "hide_splats"), "0": ("sh_degree", 0), "1": ("sh_degree", 1), "2": ("sh_degree", 2),
-    "3": ("sh_degree", 3), "=": ("scale", 1.25), "+": ("scale", 1.25), "]": ("scale", 1.25),
+    "H": ("toggle", "hide_splats"), "T": ("toggle", "turn_sh"), "0": ("sh_degree", 0), "1": ("sh_degree", 1),
+    "2": ("sh_degree", 2), "3": ("sh_degree", 3), "=": ("scale", 1.25), "+": ("scale", 1.25), "]": ("scale", 1.25),
     "-": ("scale", 0.8), "[": ("scale", 0.8),
     "B": ("budget", None), "R": ("reset", None), "P": ("screenshot", None), "F12": ("screenshot", None),
     "ESCAPE": ("quit", None),
@@ -103,7 +103,8 @@ FLY_KEYS: dict[str, tuple[float, float, float]] = {
     "W": (1, 0, 0), "S": (-1, 0, 0), "D": (0, 1, 0), "A": (0, -1, 0), "E": (0, 0, 1), "Q": (0, 0, -1),
 }
 HELP = ("drag: orbit | right/middle drag or shift-drag: pan | scroll: zoom | WASD QE: fly | R: reset | "
-        "C: cards | L: strands | G: group colours | H: hide splats | 0-3: SH degree | [/] or -/+: splat scale | "
+        "C: cards | L: strands | G: group colours | H: hide splats | 0-3: SH degree | T: SH turn with moving hair | "
+        "[/] or -/+: splat scale | "
         "B: splat budget (adaptive, full, 1/2 ... 1/16) | P: screenshot | Esc: quit")
 TARGET_FRAME_S = 0.3  # the adaptive budget's frame time while the camera moves (about 3 fps)
 MIN_BUDGET_FRACTION = 1 / 64  # the adaptive budget's floor, as a fraction of the Gaussians
@@ -200,5 +201,6 @@ class ViewerState:
         s = self.settings
         deg = "file" if s.sh_degree is None else str(s.sh_degree)
         flags = [name for name, on in (("cards", s.show_cards), ("strands", s.show_strands),
-                                        ("groups", s.color_by_group), ("no splats", s.hide_splats)) if on]
+                                        ("groups", s.color_by_group), ("no splats", s.hide_splats),
+                                        ("SH not turned", not s.turn_sh)) if on]
         return f"SH {deg}, scale {s.splat_scale:.2f}" + (f", {', '.join(flags)}" if flags else "")

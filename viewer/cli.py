@@ -16,6 +16,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--simulate", action="store_true",
                         help="run the strand simulation live: ctrl-drag turns the head, ctrl-right-drag moves it "
                              "(an animated file otherwise plays its animation: space, arrows, page up/down)")
+    add_turn_argument(parser)
     parser.add_argument("--screenshots", default=".", help="folder for screenshots (key P)")
     parser.add_argument("--frames", type=int, default=None, help="close after this many frames (scripted runs)")
     parser.add_argument("--press", default="", metavar="KEYS",
@@ -49,6 +50,13 @@ def add_raster_arguments(parser: argparse.ArgumentParser, budget_help: str, rast
                         help=budget_help)
 
 
+def add_turn_argument(parser: argparse.ArgumentParser) -> None:
+    """``--no-turn-sh``, shared by ``view``, ``render`` and ``bench-viewer``."""
+    parser.add_argument("--no-turn-sh", action="store_true",
+                        help="hair that moves: leave each Gaussian's SH as at rest instead of turning them with its "
+                             "segment (for comparison)")
+
+
 def positive(parser_name: str, value: int) -> None:
     from cghair_format.errors import CghError
 
@@ -76,5 +84,6 @@ def run(args: argparse.Namespace) -> int:
     run_viewer(asset, title=f"cgh view {Path(args.file).name}", file_size=Path(args.file).stat().st_size,
                width=args.width, height=args.height, sort=args.sort, rasterizer=args.rasterizer,
                budget=args.budget, screenshot_dir=args.screenshots,
-               max_frames=args.frames, press=press_keys(args.press), animation=animation, simulate=args.simulate)
+               max_frames=args.frames, press=press_keys(args.press), animation=animation, simulate=args.simulate,
+               turn_sh=not args.no_turn_sh)
     return 0

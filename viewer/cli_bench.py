@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from .cli import add_raster_arguments
+from .cli import add_raster_arguments, add_turn_argument
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -27,9 +27,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-reference", action="store_true", help="skip the reference splatter (needs torch)")
     parser.add_argument("--animate", action="store_true",
                         help="also time an animated frame (card upload + GPU decode + splat) against the static "
-                             "one, on the file's animation or a simulated nod")
+                             "one, on the file's animation or a simulated nod; with the reference, the PSNR of "
+                             "frames of it against the native splatter on the CPU's Gaussians, SH turned")
     parser.add_argument("--simulate", action="store_true",
                         help="like --animate, with the cards simulated live each frame (simulation time included)")
+    add_turn_argument(parser)
     parser.add_argument("--json", default=None, metavar="PATH", help="also write the figures as JSON")
 
 
@@ -59,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
                        height=args.height, frames=args.frames, sort=args.sort, rasterizers=rasterizers,
                        budgets=tuple(args.budget) if args.budget else None,
                        reference_size=None if args.no_reference else tuple(args.reference_size),
-                       animate=args.animate, simulate=args.simulate)
+                       animate=args.animate, simulate=args.simulate, turn_sh=not args.no_turn_sh)
     print(format_report(result))
     if args.json:
         with open(args.json, "w", encoding="utf-8") as f:

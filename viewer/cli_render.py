@@ -6,7 +6,7 @@ import argparse
 
 from cghair_format.animation import MOTIONS
 
-from .cli import add_raster_arguments
+from .cli import add_raster_arguments, add_turn_argument
 
 IMAGE_EXTS = (".png",)
 ANIMATION_EXTS = (".gif", ".mp4")
@@ -28,7 +28,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="use a camera from a NeRF-style transforms.json instead of the orbit")
     parser.add_argument("--frame", type=int, default=0, help="frame index in --camera (default 0)")
     parser.add_argument("--turntable", type=int, default=0, metavar="N",
-                        help="render N views around the up axis into an animated .gif or .mp4")
+                        help="render N views around the up axis into an animated .gif or .mp4 (with --frames, "
+                             "--animate or --motion: N images, the hair moving on a loop as the camera goes round)")
     parser.add_argument("--fps", type=float, default=None,
                         help="frame rate of the .gif/.mp4 (default: the animation's, or 24 for a turntable)")
     anim = parser.add_argument_group("hair that moves (one camera; .gif or .mp4)")
@@ -38,6 +39,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     anim.add_argument("--motion", default=None, choices=MOTIONS,
                       help="simulate the hair under this built-in head motion (B frames of --frames, or 2 s) "
                            "instead of reading the file's animation")
+    add_turn_argument(anim)
     look = parser.add_argument_group("appearance")
     look.add_argument("--background", type=float, nargs=3, default=(0.0, 0.0, 0.0), metavar=("R", "G", "B"))
     look.add_argument("--sh-degree", type=int, choices=(0, 1, 2, 3), default=None,
@@ -83,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
                     frame=args.frame, turntable=args.turntable, fps=fps, background=tuple(args.background),
                     sh_degree=args.sh_degree, splat_scale=args.splat_scale,
                     color_by_group=args.color_by_group, cards=args.cards, strands=args.strands, sort=args.sort,
-                    rasterizer=args.rasterizer, budget=args.budget, frames=frames)
+                    rasterizer=args.rasterizer, budget=args.budget, frames=frames, turn_sh=not args.no_turn_sh)
     written = render_job(asset, job, out, log=print if args.verbose else None, animation=animation)
     print(f"wrote {written}")
     return 0

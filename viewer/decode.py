@@ -19,7 +19,7 @@ import numpy as np
 from cghair_format import Gaussians, HairAsset
 from cghair_format.errors import CghError
 
-from .pipeline import Programs, bind, bind_images, data_image, dispatch, max_texture_size, set_uniforms
+from .pipeline import Programs, bind, bind_images, data_image, dispatch, max_texture_size, set_uniforms, use_textures
 from .shader_constants import LATENT_LOCAL_SIZE, TEXELS_PER_ROW
 
 DEFAULT_BLOCK_LIMIT = 128 << 20
@@ -138,9 +138,8 @@ class CardGeometry:
     spines and normals are written (:meth:`upload_cards`), then :meth:`decode` rebuilds the card
     strips, strand points and segment frames; the appearance (latents, MLP, SH) is decoded once.
 
-    Hook for SH rotation (issue 34, "Appearance follows"): :meth:`decode` writes each segment's
-    rotation (``u_rotations``, the quaternion taking +z onto the segment); a rest-pose copy of that
-    image and ``q_now * conj(q_rest)`` in the preprocess would turn each Gaussian's SH with its segment.
+    With ``turn`` (:class:`SegmentTurns`), :meth:`decode` also writes each segment's rotation from rest
+    (:func:`cghair_format.animation.shading.segment_rotations`), with which the preprocess turns its SH.
     """
 
     spine: Any  # [C * (M+1)] vec4
@@ -152,6 +151,7 @@ class CardGeometry:
     cards: int  # C
     card_points: int  # M + 1
     thickness: float
+    turn: SegmentTurns | None = None
 
     def upload_cards(self, spine: np.ndarray, normal: np.ndarray) -> None:
         """Write new card spines and normals (``[C, M+1, 3]`` each)."""
@@ -162,11 +162,14 @@ class CardGeometry:
         """Card strips, then strand points and the Gaussians' means, rotations and scales, into ``scene``:
         every strand's, or with ``lod`` (the priority lists' buffer and a plan's chunks, viewer/lod.py)
         only the strands a splat budget draws."""
-        c, m1 = self.cards, self.card_points
+        c, m1, turn = self.cards, self.card_points, self.turn
         prog = programs.compute("card_mesh")
         bind(prog, Spine=self.spine, Normal=self.normal, HalfWidth=self.half_width, MeshPos=scene.mesh_pos,
              MeshNrm=self.mesh_nrm)
-        set_uniforms(prog, u_count=c * m1, u_points=m1)
+        if turn is not None:
+            bind(prog, RestFrame=turn.rest_frame)
+            bind_images(prog, u_card_turns=turn.card_turns)
+        set_uniforms(prog, u_count=c * m1, u_points=m1, u_turn=turn is not None)
         dispatch(ctx, prog, c * m1)
         prog = programs.compute("decode_geometry")
         # without lod, LodStrands is bound to any buffer: the shader does not read it
@@ -174,8 +177,11 @@ class CardGeometry:
         bind(prog, MeshPos=scene.mesh_pos, MeshNrm=self.mesh_nrm, StrandCard=scene.strand_card, Uvd=self.uvd,
              Opacity=self.opacity, Points=scene.points, LodStrands=lists)
         bind_images(prog, u_means=scene.means, u_rotations=scene.rotations, u_scales=scene.scales)
+        if turn is not None:
+            bind_images(prog, u_turns=turn.turns)
+            use_textures(prog, u_rest=turn.rest, u_card_turns=turn.card_turns)
         set_uniforms(prog, u_points=scene.segments + 1, u_segments=m1 - 1, u_thickness=self.thickness,
-                     u_indexed=lod is not None)
+                     u_indexed=lod is not None, u_turn=turn is not None)
         for list_base, count, *_ in chunks:
             set_uniforms(prog, u_count=count, u_list_base=list_base)
             dispatch(ctx, prog, count)
@@ -183,9 +189,40 @@ class CardGeometry:
     def release(self) -> None:
         for buf in (self.spine, self.normal, self.half_width, self.mesh_nrm, self.uvd, self.opacity):
             buf.release()
+        if self.turn is not None:
+            self.turn.release()
 
 
-def _card_geometry(ctx: Any, asset: HairAsset) -> CardGeometry:
+@dataclass
+class SegmentTurns:
+    """What turning an animated scene's SH with its segments takes (issue 34, "Appearance follows"), as
+    :func:`cghair_format.animation.shading.segment_rotations` does on the CPU. Fixed at load: the rest
+    card frames and each segment's rest direction and spine sample; per frame the geometry decode writes
+    the card frames' turns, then each segment's rotation from rest, which the preprocess reads."""
+
+    rest_frame: Any  # [C * (M+1) * 3] vec4: the rest frame's columns t, n, n x t (shading.spine_frames)
+    card_turns: Any  # data image, texel c (M+1) + k: F_now F_rest^T as a quaternion (wxyz), written per frame
+    rest: Any  # data image, texel g: the segment's rest direction (xyz) and its spine sample k (w)
+    turns: Any  # data image, texel g: the segment's rotation from rest (wxyz), written per frame
+
+    @classmethod
+    def of(cls, ctx: Any, asset: HairAsset) -> SegmentTurns:
+        from cghair_format.animation.shading import segment_directions, segment_samples, spine_frames
+        from cghair_format.geometry import strand_points
+
+        cards = asset.cards
+        frames = spine_frames(cards).swapaxes(-1, -2).reshape(-1, 3)  # each sample's columns, in order
+        directions = segment_directions(strand_points(cards, asset.strand_card, asset.uvd))
+        rest = np.concatenate([directions, segment_samples(asset)[..., None]], axis=-1)
+        return cls(rest_frame=_buffer(ctx, _vec4(frames)), card_turns=data_image(ctx, frames.shape[0] // 3, 4, "f4"),
+                   rest=_image_of(ctx, rest), turns=data_image(ctx, rest.shape[0] * rest.shape[1], 4, "f4"))
+
+    def release(self) -> None:
+        for obj in (self.rest_frame, self.card_turns, self.rest, self.turns):
+            obj.release()
+
+
+def _card_geometry(ctx: Any, asset: HairAsset, turn_sh: bool = False) -> CardGeometry:
     cards = asset.cards
     c, m1 = cards.spine.shape[:2]
     # placeholder segments (spec 3) get opacity 0: they are decoded with the others, and never seen
@@ -195,13 +232,16 @@ def _card_geometry(ctx: Any, asset: HairAsset) -> CardGeometry:
         normal=_buffer(ctx, _vec4(cards.normal.reshape(-1, 3))),
         half_width=_buffer(ctx, cards.half_width.astype(np.float32).reshape(-1)),
         mesh_nrm=_buffer(ctx, nbytes=c * 2 * m1 * 16), uvd=_buffer(ctx, asset.uvd.astype(np.float32).reshape(-1)),
-        opacity=_buffer(ctx, opacity), cards=c, card_points=m1, thickness=float(asset.thickness))
+        opacity=_buffer(ctx, opacity), cards=c, card_points=m1, thickness=float(asset.thickness),
+        turn=SegmentTurns.of(ctx, asset) if turn_sh else None)
 
 
-def upload_asset(ctx: Any, programs: Programs, asset: HairAsset, animated: bool = False) -> GpuScene:
+def upload_asset(ctx: Any, programs: Programs, asset: HairAsset, animated: bool = False,
+                 turn_sh: bool = True) -> GpuScene:
     """Upload an asset's compact data and decode it on the GPU. ``animated`` keeps the geometry
     decode's inputs (:attr:`GpuScene.geometry`) so that its cards can move
-    (:meth:`viewer.renderer.Renderer.move_cards`)."""
+    (:meth:`viewer.renderer.Renderer.move_cards`); with ``turn_sh`` (the default) each frame's SH turn
+    with their segments (:class:`SegmentTurns`), ``False`` leaves them as at rest (for comparison)."""
     asset.validate()
     cards = asset.cards
     c, m1 = cards.spine.shape[:2]
@@ -223,7 +263,7 @@ def upload_asset(ctx: Any, programs: Programs, asset: HairAsset, animated: bool 
         mesh_pos=_buffer(ctx, nbytes=c * 2 * m1 * 16),
         mesh_triangles=ctx.buffer(card_mesh(cards).triangles.astype(np.uint32).tobytes()), card_vertices=2 * m1,
         n_strands=s)
-    geometry = _card_geometry(ctx, asset)
+    geometry = _card_geometry(ctx, asset, animated and turn_sh)
     geometry.decode(ctx, programs, scene)
     scene.sh = _decode_appearance(ctx, programs, asset, strand_card, card_group)
     if animated:

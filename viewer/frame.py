@@ -46,6 +46,7 @@ class ViewSettings:
     show_cards: bool = False
     show_strands: bool = False
     hide_splats: bool = False
+    turn_sh: bool = True  # hair that moves: turn each Gaussian's SH with its segment (where decoded)
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 

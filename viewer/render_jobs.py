@@ -54,6 +54,7 @@ class RenderJob:
     rasterizer: str = "auto"
     budget: int | None = None  # Gaussians drawn (level of detail); None: all
     frames: range | None = None  # frames of the animation to render (one camera); None: the rest pose
+    turn_sh: bool = True  # with frames: turn each Gaussian's SH with its segment (False: as at rest)
 
     def settings(self) -> ViewSettings:
         return ViewSettings(sh_degree=self.sh_degree, splat_scale=self.splat_scale,
@@ -163,7 +164,8 @@ def render_job(asset: HairAsset, job: RenderJob, out: str | Path, ctx=None, log=
                animation: Animation | None = None) -> Path:
     """Render ``asset`` as ``job`` describes and write ``out``; creates an EGL context if none given.
     ``log`` (e.g. ``print``) is told which OpenGL driver and device render. With ``job.frames``, those
-    frames of ``animation`` are rendered from the job's camera, at ``job.fps``."""
+    frames of ``animation`` are rendered from the job's camera, at ``job.fps``; with ``job.turntable`` too,
+    the camera goes round in that many images while the clip plays on a loop."""
     from .context import create_headless_context, describe_gl, gl_info
 
     out = Path(out)
@@ -175,8 +177,6 @@ def render_job(asset: HairAsset, job: RenderJob, out: str | Path, ctx=None, log=
         if animation is None:
             raise CghError("--frames renders an animation, and this file holds none: make one with cgh animate "
                            "or name a built-in --motion")
-        if job.turntable:
-            raise CghError("--frames and --turntable each make the animation's frames: choose one")
         animation.validate(asset.cards)
     own = ctx is None
     ctx = ctx or create_headless_context()
@@ -185,17 +185,17 @@ def render_job(asset: HairAsset, job: RenderJob, out: str | Path, ctx=None, log=
         log(describe_gl(gl_info(ctx)))
     try:
         renderer = create_renderer(ctx, asset, sort=job.sort, rasterizer=job.rasterizer, budget=job.budget,
-                                   animated=job.frames is not None)
+                                   animated=job.frames is not None, turn_sh=job.turn_sh)
         try:
             cameras = job_cameras(job, renderer.bounds, asset.up_axis)
             settings = job.settings()
             if job.frames is None:
                 frames = [to_uint8(renderer.render(cam, settings)) for cam in cameras]
-            else:
+            else:  # with a turntable, image i shows pose frames[i % len] from its camera (the clip loops)
                 frames = []
-                for f in job.frames:
-                    renderer.move_cards(animation.cards(asset.cards, f))
-                    frames.append(to_uint8(renderer.render(cameras[0], settings)))
+                for i in range(len(cameras) if job.turntable else len(job.frames)):
+                    renderer.move_cards(animation.cards(asset.cards, job.frames[i % len(job.frames)]))
+                    frames.append(to_uint8(renderer.render(cameras[i % len(cameras)], settings)))
         finally:
             renderer.release()
     finally:

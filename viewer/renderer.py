@@ -134,10 +134,12 @@ class Renderer(SplatRenderer):
     @classmethod
     def from_asset(cls, ctx: Any, asset: HairAsset, sort: str = "auto", primitive: str = "triangles",
                    rasterizer: str = "auto", budget: int | None = None, programs: Programs | None = None,
-                   animated: bool = False) -> Renderer:
-        """``animated``: keep the geometry decode's inputs so that :meth:`move_cards` can move the cards."""
+                   animated: bool = False, turn_sh: bool = True) -> Renderer:
+        """``animated``: keep the geometry decode's inputs so that :meth:`move_cards` can move the cards,
+        each Gaussian's SH turning with its segment unless ``turn_sh`` is false."""
         programs = programs or Programs(ctx)
-        return cls(ctx, upload_asset(ctx, programs, asset, animated), sort, programs, primitive, rasterizer, budget)
+        return cls(ctx, upload_asset(ctx, programs, asset, animated, turn_sh), sort, programs, primitive, rasterizer,
+                   budget)
 
     def move_cards(self, cards: Cards, stage: Stage = run_stage) -> None:
         """Put the cards at ``cards`` (an animation's frame; half-widths and groups stay the rest pose's):
@@ -216,9 +218,12 @@ class Renderer(SplatRenderer):
                      u_lod_width=float(plan.width))
         self.rasterizer_named(rasterizer or self.rasterizer).preprocess_outputs(prog)
         self.visible_count.clear()
+        turn = scene.geometry.turn if scene.geometry is not None and s.turn_sh else None
+        set_uniforms(prog, u_turn_sh=turn is not None)
         for k, chunk in enumerate(scene.sh):
+            # without turns, u_turns is bound to any texture: the shader does not read it
             use_textures(prog, u_means=scene.means, u_rotations=scene.rotations, u_scales=scene.scales,
-                         u_sh=chunk.texture)
+                         u_sh=chunk.texture, u_turns=scene.rotations if turn is None else turn.turns)
             bind(prog, Keys=self.keys, Values=self.values, StrandCard=scene.strand_card, CardGroup=scene.card_group,
                  Visible=self.visible_count, LodStrands=self.lod.buffer)
             if plan.full:
@@ -309,15 +314,17 @@ class Renderer(SplatRenderer):
 
 
 def create_renderer(ctx: Any, asset: HairAsset, sort: str = "auto", primitive: str = "triangles",
-                    rasterizer: str = "auto", budget: int | None = None, animated: bool = False) -> SplatRenderer:
+                    rasterizer: str = "auto", budget: int | None = None, animated: bool = False,
+                    turn_sh: bool = True) -> SplatRenderer:
     """The GPU renderer where compute shaders exist (OpenGL 4.3), else the numpy fallback.
 
-    The compute rasterizer, splat budgets and moving cards (``animated``) need compute shaders: asking
-    for them on OpenGL 3.3 is a :class:`GLContextError` that says so.
+    The compute rasterizer, splat budgets and moving cards (``animated``, the SH turning with their
+    segments unless ``turn_sh`` is false) need compute shaders: asking for them on OpenGL 3.3 is a
+    :class:`GLContextError` that says so.
     """
     if ctx.version_code >= 430:
         return Renderer.from_asset(ctx, asset, sort=sort, primitive=primitive, rasterizer=rasterizer,
-                                   budget=budget, animated=animated)
+                                   budget=budget, animated=animated, turn_sh=turn_sh)
     from .context import GLContextError
     from .fallback import FallbackRenderer
 

@@ -59,8 +59,9 @@ def rotate_sh(sh: np.ndarray, rotation: np.ndarray) -> np.ndarray:
     return out
 
 
-def _card_frames(cards: Cards) -> np.ndarray:
-    """Per spine sample the orthonormal frame ``[t, n, n x t]`` as matrix columns, ``[C, M+1, 3, 3]``."""
+def spine_frames(cards: Cards) -> np.ndarray:
+    """Per spine sample the orthonormal frame ``[t, n, n x t]`` as matrix columns, ``[C, M+1, 3, 3]`` (the
+    viewer's GPU decode builds the same frames from the moved cards)."""
     t = spine_tangents(np.asarray(cards.spine, np.float64))
     n = np.asarray(cards.normal, np.float64)
     n = n - t * (n * t).sum(-1, keepdims=True)
@@ -80,24 +81,32 @@ def _smallest_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.where(c > -1 + 1e-9, rot, np.eye(3))
 
 
+def segment_samples(asset: HairAsset) -> np.ndarray:
+    """The spine sample ``k [S, P-1]`` nearest each segment's middle along its card (whose frame it turns
+    with): ``rint(u M)`` of the mean of its end points' ``u``."""
+    m = asset.cards.segments
+    u = 0.5 * (asset.uvd[:, :-1, 0] + asset.uvd[:, 1:, 0]).astype(np.float64)
+    return np.clip(np.rint(u * m), 0, m).astype(np.int64)
+
+
+def segment_directions(points: np.ndarray) -> np.ndarray:
+    """Unit directions ``[S, P-1, 3]`` (float64) of the segments of strands ``points [S, P, 3]`` (zero for a
+    segment of zero length)."""
+    d = np.diff(np.asarray(points, np.float64), axis=1)
+    return d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-30)
+
+
 def segment_rotations(asset: HairAsset, animation: Animation, frame: int, points: np.ndarray | None = None
                       ) -> np.ndarray:
     """Each segment's rotation from rest to ``frame``, ``[S, P-1, 3, 3]`` (see the module docstring); with
     ``points [S, P, 3]``, onto those strands' segments instead of the driven ones (strands simulated alone,
     say) from the same cards' frames."""
     moved = animation.cards(asset.cards, frame)
-    turn = np.einsum("ckij,cklj->ckil", _card_frames(moved), _card_frames(asset.cards))  # F_now F_rest^T
-    m = asset.cards.segments
-    u = 0.5 * (asset.uvd[:, :-1, 0] + asset.uvd[:, 1:, 0]).astype(np.float64)
-    k = np.clip(np.rint(u * m), 0, m).astype(np.int64)
-    r_card = turn[asset.strand_card[:, None], k]
-
-    def directions(points: np.ndarray) -> np.ndarray:
-        d = np.diff(points.astype(np.float64), axis=1)
-        return d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-30)
-
-    rest = np.einsum("spij,spj->spi", r_card, directions(strand_points(asset.cards, asset.strand_card, asset.uvd)))
-    now = directions(strand_points(moved, asset.strand_card, asset.uvd) if points is None else points)
+    turn = np.einsum("ckij,cklj->ckil", spine_frames(moved), spine_frames(asset.cards))  # F_now F_rest^T
+    r_card = turn[asset.strand_card[:, None], segment_samples(asset)]
+    rest_points = strand_points(asset.cards, asset.strand_card, asset.uvd)
+    rest = np.einsum("spij,spj->spi", r_card, segment_directions(rest_points))
+    now = segment_directions(strand_points(moved, asset.strand_card, asset.uvd) if points is None else points)
     return _smallest_rotation(rest, now) @ r_card
 
 

@@ -126,6 +126,9 @@ def test_keys_toggle_settings_and_return_actions():
     assert state.settings.splat_scale == 1.0 and state.settings.sh_degree is None
     assert state.controller.azimuth == 10.0
     assert "SH file" in state.status() and "strands" in state.status()
+    assert state.settings.turn_sh and "not turned" not in state.status()
+    state.press("T")
+    assert not state.settings.turn_sh and "SH not turned" in state.status()
 
 
 def test_held_keys_fly():

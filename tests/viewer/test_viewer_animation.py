@@ -70,9 +70,10 @@ def test_animated_decode_matches_frame_points(gl_ctx, asset):
 @pytest.mark.parametrize("budget", [None, 96])
 def test_animated_render_equals_static_render_of_the_frame(gl_ctx, asset, budget):
     """Pixels of a moved frame, at full quality and at a budget that decodes only the strands it draws
-    (then grows to all: the frame decodes the rest first), against a renderer made from the moved asset."""
+    (then grows to all: the frame decodes the rest first), against a renderer made from the moved asset
+    (its SH as at rest: tests/viewer/test_viewer_sh_turn.py turns them)."""
     animation, cam = moving_cards(asset), _camera(asset)
-    moving = Renderer.from_asset(gl_ctx, asset, animated=True, budget=budget)
+    moving = Renderer.from_asset(gl_ctx, asset, animated=True, budget=budget, turn_sh=False)
     still = Renderer.from_asset(gl_ctx, frame_asset(asset, animation, 2), budget=budget)
     try:
         moving.move_cards(animation.cards(asset.cards, 2))
@@ -117,6 +118,26 @@ def test_render_frames_of_a_simulated_motion(gl_ctx, tmp_path):
     assert max(np.abs(frames[0] - f).max() for f in frames[1:]) > 0  # the hair moves
 
 
+def test_render_a_turntable_of_hair_that_moves(gl_ctx, tmp_path):
+    """--turntable N with an animation: N images, the camera going round while the clip loops; image i
+    is pose i % frames from the turntable's camera i."""
+    from cghair_format.cli import main
+
+    path = tmp_path / "hair.cgh"
+    cghair_format.write(example_asset(seed=8, strands=60, points=10, sh_degree=1), path)
+    size = ["--width", "48", "--height", "40"]
+    assert main(["render", str(path), "-o", str(tmp_path / "both.gif"), "--motion", "nod", "--frames", "2:4",
+                 "--turntable", "4", *size]) == 0
+    assert main(["render", str(path), "-o", str(tmp_path / "moving.gif"), "--motion", "nod", "--frames", "2:4",
+                 *size]) == 0
+    assert main(["render", str(path), "-o", str(tmp_path / "still.gif"), "--turntable", "4", *size]) == 0
+    both, moving, still = (_gif_frames(tmp_path / f"{name}.gif") for name in ("both", "moving", "still"))
+    assert len(both) == 4 and len(moving) == 2
+    np.testing.assert_array_equal(both[0], moving[0])  # azimuth 0, pose 2
+    for i in range(1, 4):
+        assert np.abs(both[i] - still[i]).max() > 0 and np.abs(both[i] - moving[i % 2]).max() > 0
+
+
 def test_render_frames_to_mp4(gl_ctx, tmp_path):
     pytest.importorskip("imageio_ffmpeg", reason="MP4 output needs imageio-ffmpeg")
     import imageio.v2 as imageio
@@ -137,7 +158,8 @@ def test_render_frames_to_mp4(gl_ctx, tmp_path):
 
 def test_render_animate_reads_the_files_animation(gl_ctx, tmp_path, monkeypatch, asset):
     """Where the format package reads animations (cghair_format.read_animation, stood in for here),
-    --animate renders each of its frames; frame 2 equals the static render of that pose (same job)."""
+    --animate renders each of its frames; with --no-turn-sh frame 2 equals the static render of that pose
+    (same job), and without it the SH turn with the hair (tests/viewer/test_viewer_sh_turn.py)."""
     from cghair_format.cli import main
     from viewer.render_jobs import RenderJob, render_job
 
@@ -147,7 +169,8 @@ def test_render_animate_reads_the_files_animation(gl_ctx, tmp_path, monkeypatch,
     animation = moving_cards(stored)
     monkeypatch.setattr(cghair_format, "read_animation", lambda p: animation, raising=False)
     view = ["--width", "48", "--height", "40", "--target", "0", "-0.1", "0", "--distance", "1"]
-    assert main(["render", str(path), "-o", str(tmp_path / "all.gif"), "--animate", *view]) == 0
+    assert main(["render", str(path), "-o", str(tmp_path / "all.gif"), "--animate", "--no-turn-sh", *view]) == 0
+    assert main(["render", str(path), "-o", str(tmp_path / "turned.gif"), "--animate", *view]) == 0
     frames = _gif_frames(tmp_path / "all.gif")
     assert len(frames) == animation.frames
     job = RenderJob(width=48, height=40, target=(0.0, -0.1, 0.0), distance=1.0, turntable=1)
@@ -156,6 +179,7 @@ def test_render_animate_reads_the_files_animation(gl_ctx, tmp_path, monkeypatch,
     assert still.max() > 40
     np.testing.assert_array_equal(frames[2], still)
     assert np.abs(frames[0] - still).mean() > 1  # not the rest pose
+    assert np.abs(_gif_frames(tmp_path / "turned.gif")[2] - still).max() > 8  # the SH turned
 
 
 @pytest.mark.parametrize(("args", "message"), [
@@ -163,7 +187,6 @@ def test_render_animate_reads_the_files_animation(gl_ctx, tmp_path, monkeypatch,
     (["--motion", "nod", "--frames", "x:3"], "A:B or N"),
     (["--motion", "nod", "--frames", "5:3"], "selects no frame"),
     (["--motion", "nod", "--animate", "--frames", "0:2"], "leave out --frames"),
-    (["--motion", "nod", "--turntable", "3"], "choose one"),
 ])
 def test_render_frames_bad_arguments(gl_ctx, tmp_path, capsys, args, message):
     from cghair_format.cli import main
@@ -176,12 +199,15 @@ def test_render_frames_bad_arguments(gl_ctx, tmp_path, capsys, args, message):
     assert not (tmp_path / "a.gif").exists()
 
 
-@pytest.mark.parametrize("simulate", [False, True])
-def test_bench_reports_the_animated_split(gl_ctx, simulate):
+@pytest.mark.parametrize(("simulate", "turn_sh"), [(False, True), (True, True), (False, False)])
+def test_bench_reports_the_animated_split(gl_ctx, simulate, turn_sh):
     from viewer.bench import benchmark, format_report
 
     result = benchmark(synthetic=60, points=11, width=64, height=48, frames=1, rasterizers=("compute",),
-                       budgets=(200,), reference_size=None, ctx=gl_ctx, animate=True, simulate=simulate)
+                       budgets=(200,), reference_size=None, ctx=gl_ctx, animate=True, simulate=simulate,
+                       turn_sh=turn_sh)
+    assert result["animated"]["turn_sh"] is turn_sh
+    assert ("SH turned with their segments" if turn_sh else "SH not turned") in format_report(result)
     runs = result["animated"]["runs"]
     assert [r["budget"] for r in runs] == [None, 200]
     for run in runs:
@@ -190,3 +216,28 @@ def test_bench_reports_the_animated_split(gl_ctx, simulate):
         assert run["animated_frame_s"] == pytest.approx(sum(run["animated"].values()))
         assert run["animated_over_static"] == pytest.approx(run["animated_frame_s"] / run["static_frame_s"])
     assert "animated/static" in format_report(result)
+
+
+@pytest.mark.parametrize("turn_sh", [True, False])
+def test_bench_compares_the_animated_appearance(gl_ctx, tmp_path, monkeypatch, asset, turn_sh):
+    """With the reference, bench-viewer --animate reports the PSNR of frames of the file's clip against the
+    native splatter on frame_gaussians(turn_sh=True): the viewer's frame close to it where it turns the SH,
+    about as far as the unturned SH where it does not."""
+    pytest.importorskip("torch", reason="the reference renders need torch")
+    from viewer.bench import benchmark, format_report
+
+    path = tmp_path / "hair.cgh"
+    cghair_format.write(asset, path)
+    animation = moving_cards(cghair_format.read(path))
+    monkeypatch.setattr(cghair_format, "read_animation", lambda p: animation, raising=False)
+    result = benchmark(path=str(path), width=64, height=48, frames=1, rasterizers=("compute",), budgets=(200,),
+                       reference_size=(80, 60), ctx=gl_ctx, animate=True, turn_sh=turn_sh)
+    rows = result["animated"]["psnr"]
+    assert [r["frame"] for r in rows] == [0, 1, 2]  # of the clip's 3 frames
+    assert "the viewer's frame | SH left unturned" in format_report(result)
+    for row in rows[1:]:
+        assert row["unturned_db"] < 60  # the hair turned: the SH left as at rest are visibly off
+        if turn_sh:
+            assert row["viewer_db"] > row["unturned_db"] + 10
+        else:
+            assert abs(row["viewer_db"] - row["unturned_db"]) < 3

@@ -148,6 +148,29 @@ def test_paused_clip_draws_once(gl_ctx, monkeypatch):
     assert "frame 1/2 (0.08 s, 12 fps) paused" in glfw.titles[-1]
 
 
+@pytest.mark.parametrize("turn_sh", [True, False])
+def test_turn_sh_reaches_the_renderer(gl_ctx, monkeypatch, turn_sh):
+    """``cgh view --no-turn-sh`` (``turn_sh=False``) plays the clip with the SH as at rest."""
+    from tests.viewer.test_viewer_animation import moving_cards
+    from viewer import app
+
+    monkeypatch.setitem(sys.modules, "glfw", _fake_glfw(64, 48))
+    monkeypatch.setattr(app, "create_window", lambda w, h, t: ("window", _Context(gl_ctx, w, h)))
+    turns = []  # whether each renderer made decodes SH turns
+    real_create = app.create_renderer
+
+    def create(*args, **kwargs):
+        renderer = real_create(*args, **kwargs)
+        turns.append(renderer.scene.geometry.turn is not None)
+        return renderer
+
+    monkeypatch.setattr(app, "create_renderer", create)
+    asset = example_asset(seed=9, strands=64, points=6, sh_degree=1)
+    assert app.run_viewer(asset, title="v", file_size=0, width=64, height=48, max_frames=1,
+                          animation=moving_cards(asset), turn_sh=turn_sh) == 1
+    assert turns == [turn_sh]
+
+
 def test_ctrl_drag_turns_the_live_head(gl_ctx, monkeypatch):
     """With --simulate every frame steps the solver and is drawn; ctrl-drag turns the head's target and
     leaves the camera where it was."""

@@ -143,6 +143,16 @@ def test_view_without_display_suggests_render(cgh_file, capsys, monkeypatch):
     assert rc == 2 and "--width must be between" in err
 
 
+@pytest.mark.parametrize(("flag", "turn_sh"), [((), True), (("--no-turn-sh",), False)])
+def test_view_passes_no_turn_sh(cgh_file, capsys, monkeypatch, flag, turn_sh):
+    from viewer import app
+
+    calls = []
+    monkeypatch.setattr(app, "run_viewer", lambda asset, **kwargs: calls.append(kwargs))
+    rc, _, _ = _run(capsys, "view", cgh_file, *flag)
+    assert rc == 0 and calls[0]["turn_sh"] is turn_sh
+
+
 def test_bench_viewer_small(gl_ctx, cgh_file, tmp_path, capsys):
     out = tmp_path / "bench.json"
     rc, stdout, _ = _run(capsys, "bench-viewer", "--synthetic", 200, "--points", 11, "--width", 64,

@@ -1,6 +1,8 @@
 #version 430
 // Rails and normals of every card strip vertex (cghair_format.geometry.card_mesh).
-// One invocation per spine point (card c, point k): writes vertices 2(c(M+1)+k) (left) and +1 (right).
+// One invocation per spine point (card c, point k): writes vertices 2(c(M+1)+k) (left) and +1 (right);
+// with u_turn (an animated scene turning its SH), also the card frame's turn from rest at the point,
+// F_now F_rest^T (cghair_format.animation.shading.segment_rotations), as a quaternion.
 layout(local_size_x = LOCAL_SIZE) in;
 #include "common.glsl"
 
@@ -9,9 +11,16 @@ layout(std430, binding = 1) readonly buffer Normal { vec4 normal[]; };    // [C*
 layout(std430, binding = 2) readonly buffer HalfWidth { float half_width[]; };  // [C*(M+1)]
 layout(std430, binding = 3) writeonly buffer MeshPos { vec4 mesh_pos[]; };  // [C*2(M+1)]
 layout(std430, binding = 4) writeonly buffer MeshNrm { vec4 mesh_nrm[]; };  // [C*2(M+1)]
+layout(std430, binding = 5) readonly buffer RestFrame { vec4 rest_frame[]; };  // [C*(M+1)*3] t, n, n x t
+// The card frames' turns, texel i (wxyz): a data image, which decode_geometry fetches as vectors.
+layout(rgba32f, binding = 0) uniform writeonly image2D u_card_turns;
 
 uniform uint u_count;     // C * (M+1)
 uniform uint u_points;    // M + 1
+uniform bool u_turn;      // write u_card_turns (else it and RestFrame are bound to nothing: not used)
+
+#include "tile_texel.glsl"
+#include "turn.glsl"
 
 vec3 safe_normalize(vec3 v) { return v / max(length(v), 1e-30); }
 
@@ -34,4 +43,10 @@ void main() {
     mesh_pos[2u * i + 1u] = vec4(c + w * b, 1.0);
     mesh_nrm[2u * i] = vec4(n, 0.0);
     mesh_nrm[2u * i + 1u] = vec4(n, 0.0);
+    if (u_turn) {  // the frame [t, n, n x t] of shading.spine_frames, n made normal to t
+        vec3 nt = safe_normalize(n - t * dot(n, t));
+        mat3 now = mat3(t, nt, cross(nt, t));
+        mat3 rest = mat3(rest_frame[3u * i].xyz, rest_frame[3u * i + 1u].xyz, rest_frame[3u * i + 2u].xyz);
+        imageStore(u_card_turns, texel(int(i)), mat_to_quat(now * transpose(rest)));
+    }
 }

@@ -3,7 +3,10 @@
 // Gaussians' means, rotations and scales (cghair_format.gaussians.segment_frames).
 // One invocation per Gaussian g = s (P-1) + i, for segment p_i -> p_i+1 of strand s; with u_indexed
 // (an animated frame at a splat budget, viewer/lod.py) only the strands lod_strands[u_list_base...]
-// are decoded, as the preprocess reads them.
+// are decoded, as the preprocess reads them. With u_turn (an animated scene turning its SH), also each
+// segment's rotation from rest (cghair_format.animation.shading.segment_rotations): its card frame's
+// turn at the spine sample nearest it (card_mesh), then the smallest rotation from that-turned rest
+// direction to its direction now; the preprocess evaluates its SH at the view direction turned back.
 layout(local_size_x = LOCAL_SIZE) in;
 #include "common.glsl"
 
@@ -18,6 +21,12 @@ layout(std430, binding = 6) readonly buffer LodStrands { uint lod_strands[]; }; 
 layout(rgba32f, binding = 0) uniform writeonly image2D u_means;      // xyz, opacity
 layout(rgba32f, binding = 1) uniform writeonly image2D u_rotations;  // wxyz
 layout(rgba32f, binding = 2) uniform writeonly image2D u_scales;     // xyz, 0
+layout(rgba32f, binding = 3) uniform writeonly image2D u_turns;      // wxyz, where u_turn
+// Per Gaussian, fixed at load (viewer/decode.py): its rest direction and the spine sample it turns with.
+uniform sampler2D u_rest;  // xyz, k
+uniform sampler2D u_card_turns;  // texel c (M+1) + k: card c's frame turn at spine sample k (card_mesh)
+
+uniform bool u_turn;  // write u_turns (else it, u_rest and u_card_turns are bound to nothing: not read)
 
 uniform uint u_count;       // Gaussians decoded: G, or this chunk's drawn ones where u_indexed
 uniform bool u_indexed;
@@ -27,6 +36,7 @@ uniform uint u_segments;    // card segments M
 uniform float u_thickness;  // d
 
 #include "tile_texel.glsl"
+#include "turn.glsl"
 
 vec3 strand_point(uint s, uint j) {
     uint o = 3u * (s * u_points + j);
@@ -65,4 +75,10 @@ void main() {
     imageStore(u_means, at, vec4(0.5 * (p0 + p1), opacity[g]));
     imageStore(u_rotations, at, q / length(q));
     imageStore(u_scales, at, vec4(u_thickness, u_thickness, 0.5 * len, 0.0));
+    if (u_turn) {
+        vec4 rest = texelFetch(u_rest, at, 0);
+        vec4 card = texelFetch(u_card_turns, texel(int(strand_card[s] * (u_segments + 1u) + uint(rest.w))), 0);
+        vec3 now = len > 0.0 ? d : vec3(0.0);  // as the CPU's: no bend for a segment of zero length
+        imageStore(u_turns, at, quat_mul(smallest_turn(quat_rotate(card, rest.xyz), now), card));
+    }
 }

@@ -31,6 +31,11 @@ uniform sampler2D u_means;
 uniform sampler2D u_rotations;
 uniform sampler2D u_scales;
 uniform sampler2D u_sh;
+// An animated frame's segment rotations from rest, texel g (wxyz, decode_geometry), where u_turn_sh:
+// the SH turned by R give at view direction v the colour the rest SH give at R^T v (exact: each band
+// turns within itself), so the view direction is turned back instead of the 16 coefficients forward.
+uniform sampler2D u_turns;
+uniform bool u_turn_sh;
 
 uniform uint u_base;
 uniform uint u_count;
@@ -180,7 +185,11 @@ void main() {
     vec4 ax = e1 * e2 < disc * disc ? vec4(v1 * e1, vec2(-v1.y, v1.x) * e2) : vec4(disc, 0.0, 0.0, disc);
     vec3 rgb;
     if (u_color_mode == 1) rgb = group_color(card_group[strand_card[g / u_segments]]);
-    else rgb = eval_sh(int((g - u_base) * u_sh_texels), normalize(mo.xyz - u_cam_center));
+    else {
+        vec3 view = normalize(mo.xyz - u_cam_center);
+        if (u_turn_sh) view = view * quat_to_mat(texelFetch(u_turns, at, 0));  // R^T v
+        rgb = eval_sh(int((g - u_base) * u_sh_texels), view);
+    }
     if (u_write_buffers) {
         center[slot] = vec4(m2, t.z, radius);
         conic[slot] = vec4(cc / det, -cb / det, ca / det, mo.w);
