@@ -78,20 +78,23 @@ def spine_frames(spine: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return t, r
 
 
-def normal_angles(normal: np.ndarray, spine: np.ndarray, bits: int) -> np.ndarray:
-    """Card normals ``[C, M+1, 3]`` as angles about the spine (:func:`spine_frames`), in units of
-    ``2 pi / 2^bits``, unwrapped along each card so that neighbouring angles differ by less than half
-    a turn (the normals' component along the spine is dropped: the card builder's have none)."""
-    t, r = spine_frames(spine)
+def normal_angles(normal: np.ndarray, spine: np.ndarray, bits: int,
+                  frames: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+    """Card normals ``[C, M+1, 3]`` as angles about the spine (:func:`spine_frames`, or ``frames``, the
+    spine's where the caller has them), in units of ``2 pi / 2^bits``, unwrapped along each card so that
+    neighbouring angles differ by less than half a turn (the normals' component along the spine is
+    dropped: the card builder's have none)."""
+    t, r = spine_frames(spine) if frames is None else frames
     n = np.asarray(normal, np.float64)
     theta = np.arctan2(dot(n, cross(t, r)), dot(n, r))
     return np.unwrap(theta, axis=1) * (2**bits / (2 * np.pi))
 
 
-def angle_normals(angle: np.ndarray, spine: np.ndarray, bits: int) -> np.ndarray:
+def angle_normals(angle: np.ndarray, spine: np.ndarray, bits: int,
+                  frames: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Inverse of :func:`normal_angles`: ``normalize(cos a r_k + sin a (t_k x r_k))``, ``a`` the angle
     ``angle / 2^bits`` of a turn (:func:`turn_cos_sin`), float64."""
-    t, r = spine_frames(spine)
+    t, r = spine_frames(spine) if frames is None else frames
     c, s = turn_cos_sin(np.asarray(angle, np.float64) / 2.0**bits)
     return _normalize(c[..., None] * r + s[..., None] * cross(t, r))
 

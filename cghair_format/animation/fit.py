@@ -14,7 +14,10 @@ solved by banded Cholesky. Per frame :func:`fit_frames`
    its strip (a card of one strand turning about it, the tip past its strands' ends) moves rigidly;
 2. measures, with a free fit (the prior all but off), how far each card's strands are from moving as
    one strip (:func:`_inconsistency`); where they stray, rails that few points pin keep the rigid
-   strip's shape (:func:`_add_shape`), so strands pulling apart at a sparse tip do not stretch it;
+   strip's shape (:func:`_add_shape`), so strands pulling apart at a sparse tip do not stretch it; and
+   carries a card's tail (the spine points past the last whose rails the data hold) with the free
+   fit's last held points instead of the whole card (:func:`_tail_prior`): a bent card's tip follows
+   the part next to it, and a tail far off no longer folds the tip back and flips its normal;
 3. solves :data:`ROUNDS` times, each with ``l`` from the last normals and the last solution as the prior
    (iterated Tikhonov: the pull toward the prior of an unknown the data determine with weight ``s``
    shrinks by ``lambda / (lambda + s)`` a round, an undetermined one stays at the prior), projecting each
@@ -57,6 +60,8 @@ INCONSISTENT = 0.2  # from EXACT to EXACT + this, the rest shape's weight grows 
 SUPPORT = 0.25  # ...on the rails the data weigh less than this share of the card's mean
 PAIRS = np.triu_indices(5)  # the 15 pairs (i <= j) of a point's 5 unknowns
 FLAT = 1e-6  # a card's strands whose rest spread has a second axis under this share of the first are on a line
+HELD = 0.05  # a spine point is held by the data where each rail weighs this share of the card's mean rail
+ANCHOR = 3  # held spine points (both rails each) before a card's tail that carry its rest tail (_tail_prior)
 
 
 class FitError(CghError, ValueError):
@@ -96,6 +101,7 @@ class _Layout:
     order: np.ndarray  # [N, 5] the order of each point's unknowns that sorts them (``sorted`` below)
     sorted: np.ndarray  # [N, 5] each point's unknowns, ascending
     band: np.ndarray  # [N, 15] where each pair of them (i <= j) adds to the upper band [6, n], flat
+    anchor: np.ndarray  # [C] the last spine point whose two rails the data hold (:data:`HELD`), -1: none
 
 
 def _layout(asset: HairAsset) -> _Layout:
@@ -119,8 +125,11 @@ def _layout(asset: HairAsset) -> _Layout:
     ordered = np.take_along_axis(cols, order, 1)
     size = c_count * unknowns
     band = (5 - (ordered[:, PAIRS[1]] - ordered[:, PAIRS[0]])) * size + ordered[:, PAIRS[1]]
+    rail = np.bincount(cols[:, :3].ravel(), (bary * bary).ravel(), size).reshape(c_count, m + 1, 3)[..., :2]
+    held = (rail >= HELD * rail.mean(axis=(1, 2))[:, None, None]).all(-1)  # [C, M+1]
+    anchor = np.where(held.any(1), m - np.argmax(held[:, ::-1], axis=1), -1)
     return _Layout((s_idx, p_idx), card, cols, bary, np.stack([1 - f, f], 1), uvd[:, 2] / scale[card], scale,
-                   unknowns, uvd, order, ordered, band)
+                   unknowns, uvd, order, ordered, band, anchor)
 
 
 def _normal_lengths(lay: _Layout, normal: np.ndarray) -> np.ndarray:
@@ -426,11 +435,45 @@ def _fit_frame(lay: _Layout, rest: Cards, rest_points: np.ndarray, now: np.ndarr
         free = _solve(lay, now, l_point, rigid, rigid, np.zeros(rest.count), FREE)
         normal = _project(lay, free, rest, prior_normal)[1]
     shape = _inconsistency(lay, rest, free, l_point, now)
+    rigid, prior_normal = _tail_prior(lay, rest, free, rigid, prior_normal)
     prior = rigid
     for _ in range(ROUNDS):
         prior = _solve(lay, now, _normal_lengths(lay, normal), prior, rigid, shape)
         spine, normal = _project(lay, prior, rest, prior_normal)
     return _refine(lay, rest, now, spine, normal, rigid, shape, refine) if refine else (spine, normal)
+
+
+def _tail_prior(lay: _Layout, rest: Cards, free: np.ndarray, rigid: np.ndarray, prior_normal: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """The rigid prior (unknowns ``[C * 3(M+1), 3]`` and normals ``[C, M+1, 3]``) with each card's tail, the
+    spine points past ``lay.anchor``, carried instead by the rigid motion that takes the rest rails of the
+    :data:`ANCHOR` points up to the anchor onto the free fit's there. The data do not fix a tail (a tip
+    past its strands' ends, or one rail of it): it follows the part of the card next to it, which the data
+    hold, not the whole card, whose motion differs from a bent or whipping tip's by as much as the tip's
+    length; a tail far off pulls the tangent and normal of the last points the strands do reach."""
+    c_count, m1 = rest.spine.shape[:2]
+    tail = np.flatnonzero((lay.anchor >= ANCHOR - 1) & (lay.anchor < m1 - 1))
+    if not len(tail):
+        return rigid, prior_normal
+    window = lay.anchor[tail, None] + np.arange(1 - ANCHOR, 1)  # [T, ANCHOR]
+    rest_rails = card_rails(rest)[tail]  # [T, M+1, 2, 3]
+    src = np.take_along_axis(rest_rails, window[..., None, None], 1).reshape(len(tail), -1, 3)
+    fitted = free.reshape(c_count, m1, 3, 3)[tail]
+    dst = np.take_along_axis(fitted[:, :, :2], window[..., None, None], 1).reshape(len(tail), -1, 3)
+    cs, cd = src.mean(1, keepdims=True), dst.mean(1, keepdims=True)
+    u, _, vt = np.linalg.svd(np.swapaxes(src - cs, 1, 2) @ (dst - cd))
+    d = np.ones((len(tail), 3))
+    d[:, 2] = np.where(np.linalg.det(u @ vt) < 0, -1.0, 1.0)
+    rot = np.swapaxes((u * d[:, None, :]) @ vt, 1, 2)  # [T, 3, 3]
+    shift = cd[:, 0] - np.einsum("tij,tj->ti", rot, cs[:, 0])
+    after = np.arange(m1)[None, :] > lay.anchor[tail, None]  # [T, M+1]
+    rails = np.einsum("tij,tkrj->tkri", rot, rest_rails) + shift[:, None, None]
+    normal = np.einsum("tij,tkj->tki", rot, rest.normal[tail].astype(np.float64))
+    carried = np.concatenate([rails, (normal * lay.scale[tail, None, None])[:, :, None]], 2)
+    out, prior_normal = rigid.reshape(c_count, m1, 3, 3).copy(), prior_normal.copy()
+    out[tail] = np.where(after[..., None, None], carried, out[tail])
+    prior_normal[tail] = np.where(after[..., None], normal, prior_normal[tail])
+    return out.reshape(-1, 3), prior_normal
 
 
 def _inconsistency(lay: _Layout, rest: Cards, solution: np.ndarray, l_point: np.ndarray, now: np.ndarray

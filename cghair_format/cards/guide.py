@@ -10,6 +10,7 @@ from ._util import normalize, project_to_spines
 
 DENSE_PER_SEGMENT = 8  # spline samples per card segment for the arc-length resampling
 END_MARGIN = 0.01  # extra length at each end, as a fraction of the guide's length
+COLLAPSED = 0.25  # a cluster's mean strand spanning less than this share of its strands' root-to-tip has collapsed
 FOLD_RETRIES = 2  # smoother refits of a folded guide (half the coefficients each), then no extension
 
 
@@ -73,7 +74,7 @@ def guide_spines(points: np.ndarray, labels: np.ndarray, n_clusters: int, segmen
     Also returns each point's spine parameter ``[S * P]`` on its extended spine (segment units):
     its nearest-point projection, carried over by arc length.
     """
-    centroids = cluster_centroids(points, labels, n_clusters)
+    centroids = _uncollapsed(cluster_centroids(points, labels, n_clusters), points, labels)
     p = points.shape[1]
     n_coef = spline_coefficients(p, segments)
     spines, s = _fit(centroids, points, labels, segments, n_coef, True, show_progress)
@@ -92,6 +93,27 @@ def guide_spines(points: np.ndarray, labels: np.ndarray, n_clusters: int, segmen
         idx = (strands[:, None] * p + np.arange(p)[None, :]).ravel()
         s[idx] = sub_s
     return spines, s
+
+
+def _chords(curves: np.ndarray) -> np.ndarray:
+    """Root-to-tip distances ``[N]`` of curves ``[N, P, 3]``."""
+    return np.linalg.norm(curves[:, -1] - curves[:, 0], axis=-1)
+
+
+def _uncollapsed(centroids: np.ndarray, points: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """``centroids`` with each one that its strands cancel out replaced by its member strand nearest it.
+    Strands that run every way from a cluster spread over the scalp (one card for a short crop) have
+    a mean whose root-to-tip distance is a small share of theirs (:data:`COLLAPSED`): a curve near no
+    strand, from which the card could not reach them. Curls cancel too, but along the strands' common
+    direction, which the root-to-tip distance keeps."""
+    c = len(centroids)
+    counts = np.maximum(np.bincount(labels, minlength=c), 1)
+    mean_chord = np.bincount(labels, _chords(points), c) / counts
+    for k in np.flatnonzero(_chords(centroids) < COLLAPSED * mean_chord):
+        members = np.flatnonzero(labels == k)
+        far = ((points[members] - centroids[k]) ** 2).sum(axis=(1, 2))
+        centroids[k] = points[members[np.argmin(far)]]
+    return centroids
 
 
 def _folds(spines: np.ndarray) -> np.ndarray:

@@ -15,8 +15,9 @@ Strands that leave their card's strip are handled by widening the card at the no
 and extending its end nodes along the spine, then solving again (a few rounds). Inside the strip
 the mapping is continuous; outside it the extrapolated half-planes change direction at segment
 ends and can leave gaps, so points without a solution near the strip widen their card too. A point
-that still has none takes the best exact solution however far off the strip (never observed on
-the real models at the default settings; counted in ``CardBuild.outside_strip``).
+that still has none takes the best exact solution up to 64 strip widths off the strip (never observed
+on the real models at the default settings; counted in ``CardBuild.outside_strip``), or else keeps its
+nearest-spine coordinates (``CardBuild.unsolved_points``).
 """
 
 from __future__ import annotations
@@ -41,6 +42,9 @@ MAX_WIDEN = 4.0  # per round: a card widens at most 4x ...
 MAX_EXTEND = 1.0  # ... and each end segment grows by at most its own length ...
 MAX_END_SEGMENT = 3.0  # ... up to this many times the card's mean segment length
 ROUNDS = 6
+LAST_RESORT_OUTSIDE = 64.0  # strip widths (or end segments) off the strip: beyond, an "exact" solution is a
+# near-degenerate root (u, v, delta of 1e7 and more, past what the format holds: asset.MAX_CARD_COORDINATE)
+# and the point keeps its nearest-spine coordinates, counted as unsolved
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -228,7 +232,7 @@ def fit_strip(cards: Cards, points: np.ndarray, card: np.ndarray, s: np.ndarray,
         res, ok = solve_uvd(current, points[redo], card[redo], s_redo, show_progress=show_progress)
         uvd[redo], solved[redo] = res, ok
     lost = np.flatnonzero(~solved)
-    if len(lost):  # last resort: any exact solution, however far off the strip, beats an approximation
-        res, ok = solve_uvd(current, points[lost], card[lost], s[lost], retry_outside=np.inf)
+    if len(lost):  # last resort: an exact solution far off the strip beats an approximation, within reason
+        res, ok = solve_uvd(current, points[lost], card[lost], s[lost], retry_outside=LAST_RESORT_OUTSIDE)
         uvd[lost[ok]], solved[lost[ok]] = res[ok], True
     return current, uvd, solved, rounds

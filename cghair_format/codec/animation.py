@@ -21,10 +21,11 @@ from .. import container
 from ..animation.clip import Animation
 from ..asset import MAX_LENGTH, Cards
 from ..errors import AssetError, InvalidContentError, LimitError
-from ..geometry import angle_normals, lengths, normal_angles, strand_points
+from ..geometry import angle_normals, normal_angles, spine_frames
 from ..limits import FLOAT, ReadLimits, animation_bytes
 from ..profiles import Profile
 from ..streams import StreamReader, StreamWriter
+from .animation_error import PointBoxes, animation_point_error
 from .layout import ANIM_CHUNK
 
 BLOCK_ENTRY = struct.Struct("<IIB3x")  # stored size, raw size, codec (0 raw, 1 zstd), 3 zero bytes
@@ -82,15 +83,18 @@ def encode_within(animation: Animation, rest: Cards, prof: Profile, diag: float,
     """META's ``animation``, ANIM's payload and the report, at the largest step the search finds (from
     :func:`animation_meta`'s, smaller while some strand point, ``uvd`` on ``strand_card``, lies farther than
     the profile's tolerance from its place on the input frames): a spine's error turns its tangent, and
-    so the card's rails, by more where a segment is short against the card's width."""
+    so the card's rails, by more where a segment is short against the card's width. Each step tried is
+    measured exactly (:func:`.animation_error.animation_point_error`); only the one kept is compressed."""
     tol = prof.position_tolerance * max(diag, 1e-12)
     meta = animation_meta(animation, rest, prof, diag)
+    boxes = PointBoxes.of(uvd, strand_card, rest.count, rest.segments)
     for _ in range(MAX_TIGHTENINGS):
-        payload, decoded = encode_animation(animation, rest, meta, prof.zstd_level)
-        error = animation_point_error(uvd, strand_card, animation, decoded, rest)
+        blocks, decoded = encode_blocks(animation, rest, meta)
+        error = animation_point_error(boxes, animation, decoded, rest, uvd)
         if prof.lossless or error <= tol:
             break
         meta = animation_meta(animation, rest, prof, diag, meta["step"] * TIGHTEN_TARGET * tol / error)
+    payload = _pack_blocks(blocks, prof.zstd_level)
     report = AnimationReport(animation.frames, animation.fps, len(payload), meta.get("step"), meta.get("normal_bits"),
                              error)
     return meta, payload, report
@@ -99,10 +103,16 @@ def encode_within(animation: Animation, rest: Cards, prof: Profile, diag: float,
 def encode_animation(animation: Animation, rest: Cards, meta: dict, level: int) -> tuple[bytes, Animation]:
     """ANIM's payload for ``animation`` of the decoded ``rest`` cards as META's ``animation`` object
     (``meta``) says, and the frames a decoder will get from it."""
+    blocks, decoded = encode_blocks(animation, rest, meta)
+    return _pack_blocks(blocks, level), decoded
+
+
+def encode_blocks(animation: Animation, rest: Cards, meta: dict) -> tuple[list[bytes], Animation]:
+    """:func:`encode_animation`'s blocks before compression, and the frames a decoder will get."""
     g = meta["keyframe_interval"]
     if "step" in meta:
-        spine_q, angles = quantize_frames(animation, meta["step"], meta["normal_bits"])
-        decoded = decode_quantized(spine_q, angles, meta["step"], meta["normal_bits"])
+        spine_q, angles, frames = quantize_frames(animation, meta["step"], meta["normal_bits"])
+        decoded = decode_quantized(spine_q, angles, meta["step"], meta["normal_bits"], frames)
         base = rest_integers(rest.spine, meta["step"])
         blocks = [_quantized_block(spine_q[f:f + g], angles[f:f + g], base, meta["normal_bits"])
                   for f in range(0, animation.frames, g)]
@@ -114,22 +124,26 @@ def encode_animation(animation: Animation, rest: Cards, meta: dict, level: int) 
             w.array(decoded[0][f:f + g], shuffle=True)
             w.array(decoded[1][f:f + g], shuffle=True)
             blocks.append(w.getvalue())
-    out = Animation(decoded[0], decoded[1], animation.fps, animation.start, animation.source)
-    return _pack_blocks(blocks, level), out
+    return blocks, Animation(decoded[0], decoded[1], animation.fps, animation.start, animation.source)
 
 
-def quantize_frames(animation: Animation, qa: float, bits: int) -> tuple[np.ndarray, np.ndarray]:
+def quantize_frames(animation: Animation, qa: float, bits: int) -> tuple[np.ndarray, np.ndarray, tuple]:
     """Each frame's spine integers ``[F, C, M+1, 3]`` and normal angles ``[F, C, M+1]`` in ``0 .. 2^bits-1``,
-    the angles about the spine as a decoder will have it."""
+    the angles about the spine as a decoder will have it; and that spine's frames (:func:`spine_frames`
+    of every frame's cards, as one list of cards), which :func:`decode_quantized` takes again."""
     spine_q = np.rint(animation.spine.astype(np.float64) / qa).astype(np.int64)
     turn = 1 << bits
     m1 = spine_q.shape[2]  # (the cards of every frame, as one list of cards)
-    angles = normal_angles(animation.normal.reshape(-1, m1, 3), (spine_q * qa).reshape(-1, m1, 3), bits)
-    return spine_q, np.rint(angles).astype(np.int64).reshape(spine_q.shape[:-1]) % turn
+    spine = (spine_q * qa).reshape(-1, m1, 3)
+    frames = spine_frames(spine)
+    angles = normal_angles(animation.normal.reshape(-1, m1, 3), spine, bits, frames)
+    return spine_q, np.rint(angles).astype(np.int64).reshape(spine_q.shape[:-1]) % turn, frames
 
 
-def decode_quantized(spine_q: np.ndarray, angles: np.ndarray, qa: float, bits: int) -> tuple[np.ndarray, np.ndarray]:
-    """Spine and normals (float32) of frames given as integers (spec 4.6's last step)."""
+def decode_quantized(spine_q: np.ndarray, angles: np.ndarray, qa: float, bits: int, frames: tuple | None = None
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Spine and normals (float32) of frames given as integers (spec 4.6's last step); ``frames``: the
+    spine's frames where the caller has them (:func:`quantize_frames`)."""
     spine = spine_q.astype(np.float64) * qa
     with np.errstate(over="ignore", invalid="ignore"):
         spine32 = spine.astype(np.float32)
@@ -137,7 +151,7 @@ def decode_quantized(spine_q: np.ndarray, angles: np.ndarray, qa: float, bits: i
         raise InvalidContentError(f"an animation frame's spine lies beyond {MAX_LENGTH:g} scene units (a corrupt "
                                   "step or residuals)", chunk=ANIM_CHUNK)
     m1 = spine.shape[2]
-    normal = angle_normals(angles.reshape(-1, m1), spine.reshape(-1, m1, 3), bits).reshape(spine.shape)
+    normal = angle_normals(angles.reshape(-1, m1), spine.reshape(-1, m1, 3), bits, frames).reshape(spine.shape)
     return spine32, normal.astype(np.float32)
 
 
@@ -343,19 +357,6 @@ def _decompress(body: bytes, raw: int, fail) -> bytes:
     if len(out) != raw or extra:
         fail(f"a block decompresses to {len(out) + len(extra)}{'+' if extra else ''} bytes, {raw} declared")
     return out
-
-
-def animation_point_error(uvd: np.ndarray, strand_card: np.ndarray, source: Animation, decoded: Animation,
-                          rest: Cards) -> float:
-    """The largest distance, over every frame, of a strand point on the decoded frame from the same point
-    (its ``uvd``) on the input frame."""
-    worst = 0.0
-    for f in range(source.frames):
-        a = strand_points(source.cards(rest, f), strand_card, uvd)
-        b = strand_points(decoded.cards(rest, f), strand_card, uvd)
-        worst = max(worst, float(lengths(a.astype(np.float64) - b).max(initial=0.0)))
-    return worst
-
 
 
 def animation_info(meta: dict, anim: container.ChunkInfo | None) -> dict | None:

@@ -11,8 +11,10 @@ from fit_helpers import bent, known_animation
 
 from cghair_format.animation import Animation, frame_points
 from cghair_format.animation.fit import FitError, fit_frames, residual_lines
+from cghair_format.animation.tracks import axis_rotation
+from cghair_format.asset import Cards
 from cghair_format.examples import example_asset, with_point_counts
-from cghair_format.geometry import bounding_diagonal
+from cghair_format.geometry import bounding_diagonal, spine_tangents
 
 
 @pytest.fixture(scope="module")
@@ -86,6 +88,34 @@ def test_variable_point_counts_fit_their_own_points(asset):
     assert linear.max[0] < 1e-6 and linear.max.max() > 3e-2
     _, res = fit_frames(short, frames, refine=2)
     assert res.max[0] < 1e-6 and res.max.max() < 5e-3 and res.mean.max() < 2e-5
+
+
+def _kinked(cards: Cards, angle: float) -> Cards:
+    """``cards`` with every spine point past the second turned by ``angle`` about the second, across the
+    card: the part past the bend moves rigidly, and differently from the card as a whole."""
+    spine, normal = cards.spine.astype(np.float64), cards.normal.astype(np.float64)
+    for c in range(cards.count):
+        axis = np.cross(spine[c, 2] - spine[c, 1], normal[c, 1])
+        rot = axis_rotation(axis / np.linalg.norm(axis), angle)
+        spine[c, 2:] = (spine[c, 2:] - spine[c, 1]) @ rot.T + spine[c, 1]
+        normal[c, 2:] = normal[c, 2:] @ rot.T
+    t = spine_tangents(spine)  # (the normal at the bend, made perpendicular to its new tangent)
+    normal -= (normal * t).sum(-1, keepdims=True) * t
+    normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
+    return Cards(spine.astype(np.float32), normal.astype(np.float32), cards.half_width, cards.group)
+
+
+def test_a_tail_past_the_strands_follows_the_part_next_to_it(asset):
+    """Strands reach three quarters of their cards; the cards bend near the root. The tail past the
+    strands' ends moves with the bent part, not with the whole card (whose rigid fit turns half as far):
+    carried with the whole card, it folded the tip back, 5e-3 of the diagonal off at the points."""
+    uvd = asset.uvd.copy()
+    uvd[..., 0] *= 0.75
+    short = replace(asset, uvd=uvd)
+    truth = Animation.of_frames([short.cards, _kinked(short.cards, 0.5), _kinked(short.cards, 1.0)], fps=30.0)
+    fit, res = fit_frames(short, _frames(short, truth))
+    assert res.max.max() < 1e-4
+    assert np.abs(fit.spine - truth.spine).max() / bounding_diagonal(truth.spine) < 1e-3
 
 
 def test_strand_ids_map_the_source_order(asset):

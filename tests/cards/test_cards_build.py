@@ -94,6 +94,29 @@ def test_strands_of_varying_length_and_colours_are_resampled():
     assert b.asset.uvd.shape == (4, 16, 3) and b.error.max_rel <= MAX_TARGET
 
 
+def test_a_point_with_only_a_wild_exact_solution_keeps_an_approximation():
+    """Found by the batch run: one curly point's only exact solution lies 1.6e8 strip widths off its card
+    (a near-degenerate root), which the last resort took; the asset then failed its own check (u, v
+    beyond +-1000) and could not be encoded. It keeps its nearest-spine coordinates instead."""
+    from cghair_format.synth import synthesize
+
+    build = build_cards(synthesize("curly", 241, 14, seed=204), n_cards=8, progress=False)
+    assert np.abs(build.asset.uvd[..., :2]).max() <= 1.05
+    assert build.unsolved_points >= 1 and build.error.max_rel < 0.1
+    cgh.encode(build.asset, "compact")
+
+
+def test_a_cluster_whose_strands_cancel_out_is_guided_by_one_of_them():
+    """Found by the batch run: one card for a short crop, whose strands run every way from the scalp.
+    Their mean strand spanned 0.17 of their root-to-tip, near none of them: 142 points found no place on
+    the card, 0.14 of the diagonal off. A strand of the cluster guides the card instead."""
+    from cghair_format.synth import synthesize
+
+    build = build_cards(synthesize("short", 45, 20, seed=46), n_cards=1, progress=False)
+    assert build.unsolved_points == 0 and build.error.max_rel <= MAX_TARGET
+    cgh.encode(build.asset, "compact")
+
+
 @pytest.mark.parametrize("kwargs, message", [
     ({"n_cards": 0}, "n_cards"), ({"n_groups": 0}, "n_groups"), ({"segments": 0}, "segments"),
     ({"points": 3}, "points"), ({"n_cards": 2.5}, "n_cards"), ({"sh_degree": 4}, "sh_degree"),
