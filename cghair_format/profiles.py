@@ -25,8 +25,9 @@ class Profile:
     # (0.35: the error of the 4-bit levels per row it replaced)
     weight_step: float = 0.35
     # the MLP layers' fraction, where it differs (None: weight_step). The MLP is a fixed cost whatever the
-    # strand count; compact 0.7 was chosen of 0.35 ... 2 on a small model's validation views (0.03 dB, MLPW
-    # 27 % smaller) and costs 0.04 dB on its test views (docs/compression.md, "MLP weights of small files")
+    # strand count; compact 0.7 was chosen of 0.35 ... 1.4 on two small models' validation views (0.03 dB,
+    # MLPW 26-27 % smaller) and costs 0.04-0.13 dB on their test views (docs/compression.md, "MLP weights of
+    # small files")
     mlp_step: float | None = None
     normal_bits: int = 8  # card normals: angles about the spine in 2^bits steps a turn (8..24), error pi / 2^bits rad
     # hierarchical predictor: coarse samples every this many points, the one of these that codes the
