@@ -143,7 +143,7 @@ def test_a_profile_the_writer_cannot_follow_is_refused_when_made():
     from dataclasses import replace
 
     for change in ({"normal_bits": 30}, {"base_strides": (12,)}, {"position_tolerance": float("nan")},
-                   {"logit_levels": 0}):
+                   {"logit_levels": 0}, {"mlp_step": 0.0}):
         with pytest.raises(ValueError, match="profile 'compact': "):
             replace(cgh.PROFILES["compact"], **change)
 
