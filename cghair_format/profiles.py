@@ -24,6 +24,11 @@ class Profile:
     # codebook and MLP weights (and biases): integers times a step of this fraction of each array's RMS
     # (0.35: the error of the 4-bit levels per row it replaced)
     weight_step: float = 0.35
+    # the MLP layers' fraction, where it differs (None: weight_step). The MLP is a fixed cost whatever the
+    # strand count; compact 0.7 was chosen of 0.35 ... 1.4 on two small models' validation views (0.03 dB,
+    # MLPW 26-27 % smaller) and costs 0.04-0.13 dB on their test views (docs/compression.md, "MLP weights of
+    # small files")
+    mlp_step: float | None = None
     normal_bits: int = 8  # card normals: angles about the spine in 2^bits steps a turn (8..24), error pi / 2^bits rad
     # hierarchical predictor: coarse samples every this many points, the one of these that codes the
     # strand points of a sample of cards smaller (the first codes the cards while the writer chooses)
@@ -39,6 +44,7 @@ class Profile:
             ("logit_levels must be in [1, 2^24]", 1 <= self.logit_levels <= 1 << 24),
             ("logit_floor must be in [-1e6, 0]", -1e6 <= self.logit_floor <= 0),
             ("weight_step must be a positive number", 0 < self.weight_step < math.inf),
+            ("mlp_step must be None or a positive number", self.mlp_step is None or 0 < self.mlp_step < math.inf),
             ("normal_bits must be in [8, 24]", 8 <= self.normal_bits <= 24),
             ("base_strides must list powers of two in [2, 256]",
              len(self.base_strides) > 0 and all(2 <= b <= 256 and not b & (b - 1) for b in self.base_strides)),
@@ -50,6 +56,11 @@ class Profile:
     def opacity_tolerance(self) -> float:
         return 0.5 / self.opacity_scale
 
+    @property
+    def mlp_fraction(self) -> float:
+        """The MLP layers' step, as a fraction of each layer's RMS."""
+        return self.weight_step if self.mlp_step is None else self.mlp_step
+
 
 PROFILES: dict[str, Profile] = {
     "lossless": Profile("lossless", lossless=True, zstd_level=9,
@@ -57,8 +68,9 @@ PROFILES: dict[str, Profile] = {
     "high": Profile("high", position_tolerance=2e-5, opacity_scale=1023.5, logit_levels=8191,
                     logit_floor=-24.0, weight_step=0.02, normal_bits=12,
                     description="points within 2e-5 of the bbox diagonal, opacity within 1/2047"),
-    "compact": Profile("compact", description="the default: points within 2e-4 of the bbox diagonal, "
-                                              "opacity within 1/15, weights on steps of 0.35 RMS"),
+    "compact": Profile("compact", mlp_step=0.7,
+                       description="the default: points within 2e-4 of the bbox diagonal, opacity within 1/15, "
+                                   "codebooks on steps of 0.35 RMS, MLP weights 0.7 RMS"),
 }
 DEFAULT_PROFILE = "compact"
 # what a trained file's quantized opacities may give up: the Gaussians that together carry this share of the

@@ -211,11 +211,14 @@ def steps_decode(q: np.ndarray, step: float) -> np.ndarray:
     return np.asarray(q, np.float64) * step
 
 
-def weight_steps(codebooks: np.ndarray, layers: list[tuple[np.ndarray, np.ndarray]], fraction: float) -> list[float]:
-    """One step per array: the codebooks', then each MLP layer's (:func:`weight_step` of its weights,
-    the last layer's in :data:`COLOUR_BASIS`); a layer's biases take a sixteenth of its step."""
+def weight_steps(codebooks: np.ndarray, layers: list[tuple[np.ndarray, np.ndarray]], fraction: float,
+                 mlp_fraction: float | None = None) -> list[float]:
+    """One step per array: the codebooks' (:func:`weight_step` at ``fraction``), then each MLP layer's
+    (at ``mlp_fraction``, default ``fraction``, of its weights, the last layer's in :data:`COLOUR_BASIS`);
+    a layer's biases take a sixteenth of its step."""
+    mlp = fraction if mlp_fraction is None else mlp_fraction
     return [weight_step(codebooks, fraction)] + [
-        weight_step(to_colour_basis(w) if j == len(layers) - 1 else w, fraction) for j, (w, _) in enumerate(layers)]
+        weight_step(to_colour_basis(w) if j == len(layers) - 1 else w, mlp) for j, (w, _) in enumerate(layers)]
 
 
 def weights_encode(steps: list[float], codebooks: np.ndarray, layers: list[tuple[np.ndarray, np.ndarray]]

@@ -133,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
               f" and {result.out_path.with_suffix('.train.json')}", file=sys.stderr)
         return 0
     from cghair_format import read_info
-    from cghair_format.cli.info import opacity_line
+    from cghair_format.cli.info import mlp_line, opacity_line
 
     from .train import EXPORT_PROBE_VIEWS
 
@@ -141,5 +141,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"wrote {args.output}: export PSNR {result.export_psnr[mode]:.2f} dB, this file as decoded ({mode} "
           f"weights, opacities as stored) on up to {EXPORT_PROBE_VIEWS} training views; with {other} weights "
           f"{result.export_psnr[other]:.2f} dB")
-    print(f"opacities: {opacity_line(read_info(args.output))}")
+    info = read_info(args.output)
+    print(f"opacities: {opacity_line(info)}")
+    print(f"MLP {'->'.join(map(str, [info['latent_dim'], *info['mlp']]))}: {mlp_line(info['mlp_weights'])}")
     return 0

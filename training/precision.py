@@ -1,13 +1,14 @@
 """How much each quantization costs in the picture: render PSNR against the unquantized asset.
 
     python -m training.precision MODEL.cgh DATASET_DIR [--split val] [--weight-steps 0.02,0.35,0.5]
-                                 [--logit-levels 1023,63]
+                                 [--mlp-steps 0.7,1] [--logit-levels 1023,63]
 
 ``MODEL.cgh`` is the reference (write it with ``--profile lossless`` to measure every profile);
 the cameras come from the dataset's split (default ``val``: the validation views, since these
 figures choose settings; see :meth:`training.datasets.types.Dataset.split`). For each profile the
 file is encoded, decoded and rendered; for each weight step (a fraction of each array's RMS, as the
-profiles give it) only the codebooks and MLP weights are quantized, and for each logit level count
+profiles give it) only the codebooks and MLP weights are quantized, for each MLP step only the MLP's
+(the compact profile gives it its own), and for each logit level count
 only the soft logits, each as the writer stores them, which isolates each one's share of the error.
 """
 
@@ -41,14 +42,16 @@ def render_views(asset: HairAsset, views: list[View]) -> torch.Tensor:
     return torch.as_tensor(np.stack([render_gaussians(g, v.camera)["rgb"] for v in views]), dtype=torch.float64)
 
 
-def with_weight_step(asset: HairAsset, fraction: float) -> HairAsset:
-    """A copy with codebooks and MLP weights and biases on steps of ``fraction`` of each array's RMS, as
-    the writer stores them, everything else exact."""
+def with_weight_step(asset: HairAsset, fraction: float | None, mlp_fraction: float | None = None) -> HairAsset:
+    """A copy with codebooks (None: exact) and MLP weights and biases on steps of ``fraction`` (the MLP's
+    ``mlp_fraction``, default ``fraction``) of each array's RMS, as the writer stores them, everything
+    else exact."""
     out = copy.deepcopy(asset)
     app = out.appearance
     layers = [(layer.weight, layer.bias) for layer in app.mlp]
-    steps = weight_steps(app.codebooks, layers, fraction)
-    app.codebooks, decoded = weights_decode(steps, *weights_encode(steps, app.codebooks, layers))
+    steps = weight_steps(app.codebooks, layers, fraction or 1.0, mlp_fraction or fraction)
+    codebooks, decoded = weights_decode(steps, *weights_encode(steps, app.codebooks, layers))
+    app.codebooks = app.codebooks if fraction is None else codebooks
     for layer, (w, b) in zip(app.mlp, decoded, strict=True):
         layer.weight, layer.bias = w, b
     return out
@@ -65,7 +68,7 @@ def with_logit_levels(asset: HairAsset, levels: int, floor: float = -16.0) -> Ha
 
 
 def measure(asset: HairAsset, views: list[View], profiles=("high", "compact"), steps=(0.02, 0.35, 0.5),
-            logit_levels=(1023, 63)) -> list[dict]:
+            logit_levels=(1023, 63), mlp_steps=()) -> list[dict]:
     reference = render_views(asset, views)
     rows = []
     for profile in profiles:
@@ -75,6 +78,9 @@ def measure(asset: HairAsset, views: list[View], profiles=("high", "compact"), s
     for f in steps:
         rows.append({"what": f"weight step {f:g} only", "bytes": None,
                      "psnr": psnr(render_views(with_weight_step(asset, f), views), reference)})
+    for f in mlp_steps:
+        rows.append({"what": f"MLP step {f:g} only", "bytes": None,
+                     "psnr": psnr(render_views(with_weight_step(asset, None, f), views), reference)})
     for n in logit_levels if asset.appearance.weight_mode == "soft" else ():
         rows.append({"what": f"{n} logit levels only", "bytes": None,
                      "psnr": psnr(render_views(with_logit_levels(asset, n), views), reference)})
@@ -89,16 +95,19 @@ def main(argv: list[str] | None = None) -> int:
                    help="views whose cameras are used (default: val, the views for choosing settings)")
     p.add_argument("--weight-steps", default="0.02,0.35,0.5",
                    help="weight steps to try, as fractions of each array's RMS (0 < step <= 4)")
+    p.add_argument("--mlp-steps", default="",
+                   help="steps of the MLP's weights alone to try, as fractions of each layer's RMS (0 < step <= 4)")
     p.add_argument("--logit-levels", default="1023,63", help="soft-logit level counts to try (1..65535)")
     args = p.parse_args(argv)
     try:
         steps = tuple(float(f) for f in args.weight_steps.split(","))
+        mlp_steps = tuple(float(f) for f in args.mlp_steps.split(",") if f)
         levels = tuple(int(n) for n in args.logit_levels.split(","))
     except ValueError:
-        p.error(f"--weight-steps takes comma-separated numbers and --logit-levels integers, got "
-                f"{args.weight_steps!r}, {args.logit_levels!r}")
-    if not all(0 < f <= 4 for f in steps):
-        p.error("--weight-steps must lie in (0, 4]")
+        p.error(f"--weight-steps and --mlp-steps take comma-separated numbers and --logit-levels integers, got "
+                f"{args.weight_steps!r}, {args.mlp_steps!r}, {args.logit_levels!r}")
+    if not all(0 < f <= 4 for f in steps + mlp_steps):
+        p.error("--weight-steps and --mlp-steps must lie in (0, 4]")
     if not all(1 <= n <= 65535 for n in levels):
         p.error("--logit-levels must lie in 1..65535")
     from cghair_format.errors import CghError
@@ -109,7 +118,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"python -m training.precision: error: {exc}", file=sys.stderr)
         return 1
     print(f"render PSNR against {args.cgh} on {len(views)} {args.split} views")
-    for row in measure(asset, views, steps=steps, logit_levels=levels):
+    for row in measure(asset, views, steps=steps, logit_levels=levels, mlp_steps=mlp_steps):
         size = f"{row['bytes']:>10,} B" if row["bytes"] is not None else " " * 12
         print(f"{row['what']:<22} {size}  {row['psnr']:7.2f} dB")
     return 0

@@ -34,6 +34,7 @@ def format_info(name: str, info: dict) -> str:
         f"  appearance  K={info['codebook_size']} latents of D={info['latent_dim']} per group, "
         f"{info['weight_mode']} weights, MLP {info['latent_dim']}->{'->'.join(map(str, info['mlp']))}, "
         f"SH degree {info['sh_degree']}",
+        f"  MLP         {mlp_line(info['mlp_weights'])}",
         f"  scene       thickness {info['thickness']:.3g}, {info['meters_per_unit']:g} m per unit, "
         f"up axis {info['up_axis']}",
         f"  points      {_coding(info['quant'])}",
@@ -46,6 +47,13 @@ def format_info(name: str, info: dict) -> str:
         lines.append(f"  {c['type']:<6} {'yes' if c['required'] else 'no':<9} {c['codec']:<5} {c['stored_bytes']:>11,} "
                      f"{c['raw_bytes']:>10,} {100 * c['stored_bytes'] / info['file_bytes']:6.1f}%")
     return "\n".join(lines)
+
+
+def mlp_line(m: dict) -> str:
+    """The MLP's weights and biases and what MLPW stores them in (:func:`.codec.read_info`'s ``mlp_weights``)."""
+    if m["stored_bytes"] is None:
+        return f"{m['values']:,} weights and biases; MLPW is missing"
+    return f"{m['values']:,} weights and biases in {m['stored_bytes']:,} bytes, {m['bits_per_value']:.2f} bits each"
 
 
 def animation_line(a: dict) -> str:

@@ -96,9 +96,19 @@ def read_info(source: Source) -> dict:
         "generator": meta["generator"], "attribution": meta["attribution"],
         "animation": _animation_info(meta, infos, meta_info.offset),
         "bits_per_gaussian": 8 * len(data) / gaussians, "quant": meta["quant"], "opacities": _opacities(meta),
+        "mlp_weights": _mlp_weights(meta, infos),
         "chunks": [{"type": i.type, "required": i.required, "codec": ["raw", "zstd"][i.codec],
                     "stored_bytes": i.stored, "raw_bytes": i.raw} for i in infos],
     }
+
+
+def _mlp_weights(meta: dict, infos: list[container.ChunkInfo]) -> dict:
+    """What the MLP costs: its weights and biases (a fixed cost, whatever the strand count) and MLPW's
+    stored bytes and bits per value (None for a file without MLPW, which a decoder refuses)."""
+    widths = [meta["latent_dim"]] + [layer["out"] for layer in meta["mlp"]]
+    values = sum(i * o + o for i, o in zip(widths[:-1], widths[1:], strict=True))
+    stored = next((i.stored for i in infos if i.type == "MLPW"), None)
+    return {"values": values, "stored_bytes": stored, "bits_per_value": None if stored is None else 8 * stored / values}
 
 
 def _animation_info(meta: dict, infos: list[container.ChunkInfo], meta_offset: int) -> dict | None:

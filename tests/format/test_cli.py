@@ -30,6 +30,19 @@ def test_info_text_and_json(asset_file, capsys):
     assert info["strands"] == 64 and info["profile"] == "compact" and info["quant"]["base_stride"] == 16
 
 
+def test_info_gives_what_the_mlp_costs(asset_file, capsys):
+    """The MLP is a fixed cost whatever the strand count: info counts its values and MLPW's bits each."""
+    mlp = cgh.read(asset_file).appearance.mlp
+    values = sum(layer.weight.size + layer.bias.size for layer in mlp)
+    assert main(["info", str(asset_file), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    stored = next(c["stored_bytes"] for c in info["chunks"] if c["type"] == "MLPW")
+    assert info["mlp_weights"] == {"values": values, "stored_bytes": stored, "bits_per_value": 8 * stored / values}
+    assert main(["info", str(asset_file)]) == 0
+    assert f"MLP         {values:,} weights and biases in {stored:,} bytes, {8 * stored / values:.2f} bits each" \
+        in capsys.readouterr().out
+
+
 def test_info_names_the_writers_strand_coding_choices(capsys):
     """The vectors cover each choice a decoder follows; `cgh info` says which a file took."""
     vectors = Path(__file__).parents[2] / "spec" / "vectors"
@@ -130,7 +143,7 @@ def test_a_profile_the_writer_cannot_follow_is_refused_when_made():
     from dataclasses import replace
 
     for change in ({"normal_bits": 30}, {"base_strides": (12,)}, {"position_tolerance": float("nan")},
-                   {"logit_levels": 0}):
+                   {"logit_levels": 0}, {"mlp_step": 0.0}):
         with pytest.raises(ValueError, match="profile 'compact': "):
             replace(cgh.PROFILES["compact"], **change)
 

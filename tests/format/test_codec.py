@@ -41,7 +41,8 @@ def _check_bounds(a, b, profile):
     assert np.array_equal(a.strand_card, b.strand_card) and np.array_equal(a.cards.group, b.cards.group)
     # codebooks and MLP: within half a step of a fraction of each array's RMS; the last layer's, stored in
     # the colour basis, within 0.85 of its step (biases a sixteenth of that)
-    steps = weight_steps(a.appearance.codebooks, [(x.weight, x.bias) for x in a.appearance.mlp], prof.weight_step)
+    steps = weight_steps(a.appearance.codebooks, [(x.weight, x.bias) for x in a.appearance.mlp], prof.weight_step,
+                         prof.mlp_fraction)
     assert np.abs(b.appearance.codebooks - a.appearance.codebooks).max() <= steps[0] / 2 * (1 + 1e-6)
     for j, (la, lb, step) in enumerate(zip(a.appearance.mlp, b.appearance.mlp, steps[1:], strict=True)):
         reach = 0.85 if j == len(steps) - 2 else 0.5
@@ -52,6 +53,18 @@ def _check_bounds(a, b, profile):
     wa, wb = strand_weights(a.appearance), strand_weights(b.appearance)
     k_, tau = a.appearance.k, a.appearance.temperature
     assert np.abs(wa - wb).max() <= k_ / (2 * prof.logit_levels) + k_ * np.exp(prof.logit_floor / tau) + 1e-6
+
+
+@pytest.mark.parametrize("profile", ["compact", "high"])
+def test_writer_steps_follow_the_profile(profile):
+    """META's weight steps are the profile's fractions of each array's RMS: compact stores the MLP on
+    coarser steps than the codebooks (0.7 and 0.35 RMS), high both on 0.02."""
+    prof, asset = cgh.PROFILES[profile], example_asset(1)
+    app = asset.appearance
+    written = cgh.read_info(cgh.encode(asset, profile)[0])["quant"]["weight_steps"]
+    assert written == weight_steps(app.codebooks, [(x.weight, x.bias) for x in app.mlp], prof.weight_step,
+                                   prof.mlp_fraction)
+    assert (prof.mlp_fraction, prof.weight_step) == ((0.7, 0.35) if profile == "compact" else (0.02, 0.02))
 
 
 @settings(max_examples=25, deadline=None)

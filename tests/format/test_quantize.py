@@ -147,6 +147,16 @@ def test_colour_basis_is_orthonormal_and_exact_inverse():
     assert np.abs(to_colour_basis(grey).reshape(4, 3, 5)[:, 1:]).max() < 1e-12
 
 
+def test_mlp_layers_take_their_own_fraction():
+    """The codebooks' step follows ``fraction``, each MLP layer's ``mlp_fraction`` (the compact profile
+    stores the MLP coarser than the codebooks)."""
+    rng = np.random.default_rng(2)
+    codebooks = rng.normal(size=(3, 4, 8))
+    layers = [(rng.normal(size=(8, 8)), rng.normal(size=8)), (rng.normal(size=(12, 8)) * 0.1, rng.normal(size=12))]
+    same, apart = weight_steps(codebooks, layers, 0.35), weight_steps(codebooks, layers, 0.35, 0.7)
+    assert apart[0] == same[0] and np.allclose(apart[1:], 2 * np.asarray(same[1:]), rtol=1e-6)
+
+
 @pytest.mark.parametrize("fraction", [0.02, 0.35, 1.0])
 def test_weights_within_their_steps(fraction):
     rng = np.random.default_rng(0)

@@ -90,7 +90,10 @@ def test_opacity_budget_in_train_and_encode(tmp_path, strands_file, capsys, monk
     kept, lowered, default = tmp_path / "kept.cgh", tmp_path / "lowered.cgh", tmp_path / "default.cgh"
     assert main(["train", str(ds), "--strands", str(strands_file), "-o", str(kept), *common,
                  "--opacity-budget", "0"]) == 0
-    assert "opacities: all within 1/15 of the writer's input" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "opacities: all within 1/15 of the writer's input" in out
+    mlp = read_info(kept)["mlp_weights"]
+    assert f"MLP 64->64->{7 * 16 * 3}: {mlp['values']:,} weights and biases in {mlp['stored_bytes']:,} bytes" in out
     assert json.loads(kept.with_suffix(".train.json").read_text())["negligible_segments"] is None
     varied = read(kept)
     varied.opacity = np.random.default_rng(0).uniform(0, 1, varied.opacity.shape).astype(np.float32)
