@@ -33,6 +33,7 @@ from cghair_format.animation.solver import (
     wind_accel,
 )
 from cghair_format.animation.tracks import axis_rotation, builtin_track
+from cghair_format.geometry import arc_shares, at_arc_shares
 
 
 def hanging(strands: int = 3, points: int = 12, length: float = 0.3, seed: int = 0) -> np.ndarray:
@@ -195,18 +196,6 @@ def test_per_joint_bend_keeps_the_share_at_the_reference_segment_and_stiffens_sh
     assert np.all(per_joint(1.0, fine) == 1.0) and np.all(per_joint(0.0, lengths) == 0.0)
 
 
-def _arc_share(x: np.ndarray) -> np.ndarray:
-    seg = np.linalg.norm(np.diff(x, axis=1), axis=-1)
-    total = np.concatenate([np.zeros((len(x), 1)), np.cumsum(seg, 1)], 1)
-    return total / total[:, -1:]
-
-
-def _at_shares(x: np.ndarray, shares: np.ndarray, wanted: np.ndarray) -> np.ndarray:
-    """Points of strands ``x [N, P, 3]`` whose rest arc-length shares are ``shares``, at the shares ``wanted``."""
-    return np.stack([np.stack([np.interp(wanted[i], shares[i], x[i, :, c]) for c in range(3)], -1)
-                     for i in range(len(x))])
-
-
 @pytest.mark.parametrize("motion", ["nod", "shake"])
 def test_a_strand_moves_alike_at_32_and_100_points(motion):
     """The same strands at 32 and at 100 points, moved by a built-in motion, stay close at matching arc
@@ -218,8 +207,8 @@ def test_a_strand_moves_alike_at_32_and_100_points(motion):
     settings = SolverSettings(substeps=4, settle=0.1)
     coarse, fine = hanging(2, 32), hanging(2, 100)
     runs = [list(simulate(rest, scene, settings)) for rest in (coarse, fine)]
-    shares = _arc_share(coarse)
-    errors = [np.linalg.norm(a - _at_shares(b, _arc_share(fine), shares), axis=-1).mean() / 0.3
+    shares = arc_shares(coarse)
+    errors = [np.linalg.norm(a - at_arc_shares(b, arc_shares(fine), shares), axis=-1).mean() / 0.3
               for a, b in zip(*runs, strict=True)]
     moved = np.linalg.norm(runs[0][-1] - runs[0][0], axis=-1).mean() / 0.3
     assert moved > 0.03  # the motion does move the strands
