@@ -48,6 +48,21 @@ def bounding_diagonal(points: np.ndarray) -> float:
     return float(np.linalg.norm(hi - lo))
 
 
+def arc_shares(points: np.ndarray) -> np.ndarray:
+    """Each point's arc length along its strand as a share of the strand's, ``[N, P]`` for ``[N, P, 3]``."""
+    total = np.cumsum(lengths(np.diff(np.asarray(points, np.float64), axis=1)), axis=1)
+    total = np.concatenate([np.zeros((len(total), 1)), total], axis=1)
+    return total / np.maximum(total[:, -1:], 1e-300)
+
+
+def at_arc_shares(points: np.ndarray, shares: np.ndarray, wanted: np.ndarray) -> np.ndarray:
+    """Strands ``points [N, P, 3]`` whose points lie at the arc-length ``shares [N, P]`` (:func:`arc_shares`
+    of their rest pose), interpolated along them at the shares ``wanted [N, Q]``: strands of different
+    point counts compared point for point."""
+    return np.stack([np.stack([np.interp(wanted[i], shares[i], points[i, :, c]) for c in range(3)], axis=-1)
+                     for i in range(len(points))])
+
+
 def spine_tangents(spine: np.ndarray) -> np.ndarray:
     """Unit tangents ``t_k`` of spines ``[C, M+1, 3]``: central differences, one-sided at the ends."""
     d = np.empty_like(spine)

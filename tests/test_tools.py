@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from batch import baseline_coder
 
@@ -250,3 +251,14 @@ def test_bench_tables_where_takes_fnmatch_patterns(tmp_path):
     assert run.returncode == 0, run.stderr
     assert 'Hair: <!-- bench: test_sizes field=bytes where="model=a.*" -->1,000-2,000<!-- /bench -->.' in text
     assert "None: <!-- bench: test_sizes field=bytes where=\"model=c*\" -->not measured" in text
+
+
+@pytest.mark.slow
+def test_animation_checks_sweep_every_motion_at_both_rates():
+    run = subprocess.run([sys.executable, str(ROOT / "tools" / "animation_checks.py"), "stability", "--seconds", "0.2",
+                          "--styles", "short", "--models"], capture_output=True, text=True, cwd=ROOT, timeout=600)
+    assert run.returncode == 0, run.stderr
+    lines = run.stdout.splitlines()
+    assert len(lines) == 10 and all("finite True" in line for line in lines), run.stdout
+    errors = [float(re.search(r"length error (\S+),", line).group(1)) for line in lines]
+    assert max(errors) < 1e-9  # follow the leader: lengths exact after every substep

@@ -39,10 +39,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--frames", type=int_at_least(1), default=None,
                    help="frames to simulate (default 120; a head track's own)")
     p.add_argument("--fps", type=positive_float, default=None, help="frames a second (default 30; a head track's own)")
-    p.add_argument("--substeps", type=int_at_least(1), default=None, help="solver steps a frame (default 8)")
+    p.add_argument("--substeps", type=int_at_least(1), default=None,
+                   help="solver steps a frame (default 8); the hair moves alike at any count, more are finer")
     p.add_argument("--stiffness", type=share, default=None,
-                   help="bend stiffness, 0..1: the pull toward each segment's rest bend a step (default 0.9)")
-    p.add_argument("--damping", type=share, default=None, help="velocity lost a step, 0..1 (default 0.04)")
+                   help="bend stiffness, 0..1: the pull toward each segment's rest bend a step, as on a strand of "
+                        "32 points; converted per joint, so any point count bends alike (default 0.9)")
+    p.add_argument("--damping", type=share, default=None,
+                   help="velocity lost every 1/240 s, 0..1 (default 0.04), whatever the fps and substeps")
     p.add_argument("--wind", type=_vector, default=None, metavar="X,Y,Z", help="wind, m/s^2 across the strands")
     p.add_argument("--gust", type=share, default=0.0, help="strength of the seeded gusts, 0..1 (default 0)")
     p.add_argument("--seed", type=int, default=0, help="seed of the gusts (default 0)")
