@@ -28,7 +28,7 @@ import numpy as np
 
 from .pipeline import Programs, bind, bind_images, data_image, dispatch, max_texture_size, set_uniforms, use_textures
 from .rasterizer import Target
-from .shader_constants import BLEND_CHUNK, RECORD_VEC4S, RUN, TEXELS_PER_ROW, TILE
+from .shader_constants import BLEND_CHUNK, EMIT_CHUNK, RECORD_VEC4S, RUN, TEXELS_PER_ROW, TILE
 from .sort import GpuRadixSort, sort_order
 
 MIN_ENTRIES = 1 << 20  # first allocation of the entry buffers
@@ -60,7 +60,7 @@ class TileRasterizer:
         self._records = None
         self.counts = ctx.buffer(reserve=4 * n)
         self.run_sums = ctx.buffer(reserve=4 * max(1, math.ceil(n / RUN)))
-        self.total = ctx.buffer(reserve=4)
+        self.total = ctx.buffer(reserve=8)  # entries, and the most of one run
         self.entries = 0  # entries of the last gather()
         self.entries_needed = 0  # entries the last gather() needed (more than entries if over capacity)
         self.longest = 0  # most entries of one tile in the last gather() (the blend's dispatches)
@@ -127,7 +127,8 @@ class TileRasterizer:
         set_uniforms(scan, u_count=runs)
         scan.run(1, 1, 1)
         self.ctx.memory_barrier()
-        entries = self.entries_needed = int(np.frombuffer(self.total.read(), np.uint32)[0])
+        entries, longest_run = (int(v) for v in np.frombuffer(self.total.read(), np.uint32))
+        self.entries_needed = entries
         if entries > self.capacity:
             return False
         self._reserve(entries)
@@ -137,7 +138,9 @@ class TileRasterizer:
              TileValues=self.values)
         use_textures(prog, u_records=self.records)
         set_uniforms(prog, u_count=visible, u_viewport=viewport, u_tiles_x=tiles_x)
-        dispatch(self.ctx, prog, runs)
+        for skip in range(0, longest_run, EMIT_CHUNK):  # llvmpipe's loop limit (tile_emit.comp.glsl)
+            set_uniforms(prog, u_skip=skip)
+            dispatch(self.ctx, prog, runs)
         key_bits = max(1, (tiles_x * tiles_y - 1).bit_length())
         if self.sorter is None:
             self._sort_on_cpu(entries, key_bits)
