@@ -139,14 +139,14 @@ def bind(program: Any, **buffers: Any) -> None:
             buf.bind_to_storage_buffer(program[name].binding)
 
 
-def bind_images(program: Any, **images: Any) -> None:
-    """Bind textures as the write-only images of the compute ``program`` named by the keywords (its
-    image uniforms, on the units their declarations give)."""
+def bind_images(program: Any, read: bool = False, **images: Any) -> None:
+    """Bind textures as the write-only images (read-write where ``read``) of the compute ``program``
+    named by the keywords (its image uniforms, on the units their declarations give)."""
     units = program.extra["image_units"]
     for name, image in images.items():
         if name not in units:
             raise GLError(f"the compute shader declares no image {name} (it has {sorted(units)})")
-        image.bind_to_image(units[name], read=False, write=True)
+        image.bind_to_image(units[name], read=read, write=True)
 
 
 def use_textures(program: Any, **textures: Any) -> None:

@@ -23,6 +23,16 @@ RADIX_BITS = 4  # key bits per radix-sort pass
 RADIX_THREADS = 256  # invocations per radix-sort work group
 RADIX_ITEMS = 16  # consecutive keys per radix-sort invocation
 RADIX_SCAN_THREADS = 1024  # the one work group that scans the block histograms (and the tile runs)
+# Tile entries one tile_blend dispatch blends per tile: Mesa's gallivm (llvmpipe) ends a shader
+# invocation after 65,535 loop iterations (LP_MAX_TGSI_LOOP_ITERATIONS, all its loops together),
+# so a denser tile is blended over several dispatches (viewer/tiles.py). The blend's per-row loops
+# have constant trip counts and are unrolled (the limit was measured to fall at the 65,535th
+# entry); the margin covers them if not. Near the limit, so that a paper-scale 1080p frame (60,997
+# entries in its longest tile, docs/viewer.md) still takes one dispatch.
+BLEND_CHUNK = 65_000
+# Tile entries one tile_emit dispatch writes per run of RUN splats (the same limit): besides these,
+# an invocation loops over its splats and their rows of tiles (RUN x 270 rows at 8K).
+EMIT_CHUNK = 1 << 15
 
 SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast")  # GL_RENDERER names of CPU renderers
 
@@ -76,7 +86,7 @@ def glsl_defines(workgroups: Workgroups) -> str:
     values = {"TILE": TILE, "RUN": RUN, "TEXEL_ROW_SHIFT": row_shift, "RECORD_VEC4S": RECORD_VEC4S,
               "LOCAL_SIZE": LOCAL_SIZE, "LATENT_LOCAL_SIZE": LATENT_LOCAL_SIZE,
               "RADIX_DIGITS": 1 << RADIX_BITS, "RADIX_THREADS": RADIX_THREADS, "RADIX_ITEMS": RADIX_ITEMS,
-              "RADIX_SCAN_THREADS": RADIX_SCAN_THREADS,
+              "RADIX_SCAN_THREADS": RADIX_SCAN_THREADS, "BLEND_CHUNK": BLEND_CHUNK, "EMIT_CHUNK": EMIT_CHUNK,
               "BLEND_GROUP_X": workgroups.blend[0], "BLEND_GROUP_Y": workgroups.blend[1],
               "BLEND_ROWS": workgroups.blend_rows}
     return "".join(f"#define {name} {value}\n" for name, value in values.items())

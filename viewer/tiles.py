@@ -8,9 +8,11 @@ found (``tile_ranges``, which also copies the entries into an image); where the 
 the CPU, numpy sorts the entries, counts each tile's and writes the entry image itself.
 ``tile_blend`` then runs one work group per tile, blending the tile's splats front to back and stopping each pixel at
 T < 1e-4: the cost follows the visible splats, not all the splats over a pixel as fixed-function
-blending does. The blend reads splats as texels (the preprocess writes a record image next to its
-buffers): llvmpipe fetches texels as vectors but loads storage and shared memory one invocation
-at a time. Same image contract as the raster path and the reference splatter.
+blending does. A tile with more than ``BLEND_CHUNK`` entries is blended over several dispatches
+(llvmpipe ends a shader invocation after 65,535 loop iterations; docs/viewer.md). The blend
+reads splats as texels (the preprocess writes a record image next to its buffers): llvmpipe
+fetches texels as vectors but loads storage and shared memory one invocation at a time. Same
+image contract as the raster path and the reference splatter.
 
 The entry buffers grow on demand up to :attr:`TileRasterizer.capacity` entries (one storage block);
 a view that needs more (very close views of dense hair) is reported by :meth:`TileRasterizer.gather`
@@ -26,7 +28,7 @@ import numpy as np
 
 from .pipeline import Programs, bind, bind_images, data_image, dispatch, max_texture_size, set_uniforms, use_textures
 from .rasterizer import Target
-from .shader_constants import RECORD_VEC4S, RUN, TEXELS_PER_ROW, TILE
+from .shader_constants import BLEND_CHUNK, EMIT_CHUNK, RECORD_VEC4S, RUN, TEXELS_PER_ROW, TILE
 from .sort import GpuRadixSort, sort_order
 
 MIN_ENTRIES = 1 << 20  # first allocation of the entry buffers
@@ -58,9 +60,10 @@ class TileRasterizer:
         self._records = None
         self.counts = ctx.buffer(reserve=4 * n)
         self.run_sums = ctx.buffer(reserve=4 * max(1, math.ceil(n / RUN)))
-        self.total = ctx.buffer(reserve=4)
+        self.total = ctx.buffer(reserve=8)  # entries, and the most of one run
         self.entries = 0  # entries of the last gather()
         self.entries_needed = 0  # entries the last gather() needed (more than entries if over capacity)
+        self.longest = 0  # most entries of one tile in the last gather() (the blend's dispatches)
         self.allocated = 0
         self.keys = self.values = self.sorter = self.entry_image = None
         self.ranges = None
@@ -107,7 +110,7 @@ class TileRasterizer:
         self._ranges(width, height)
         tiles_x, tiles_y = self.tiles
         self.total.clear()
-        self.entries = self.entries_needed = 0
+        self.entries = self.entries_needed = self.longest = 0
         runs = math.ceil(visible / RUN)
         if visible == 0:
             self._reserve(0)
@@ -124,7 +127,8 @@ class TileRasterizer:
         set_uniforms(scan, u_count=runs)
         scan.run(1, 1, 1)
         self.ctx.memory_barrier()
-        entries = self.entries_needed = int(np.frombuffer(self.total.read(), np.uint32)[0])
+        entries, longest_run = (int(v) for v in np.frombuffer(self.total.read(), np.uint32))
+        self.entries_needed = entries
         if entries > self.capacity:
             return False
         self._reserve(entries)
@@ -134,7 +138,9 @@ class TileRasterizer:
              TileValues=self.values)
         use_textures(prog, u_records=self.records)
         set_uniforms(prog, u_count=visible, u_viewport=viewport, u_tiles_x=tiles_x)
-        dispatch(self.ctx, prog, runs)
+        for skip in range(0, longest_run, EMIT_CHUNK):  # llvmpipe's loop limit (tile_emit.comp.glsl)
+            set_uniforms(prog, u_skip=skip)
+            dispatch(self.ctx, prog, runs)
         key_bits = max(1, (tiles_x * tiles_y - 1).bit_length())
         if self.sorter is None:
             self._sort_on_cpu(entries, key_bits)
@@ -146,14 +152,22 @@ class TileRasterizer:
         bind_images(prog, u_entries=self.entry_image)
         set_uniforms(prog, u_count=entries)
         dispatch(self.ctx, prog, entries)
+        self.longest = entries if entries <= BLEND_CHUNK else self._longest_range()
         return True
+
+    def _longest_range(self) -> int:
+        """Most entries of one tile, from the ranges the GPU found."""
+        ranges = np.frombuffer(self.ranges.read(), np.uint32).reshape(-1, 2)
+        return int((ranges[:, 1] - ranges[:, 0]).max())
 
     def _sort_on_cpu(self, entries: int, key_bits: int) -> None:
         """Sort the entries by tile with numpy, which also gives the tiles' ranges (a count per
         tile), and write the sorted slots straight into the entry image: no ranges pass."""
         tiles = np.frombuffer(self.keys.read(size=4 * entries), np.uint32)
         slots = np.frombuffer(self.values.read(size=4 * entries), np.uint32)
-        ends = np.cumsum(np.bincount(tiles, minlength=self.tiles[0] * self.tiles[1]), dtype=np.uint32)
+        counts = np.bincount(tiles, minlength=self.tiles[0] * self.tiles[1])
+        self.longest = int(counts.max())
+        ends = np.cumsum(counts, dtype=np.uint32)
         starts = np.concatenate([np.zeros(1, np.uint32), ends[:-1]])
         self.ranges.write(np.stack([starts, ends], axis=1).tobytes())
         rows = -(-entries // TEXELS_PER_ROW)
@@ -162,15 +176,18 @@ class TileRasterizer:
         self.entry_image.write(image.tobytes(), viewport=(0, 0, TEXELS_PER_ROW, rows))
 
     def draw(self, target: Target, width: int, height: int) -> None:
-        """Blend every tile into the target's RGBA32F texture (``width`` x ``height``, overwritten)."""
+        """Blend every tile into the target's RGBA32F texture (``width`` x ``height``, overwritten):
+        one dispatch per ``BLEND_CHUNK`` entries of the longest tile, each resuming from the image."""
         tiles_x, tiles_y = self.tiles
         prog = self.programs.compute("tile_blend")
         bind(prog, Ranges=self.ranges)
-        bind_images(prog, u_image=target.texture)
+        bind_images(prog, read=True, u_image=target.texture)
         use_textures(prog, u_entries=self.entry_image, u_records=self.records)
         set_uniforms(prog, u_size=(width, height), u_tiles_x=tiles_x)
-        prog.run(tiles_x, tiles_y, 1)
-        self.ctx.memory_barrier()
+        for skip in range(0, max(self.longest, 1), BLEND_CHUNK):
+            set_uniforms(prog, u_skip=skip)
+            prog.run(tiles_x, tiles_y, 1)
+            self.ctx.memory_barrier()
 
     def release(self) -> None:
         for obj in (self.counts, self.run_sums, self.total, self.keys, self.values, self.ranges, self._records,

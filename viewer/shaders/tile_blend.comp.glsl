@@ -14,15 +14,21 @@
 // preprocess.comp.glsl): llvmpipe fetches texels as vectors but loads storage and shared memory
 // one invocation at a time, which made a shared-memory batch loop many times slower there.
 // Writes (C, 1 - T) to the accumulation image, row j = image row j.
+// One dispatch blends at most BLEND_CHUNK entries of each tile, those after the first u_skip: Mesa's
+// llvmpipe ends an invocation after 65,535 loop iterations (all its loops together), which dropped
+// the back splats of denser tiles. A tile with more entries is finished by further dispatches
+// (viewer/tiles.py), each resuming from the image: C as stored, T = 1 - alpha (float32 rounding of
+// 1 - T adds at most 6e-8 to T, far below the early termination's 1e-4).
 layout(local_size_x = BLEND_GROUP_X, local_size_y = BLEND_GROUP_Y) in;
 
 layout(std430, binding = 1) readonly buffer Ranges { uvec2 ranges[]; };
-layout(rgba32f, binding = 0) uniform writeonly image2D u_image;
+layout(rgba32f, binding = 0) uniform image2D u_image;
 uniform usampler2D u_entries;
 uniform sampler2D u_records;
 
 uniform uvec2 u_size;  // image width, height
 uniform uint u_tiles_x;
+uniform uint u_skip;  // entries of each tile blended by earlier dispatches
 
 const float ALPHA_MAX = 0.99;
 const float ALPHA_MIN = 1.0 / 255.0;
@@ -44,6 +50,9 @@ void slab(float u, float v, inout float lo, inout float hi) {
 void main() {
     uvec2 tile = gl_WorkGroupID.xy;
     uvec2 range = ranges[tile.y * u_tiles_x + tile.x];
+    uint first = range.x + u_skip;
+    if (u_skip > 0u && first >= range.y) return;  // finished by an earlier dispatch
+    uint end = min(range.y, first + uint(BLEND_CHUNK));
     uint x = tile.x * TILE + gl_LocalInvocationID.x;
     uint y0 = tile.y * TILE;  // rows are numbered within the tile, whatever the layout: same arithmetic
     uint r0 = gl_LocalInvocationID.y * BLEND_ROWS;  // this invocation's first row
@@ -51,13 +60,15 @@ void main() {
     float T[BLEND_ROWS];  // pixels outside the image start at 0: T >= T_MIN marks the pixels still blending
     float t_max = 0.0;
     for (uint k = 0u; k < BLEND_ROWS; ++k) {
-        rgb[k] = vec3(0.0);
-        T[k] = x < u_size.x && y0 + r0 + k < u_size.y ? 1.0 : 0.0;
+        bool inside = x < u_size.x && y0 + r0 + k < u_size.y;
+        vec4 was = u_skip > 0u && inside ? imageLoad(u_image, ivec2(x, y0 + r0 + k)) : vec4(0.0);
+        rgb[k] = was.rgb;
+        T[k] = inside ? 1.0 - was.a : 0.0;
         t_max = max(t_max, T[k]);
     }
     float px = float(x) + 0.5;
     float py0 = float(y0) + 0.5;
-    for (uint i = range.x; i < range.y && t_max >= T_MIN; ++i) {
+    for (uint i = first; i < end && t_max >= T_MIN; ++i) {
         int slot = int(texelFetch(u_entries, texel(int(i)), 0).r);
         ivec2 at = texel(RECORD_VEC4S * slot);  // a record's texels share a row
         vec4 c = texelFetch(u_records, at, 0);                   // mx, my, radius, opacity
