@@ -89,7 +89,6 @@ def test_window_budgets_and_rasterizers_run(xvfb_display, tmp_path, args):
 PLAY_SCRIPT = """
 import sys
 import numpy as np
-from cghair_format.animation import frame_asset
 from cghair_format.examples import example_asset
 from tests.viewer.test_viewer_animation import moving_cards
 from viewer.app import run_viewer
@@ -105,14 +104,14 @@ lo = c.spine.reshape(-1, 3).min(axis=0) - c.half_width.max()
 hi = c.spine.reshape(-1, 3).max(axis=0) + c.half_width.max()
 ctl = OrbitController.framing(lo, hi, asset.up_axis)
 job = RenderJob(width=96, height=72, azimuth=ctl.azimuth, elevation=ctl.elevation, distance=ctl.distance,
-                target=tuple(ctl.target))
-render_job(frame_asset(asset, animation, 2), job, sys.argv[1] + "/headless.png")
+                target=tuple(ctl.target), frames=range(2, 3))
+render_job(asset, job, sys.argv[1] + "/headless.png", animation=animation)
 """
 
 
 def test_window_plays_an_animation(xvfb_display, tmp_path):
     """Two steps (right arrow, which pauses) show frame 2: the screenshot equals the headless render of
-    that pose seen by the same camera."""
+    that frame seen by the same camera, each Gaussian's SH turned with its segment in both."""
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     env = dict(os.environ, DISPLAY=xvfb_display, PYTHONPATH=root)
     done = subprocess.run([sys.executable, "-c", PLAY_SCRIPT, str(tmp_path)], env=env, cwd=tmp_path,
