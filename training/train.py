@@ -292,8 +292,9 @@ def start_run(dataset: Dataset | str | Path, config: TrainConfig | None, options
 def coder_predictor(base: HairAsset, config: TrainConfig, profile: str,
                     device: torch.device | str = "cpu") -> losses.CoderPredictor | None:
     """The strand coder's predictor for the rate term (:func:`training.losses.geometry_rate`), on the
-    profile's first base stride and position step (twice its tolerance: the writer's bound is half a step);
-    None when ``config.geometry_rate`` is 0."""
+    profile's first base stride, with residuals counted in steps of twice the profile's position tolerance
+    (the width of the writer's dead zone, inside which a refinement residual codes as zero); None when
+    ``config.geometry_rate`` is 0."""
     if config.geometry_rate <= 0:
         return None
     from cghair_format.gaussians import decode_strands
