@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from cghair_format.cli.argtypes import int_at_least, share
+from cghair_format.cli.argtypes import int_at_least, non_negative_float, share
 from cghair_format.profiles import DEFAULT_OPACITY_BUDGET
 
 from .config import BACKENDS, VARIANTS
@@ -33,6 +33,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="iterations before the strand points start to move (default: 7/30 of --iters, the paper's "
                         "proportion); as many as --iters keeps the given strands as they are, and the file small "
                         "(docs/ablation.md, 'The trained file')")
+    p.add_argument("--geometry-rate", type=non_negative_float, metavar="W", default=None,
+                   help="while the strand points move, add W times the strand coder's estimated bits per stored "
+                        "coordinate to the loss, which keeps the moved strands cheap to store (default: 0, off; "
+                        "docs/training.md, 'Rate-aware geometry')")
     p.add_argument("--variant", choices=VARIANTS, default=None,
                    help="appearance model (default: latents, the paper's); others are the ablation's")
     p.add_argument("--config", help="a JSON config (as saved in <out>.train.json's 'config'); flags override it")
@@ -85,7 +89,8 @@ def _config(args: argparse.Namespace):
         cfg = TrainConfig()
     for flag, name in (("iters", "iterations"), ("variant", "variant"), ("checkpoint_every", "checkpoint_every"),
                        ("n_cards", "n_cards"), ("groups", "n_groups"), ("points", "points_per_strand"),
-                       ("seed", "seed"), ("opacity_budget", "opacity_budget")):
+                       ("seed", "seed"), ("opacity_budget", "opacity_budget"),
+                       ("geometry_rate", "geometry_rate")):
         value = getattr(args, flag)
         if value is not None:
             setattr(cfg, name, value)

@@ -58,6 +58,8 @@ class TrainConfig:
     lambda_dssim: float = 0.2
     lambda_alpha: float = 0.1
     lambda_opacity_smooth: float = 0.01
+    geometry_rate: float = 0.0  # weight of the strand coder's estimated bits per coordinate while the points move
+    # (training.losses.geometry_rate; 0: off, today's geometry training; docs/training.md, "Rate-aware geometry")
     # export
     opacity_budget: float = DEFAULT_OPACITY_BUDGET  # share of the training views' blend weight whose Gaussians a
     # quantized file may store less opaque, down to 0 (training/visibility.py; 0: every opacity within the bound)
@@ -83,6 +85,8 @@ class TrainConfig:
             raise ConfigError(f"sh_degree must be 0..3, got {self.sh_degree}")
         if not 0 < self.tau_end <= self.tau_start:
             raise ConfigError("need 0 < tau_end <= tau_start")
+        if not (isinstance(self.geometry_rate, (int, float)) and 0 <= self.geometry_rate < float("inf")):
+            raise ConfigError(f"geometry_rate must be a number >= 0, got {self.geometry_rate!r}")
         if not 0 <= self.opacity_budget < 1:
             raise ConfigError(f"opacity_budget must be in [0, 1), got {self.opacity_budget}")
         if len(self.background) != 3:

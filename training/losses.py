@@ -1,9 +1,10 @@
-"""Image losses and metrics: L1, SSIM / D-SSIM, alpha loss, opacity smoothness, PSNR."""
+"""Losses and metrics: L1, SSIM / D-SSIM, alpha loss, opacity smoothness, PSNR, and the strand coder's rate."""
 
 from __future__ import annotations
 
 import math
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import Tensor
@@ -64,3 +65,43 @@ def opacity_smoothness(opacity: Tensor, real: Tensor | None = None) -> Tensor:
 def image_loss(rgb: Tensor, target: Tensor, lambda_dssim: float) -> Tensor:
     """``(1 - lambda) L1 + lambda (1 - SSIM)``, the 3DGS photometric loss."""
     return (1 - lambda_dssim) * l1(rgb, target) + lambda_dssim * (1 - ssim(rgb, target))
+
+
+class CoderPredictor:
+    """The strand coder's predictor of refinement samples (spec 4.3, :func:`cghair_format.quantize.level_plan`):
+    each sample between the base samples is predicted by Lagrange interpolation of the world positions
+    of its coarser neighbours, and the writer stores what that misses, quantized. Built once per run
+    from the strands' point count, the writer's first base stride and each strand's own count."""
+
+    def __init__(self, n_points: int, base_stride: int, counts: np.ndarray, step: float,
+                 device: torch.device | str = "cpu"):
+        from cghair_format.quantize import level_plan
+
+        _, levels = level_plan(n_points, base_stride)
+        idx = np.concatenate([np.zeros(0, np.int64)] + [lv[0] for lv in levels])
+        nb = np.concatenate([np.zeros((0, 4), np.int64)] + [lv[1] for lv in levels])
+        wt = np.concatenate([np.zeros((0, 4))] + [lv[2] for lv in levels])
+        # a row counts for a strand when the sample and every neighbour it is predicted from are its own points
+        last = np.maximum(idx, np.where(wt != 0, nb, 0).max(1))
+        self.idx = torch.as_tensor(idx, device=device)  # [R]
+        self.nb = torch.as_tensor(nb, device=device)  # [R, 4]
+        self.wt = torch.as_tensor(wt, device=device)  # [R, 4] float64, cast to the points' dtype
+        self.keep = torch.as_tensor(last[None, :] < np.asarray(counts)[:, None], device=device)  # [S, R] bool
+        self.step = float(step)  # the writer's position step, world units
+
+    def residuals(self, points: Tensor) -> Tensor:
+        """What the predictor misses ``[S, R, 3]`` on strands ``points [S, P, 3]`` (world)."""
+        pred = (points[:, self.nb] * self.wt.to(points.dtype)[None, :, :, None]).sum(2)
+        return points[:, self.idx] - pred
+
+
+def geometry_rate(points: Tensor, predictor: CoderPredictor) -> Tensor:
+    """Estimated bits per stored coordinate of strands ``points [S, P, 3]``: the mean over the coder's
+    refinement samples (:class:`CoderPredictor`) of ``log2(1 + |residual| / step)``, a smooth stand-in
+    for the bits an entropy coder spends on a residual of ``|residual| / step`` steps. Smooth strands
+    (curls included: the cubic predictor follows them) cost about nothing; the point-to-point roughness
+    that geometry training adds costs a few bits a coordinate, which this term pulls back."""
+    r = predictor.residuals(points).abs() / predictor.step
+    bits = torch.log2(1 + r).sum(-1)  # [S, R]
+    keep = predictor.keep
+    return (bits * keep).sum() / (3 * keep.sum().clamp_min(1))

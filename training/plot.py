@@ -47,9 +47,11 @@ def plot_sweep(key: str, rows: list[dict], paper: dict[int, tuple[float, float]]
 
 
 def plot_psnr_size(ours: list[tuple[str, float, float]], paper: list[tuple[str, float, float]],
-                   colours: dict[str, tuple[int, int, int]], path: str | Path, title: str = "") -> Path:
-    """Write a PNG of held-out PSNR against appearance size (log scale): ``ours`` as dots and ``paper``
-    as hollow squares, each point ``(label, bytes, PSNR)`` coloured by ``colours[label]`` (the legend)."""
+                   colours: dict[str, tuple[int, int, int]], path: str | Path, title: str = "",
+                   size_label: str = "appearance size") -> Path:
+    """Write a PNG of held-out PSNR against ``size_label`` (bytes, log scale): ``ours`` as dots and ``paper``
+    as hollow squares (the shapes' legend only where there are some), each point ``(label, bytes, PSNR)``
+    coloured by ``colours[label]`` (the legend)."""
     from PIL import Image, ImageDraw, ImageFont
 
     ours = [(label, math.log10(size), psnr) for label, size, psnr in ours]
@@ -80,7 +82,7 @@ def plot_psnr_size(ours: list[tuple[str, float, float]], paper: list[tuple[str, 
         draw.text((left - 8, gy), f"{y:g}", fill="black", font=small, anchor="rm")
         y += step
     draw.rectangle([left, top, right, bottom], outline="black")
-    draw.text(((left + right) / 2, SIZE[1] - 20), "appearance size (bytes, log scale)", fill="black", font=font,
+    draw.text(((left + right) / 2, SIZE[1] - 20), f"{size_label} (bytes, log scale)", fill="black", font=font,
               anchor="mm")
     ylabel = Image.new("RGB", (bottom - top, 24), "white")
     ImageDraw.Draw(ylabel).text(((bottom - top) / 2, 12), "held-out PSNR (dB)", fill="black", font=font, anchor="mm")
@@ -100,11 +102,12 @@ def plot_psnr_size(ours: list[tuple[str, float, float]], paper: list[tuple[str, 
         draw.ellipse([lx, ly - 5, lx + 10, ly + 5], fill=colour)
         draw.text((lx + 18, ly), label, fill="black", font=small, anchor="lm")
         ly += 22
-    ly += 10
-    draw.ellipse([lx, ly - 5, lx + 10, ly + 5], fill="black")
-    draw.text((lx + 18, ly), "ours", fill="black", font=small, anchor="lm")
-    draw.rectangle([lx, ly + 17, lx + 10, ly + 27], outline="black", width=2)
-    draw.text((lx + 18, ly + 22), "paper (its data)", fill="black", font=small, anchor="lm")
+    if paper:
+        ly += 10
+        draw.ellipse([lx, ly - 5, lx + 10, ly + 5], fill="black")
+        draw.text((lx + 18, ly), "ours", fill="black", font=small, anchor="lm")
+        draw.rectangle([lx, ly + 17, lx + 10, ly + 27], outline="black", width=2)
+        draw.text((lx + 18, ly + 22), "paper (its data)", fill="black", font=small, anchor="lm")
 
     path = Path(path)
     img.save(path)

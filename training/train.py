@@ -220,6 +220,7 @@ class Run:
     history: list[dict]
     seconds_before: float  # training time of the runs before a resumed checkpoint
     stage: dict = field(default_factory=lambda: dict.fromkeys(STAGES, 0.0))  # seconds per stage
+    predictor: losses.CoderPredictor | None = None  # the strand coder's, for the rate term (None: no rate term)
 
     def clock(self) -> float:
         """Now; on a GPU after waiting for the kernels (they run asynchronously), so that each stage is timed."""
@@ -285,7 +286,22 @@ def start_run(dataset: Dataset | str | Path, config: TrainConfig | None, options
     end = config.iterations if options.stop_at is None else max(start, min(options.stop_at, config.iterations))
     return Run(config, options, ds.train, str(dataset) if not isinstance(dataset, Dataset) else "<in memory>",
                base, model, optimizer, schedule, renderer(backend), backend, device, targets, masks, start, end,
-               history, seconds_before)
+               history, seconds_before, predictor=coder_predictor(base, config, options.profile, device))
+
+
+def coder_predictor(base: HairAsset, config: TrainConfig, profile: str,
+                    device: torch.device | str = "cpu") -> losses.CoderPredictor | None:
+    """The strand coder's predictor for the rate term (:func:`training.losses.geometry_rate`), on the
+    profile's first base stride, with residuals counted in steps of twice the profile's position tolerance
+    (the width of the writer's dead zone, inside which a refinement residual codes as zero); None when
+    ``config.geometry_rate`` is 0."""
+    if config.geometry_rate <= 0:
+        return None
+    from cghair_format.gaussians import decode_strands
+
+    prof = get_profile(profile)
+    step = 2 * prof.position_tolerance * decode_strands(base).bbox_diagonal()
+    return losses.CoderPredictor(base.points_per_strand, prof.base_strides[0], base.counts, step, device)
 
 
 def train_step(run: Run, iteration: int) -> tuple[float, float, float]:
@@ -302,6 +318,8 @@ def train_step(run: Run, iteration: int) -> tuple[float, float, float]:
     loss = (losses.image_loss(out.rgb, target, config.lambda_dssim)
             + config.lambda_alpha * losses.l1(out.alpha, run.masks[it.view])
             + config.lambda_opacity_smooth * run.model.opacity_smoothness())
+    if it.geometry_on and run.predictor is not None:
+        loss = loss + config.geometry_rate * losses.geometry_rate(run.model.points(), run.predictor)
     t3 = run.clock()
     run.optimizer.zero_grad(set_to_none=True)
     loss.backward()

@@ -31,6 +31,13 @@ def positive_float(text: str) -> float:
     return v
 
 
+def non_negative_float(text: str) -> float:
+    v = _number(text)
+    if not 0 <= v < float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a number >= 0, got {text}")
+    return v
+
+
 def share(text: str) -> float:
     """A share in [0, 1)."""
     v = _number(text)
