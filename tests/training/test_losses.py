@@ -72,7 +72,7 @@ def test_geometry_rate_gradient_matches_finite_differences():
     # pulling the points along minus the gradient makes them cheaper to code
     rate = losses.geometry_rate(points, pred)
     (grad,) = torch.autograd.grad(rate, points)
-    assert float(losses.geometry_rate(points.detach() - 0.05 * grad / grad.norm(), pred)) < float(rate)
+    assert float(losses.geometry_rate(points.detach() - 0.05 * grad / grad.norm(), pred)) < rate.item()
 
 
 def test_geometry_rate_counts_each_strands_own_points_only():
