@@ -23,6 +23,19 @@ class UnsupportedFormatError(CghError, ValueError):
     """No importer or exporter is registered for a file extension."""
 
 
+def readable_file(path: str | Path, extensions, what: str) -> tuple[Path, str]:
+    """``path`` and its lower-case extension, once the extension is one of ``extensions`` (listed in the
+    message in their order) and the file exists; else the one-line error naming ``what`` was to be read."""
+    p = Path(path)
+    ext = p.suffix.lower()
+    if ext not in extensions:
+        raise UnsupportedFormatError(f"{path}: cannot read {what} from {ext or 'a file without extension'}; "
+                                     f"known extensions: {', '.join(extensions)}")
+    if not p.is_file():
+        raise StrandFileError(path, "no such file" if not p.exists() else "not a file")
+    return p, ext
+
+
 def read_bytes(path: str | Path) -> bytes:
     with open(path, "rb") as f:
         return f.read()

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import StrandFileError, UnsupportedFormatError, read_bytes
+from ._common import StrandFileError, read_bytes, readable_file
 
 MESH_EXTENSIONS = (".obj", ".ply", ".usd", ".usda", ".usdc", ".usdz")
 MAX_TRIANGLES = 4_000_000  # a head scan is well under; a collider's distance field needs no more
@@ -126,12 +126,6 @@ def check_mesh(path: str | Path, mesh: TriangleMesh) -> TriangleMesh:
 
 def load_mesh(path: str | Path) -> TriangleMesh:
     """The triangles of an ``.obj``, ``.ply`` or USD file, checked (:func:`check_mesh`)."""
-    p = Path(path)
-    ext = p.suffix.lower()
-    if ext not in MESH_EXTENSIONS:
-        raise UnsupportedFormatError(f"{path}: cannot read a mesh from {ext or 'a file without extension'}; "
-                                     f"known extensions: {', '.join(MESH_EXTENSIONS)}")
-    if not p.is_file():
-        raise StrandFileError(path, "no such file" if not p.exists() else "not a file")
+    p, ext = readable_file(path, MESH_EXTENSIONS, "a mesh")
     reader = _obj if ext == ".obj" else _ply if ext == ".ply" else _usd
     return check_mesh(path, reader(p))

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import StrandFileError, UnsupportedFormatError
+from ._common import StrandFileError, readable_file
 
 # extension -> module (relative to this package) with load_cache(path) -> StrandCache
 CACHE_FORMATS: dict[str, str] = {".usd": "usd_cache", ".usda": "usd_cache", ".usdc": "usd_cache",
@@ -60,11 +60,5 @@ class StrandCache:
 
 def load_cache(path: str | Path) -> StrandCache:
     """The animated strands of ``path`` (``.usd .usda .usdc .usdz .abc``), by extension."""
-    p = Path(path)
-    ext = p.suffix.lower()
-    if ext not in CACHE_FORMATS:
-        raise UnsupportedFormatError(f"{path}: cannot read animated strands from {ext or 'a file without extension'}"
-                                     f"; known extensions: {', '.join(sorted(CACHE_FORMATS))}")
-    if not p.is_file():
-        raise StrandFileError(path, "no such file" if not p.exists() else "not a file")
+    p, ext = readable_file(path, sorted(CACHE_FORMATS), "animated strands")
     return importlib.import_module(f"{__package__}.{CACHE_FORMATS[ext]}").load_cache(p)

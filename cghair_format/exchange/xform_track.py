@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import StrandFileError, UnsupportedFormatError
+from ._common import StrandFileError, readable_file
 from .usd_cache import even_time_codes
 from .usd_curves import _pxr, open_stage
 
@@ -132,11 +132,5 @@ def load_alembic_xforms(path: Path, prim: str | None = None) -> XformSamples:
 
 def load_xforms(path: str | Path, prim: str | None = None) -> XformSamples:
     """The animated transform of ``prim`` (or of the single animated xformable prim) in a USD or Alembic file."""
-    p = Path(path)
-    ext = p.suffix.lower()
-    if ext not in (*USD_EXTENSIONS, ".abc"):
-        raise UnsupportedFormatError(f"{path}: cannot read a transform track from {ext or 'a file without extension'}"
-                                     f"; known extensions: {', '.join((*USD_EXTENSIONS, '.abc'))}")
-    if not p.is_file():
-        raise StrandFileError(path, "no such file" if not p.exists() else "not a file")
+    p, ext = readable_file(path, (*USD_EXTENSIONS, ".abc"), "a transform track")
     return load_alembic_xforms(p, prim) if ext == ".abc" else load_usd_xforms(p, prim)
