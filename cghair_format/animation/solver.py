@@ -36,6 +36,7 @@ strand moves alike at any point count and substep count (a card spine of 32 poin
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -93,12 +94,19 @@ class StrandState:
     x_prev: np.ndarray  # [N, P, 3] float64
     rest: np.ndarray  # [N, P, 3] float64, the pose at the head's rest transform
     rest_length: np.ndarray  # [N, P-1] float64
+    _bend: tuple[float, np.ndarray] | None = dataclasses.field(default=None, repr=False, compare=False)
 
     @classmethod
     def at_rest(cls, rest: np.ndarray) -> StrandState:
         rest = np.array(rest, np.float64)
         seg = np.diff(rest, axis=1)
         return cls(rest.copy(), rest.copy(), rest, np.sqrt((seg * seg).sum(-1)))
+
+    def bend_pull(self, share: float) -> np.ndarray:
+        """:func:`per_joint` of ``share`` on these rest lengths, computed once, not every substep."""
+        if self._bend is None or self._bend[0] != share:
+            self._bend = (share, per_joint(share, self.rest_length))
+        return self._bend[1]
 
 
 def rotate_between(a: np.ndarray, b: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -253,7 +261,7 @@ def step(state: StrandState, settings: SolverSettings, rotation: np.ndarray, tra
         integrate(state, accel, per_substep_damping(settings.damping, dt), dt)
         reach = int(round(settings.global_range * state.x.shape[1]))
         global_shape(state, target, per_substep(settings.global_stiffness, dt), reach)
-        local_shape(state, target, per_joint(settings.local_stiffness, state.rest_length))
+        local_shape(state, target, state.bend_pull(settings.local_stiffness))
         moved = capsules.moved(rotation, translation) if capsules is not None else None
         for _ in range(settings.length_iterations):
             if moved is not None:
