@@ -47,6 +47,9 @@ GROW_BELOW = 0.9  # ... and a first step whose error is below this fraction is r
 NUDGE, NUDGE_RARE = 0.99, 100_000  # where one point, or one in NUDGE_RARE, misses the tolerance, the step is
 # first made 1 % smaller instead: the lattices align anew, and isolated misses seldom recur, while shrinking
 # the step with the error would cost the whole file for one point (docs/compression.md, "The writer's per-file choices")
+NUDGES = 4  # ... up to this many times: a point far off a twisting card (|delta| 15 units off a 78-unit card) moves
+# 3.4 steps for a step of u, so its miss is where the lattice falls, not the step's size, and a step shrunk with
+# the error can miss by more (docs/compression.md, "Far points and the step")
 DEAD_ZONE = 0.97  # a refinement residual stays zero where the prediction is this close to the input (x tol)
 
 
@@ -226,8 +229,8 @@ def _search_step(input_asset: HairAsset, input_points: np.ndarray, prof: Profile
     # where it usually meets the bound at once, then tighten or grow
     step = None if prof.lossless else STEP_START * tol
     passed = None
-    chosen, nudged = None, False
-    for attempt in range(MAX_TIGHTENINGS):
+    chosen, nudges = None, 0
+    for attempt in range(MAX_TIGHTENINGS + NUDGES):
         asset, points, order, family = arranged
         geometry = _quantize_geometry(asset, prof, step, diag, points, tol, chosen, family)
         chosen = geometry.choices
@@ -250,8 +253,8 @@ def _search_step(input_asset: HairAsset, input_points: np.ndarray, prof: Profile
                 break  # only a first step well inside the bound is retried larger
         elif passed is not None:
             break
-        if err > tol and not nudged and np.count_nonzero(dist > tol) <= max(1, dist.size // NUDGE_RARE):
-            step, nudged = step * NUDGE, True
+        if err > tol and nudges < NUDGES and np.count_nonzero(dist > tol) <= max(1, dist.size // NUDGE_RARE):
+            step, nudges = step * NUDGE, nudges + 1
         else:
             step *= TIGHTEN_TARGET * tol / err if err > 0 else 1 / GROW_BELOW
     if passed is None:

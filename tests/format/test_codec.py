@@ -386,3 +386,27 @@ def test_an_isolated_miss_nudges_the_step_and_many_tighten_it(missing, nudged, m
         assert steps[1] == pytest.approx(writer.NUDGE * steps[0])
     else:
         assert steps[1] == pytest.approx(writer.TIGHTEN_TARGET / 1.2 * steps[0])
+
+
+@pytest.mark.parametrize("recurring", [writer.NUDGES, writer.NUDGES + 1])
+def test_a_recurring_isolated_miss_is_nudged_up_to_nudges_times(recurring, monkeypatch):
+    """A point far off its card misses wherever the lattice falls badly, at any step: each nudge is a new
+    fall of the lattice, and only after NUDGES of them does the step shrink with the error."""
+    real, steps = writer._quantize_geometry, []
+
+    def isolated_misses(asset, prof, step, diag, points, tol, choices, family):
+        geometry = real(asset, prof, step, diag, points, tol, choices, family)
+        steps.append(step)
+        if len(steps) <= recurring:
+            decoded = geometry.decoded_points.copy()
+            decoded.reshape(-1, 3)[0] = points.reshape(-1, 3)[0] + [1.2 * tol, 0, 0]
+            geometry = geometry._replace(decoded_points=decoded)
+        return geometry
+
+    monkeypatch.setattr(writer, "_quantize_geometry", isolated_misses)
+    _, report = cgh.encode(example_asset(0), "compact")
+    assert len(steps) == recurring + 1 and report.step == steps[-1]
+    nudged = min(recurring, writer.NUDGES)
+    assert steps[1:nudged + 1] == pytest.approx([steps[0] * writer.NUDGE ** (i + 1) for i in range(nudged)])
+    if recurring > writer.NUDGES:
+        assert steps[-1] == pytest.approx(writer.TIGHTEN_TARGET / 1.2 * steps[-2])
