@@ -18,6 +18,7 @@ from .. import container, memory
 from ..animation.clip import Animation
 from ..asset import Cards, HairAsset
 from ..atomic import write_bytes
+from ..cards.inverse import points_on_cards
 from ..children import WEIGHT_ONE, Children, best_weights, find_children, fit_weights, place_children
 from ..errors import AssetError
 from ..geometry import CardMap, bounding_diagonal, card_scales, lengths, strand_points
@@ -380,7 +381,7 @@ def _with_late_guides(geometry: _Geometry, before: np.ndarray, order: np.ndarray
     if not len(kids):
         del q["children"]  # (and no CHLD: every child became a guide)
     card = asset.strand_card[:guides]
-    on_cards, _ = _on_cards(coding.cards, coding.cmap, card[g0:], asset.uvd[g0:guides], points[g0:guides],
+    on_cards, _ = points_on_cards(coding.cards, coding.cmap, card[g0:], asset.uvd[g0:guides], points[g0:guides],
                             1e-3 * q["step"])
     uvd = np.concatenate([coding.card_uvd, on_cards])
     scale = uvd_scale(*card_scales(coding.cards, q["step"]), card, q["step"])
@@ -420,35 +421,8 @@ def _quantized_cards(asset: HairAsset, q: dict, points: np.ndarray, tol: float
     while True:
         cards_w, cards = quantized_cards(asset.cards, q)
         cmap = CardMap(cards)
-        uvd, miss = _on_cards(cards, cmap, asset.strand_card, asset.uvd, points, 1e-3 * q["step"])
+        uvd, miss = points_on_cards(cards, cmap, asset.strand_card, asset.uvd, points, 1e-3 * q["step"])
         if miss <= CARD_MISS_SHARE * tol or q["card_step"] <= MIN_CARD_STEP_FRACTION * q["step"]:
             return cards_w, cards, cmap, uvd
         q["card_step"] /= 2
 
-
-def _on_cards(cards: Cards, cmap: CardMap, strand_card: np.ndarray, uvd: np.ndarray, points: np.ndarray,
-              atol: float) -> tuple[np.ndarray, float]:
-    """The card coordinates ``[S, P, 3]`` of the input ``points`` on the quantized ``cards`` (``cmap``
-    their map), from their coordinates ``uvd`` on the input's cards, and the largest distance left
-    between a point and its coordinates' image. The strand coder then codes the points themselves,
-    and the cards' own quantization error does not add to theirs. Newton steps (compiled) solve
-    nearly every point; the few they leave farther than ``atol`` off (off the strip, where the
-    mapping folds) are solved exactly (:func:`.cards.inverse.solve_uvd`) where that is nearer."""
-    from ..cards.inverse import solve_uvd
-
-    s, p = uvd.shape[:2]
-    card = np.repeat(strand_card.astype(np.int64), p)
-    flat_uvd, flat_points = uvd.reshape(-1, 3), points.reshape(-1, 3)
-    out, miss = np.empty((s * p, 3)), np.empty(s * p)
-
-    def block(b: slice) -> None:
-        out[b], miss[b] = cmap.invert(card[b], flat_uvd[b], flat_points[b])
-
-    map_blocks(block, s * p, 1 << 16)
-    off = np.flatnonzero(miss > atol)
-    if len(off):
-        exact, _ = solve_uvd(cards, flat_points[off], card[off], out[off, 0] * cards.segments)
-        exact_miss = np.linalg.norm(cmap(card[off], exact) - flat_points[off], axis=-1)
-        nearer = exact_miss < miss[off]
-        out[off[nearer]], miss[off[nearer]] = exact[nearer], exact_miss[nearer]
-    return out.reshape(s, p, 3), float(miss.max(initial=0.0))
