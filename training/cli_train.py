@@ -37,6 +37,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="while the strand points move, add W times the strand coder's estimated bits per stored "
                         "coordinate to the loss, which keeps the moved strands cheap to store (default: 0, off; "
                         "docs/training.md, 'Rate-aware geometry')")
+    p.add_argument("--free-children", action="store_true",
+                   help="move every strand on its own, the interpolated ones (children) too; by default the strands "
+                        "the file stores as blends of others follow those, and stay a few bytes each "
+                        "(docs/training.md, 'Children follow their guides')")
     p.add_argument("--variant", choices=VARIANTS, default=None,
                    help="appearance model (default: latents, the paper's); others are the ablation's")
     p.add_argument("--config", help="a JSON config (as saved in <out>.train.json's 'config'); flags override it")
@@ -99,6 +103,8 @@ def _config(args: argparse.Namespace):
         cfg.geometry_frozen_iters = round(FROZEN_FRACTION * args.iters)
     if args.geometry_frozen_iters is not None:
         cfg.geometry_frozen_iters = args.geometry_frozen_iters
+    if args.free_children:
+        cfg.children_follow = False
     return cfg.validate()
 
 

@@ -60,6 +60,8 @@ class TrainConfig:
     lambda_opacity_smooth: float = 0.01
     geometry_rate: float = 0.0  # weight of the strand coder's estimated bits per coordinate while the points move
     # (training.losses.geometry_rate; 0: off, today's geometry training; docs/training.md, "Rate-aware geometry")
+    children_follow: bool = True  # the strands the writer stores as blends of others (children) move only with
+    # their guides, and the file keeps them so (training.children; docs/training.md, "Children follow their guides")
     # export
     opacity_budget: float = DEFAULT_OPACITY_BUDGET  # share of the training views' blend weight whose Gaussians a
     # quantized file may store less opaque, down to 0 (training/visibility.py; 0: every opacity within the bound)
@@ -87,6 +89,8 @@ class TrainConfig:
             raise ConfigError("need 0 < tau_end <= tau_start")
         if not (isinstance(self.geometry_rate, (int, float)) and 0 <= self.geometry_rate < float("inf")):
             raise ConfigError(f"geometry_rate must be a number >= 0, got {self.geometry_rate!r}")
+        if not isinstance(self.children_follow, bool):
+            raise ConfigError(f"children_follow must be true or false, got {self.children_follow!r}")
         if not 0 <= self.opacity_budget < 1:
             raise ConfigError(f"opacity_budget must be in [0, 1), got {self.opacity_budget}")
         if len(self.background) != 3:

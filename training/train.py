@@ -30,6 +30,7 @@ from cghair_format.strands import Strands
 
 from . import losses
 from .backends import renderer, resolve_backend
+from .children import PROJECT_EVERY, FollowingChildren, following_children
 from .config import RunOptions, TrainConfig
 from .datasets.read import read_dataset
 from .datasets.types import Dataset, View
@@ -221,6 +222,7 @@ class Run:
     seconds_before: float  # training time of the runs before a resumed checkpoint
     stage: dict = field(default_factory=lambda: dict.fromkeys(STAGES, 0.0))  # seconds per stage
     predictor: losses.CoderPredictor | None = None  # the strand coder's, for the rate term (None: no rate term)
+    children: FollowingChildren | None = None  # the interpolated strands that follow their guides (None: none)
 
     def clock(self) -> float:
         """Now; on a GPU after waiting for the kernels (they run asynchronously), so that each stage is timed."""
@@ -286,7 +288,8 @@ def start_run(dataset: Dataset | str | Path, config: TrainConfig | None, options
     end = config.iterations if options.stop_at is None else max(start, min(options.stop_at, config.iterations))
     return Run(config, options, ds.train, str(dataset) if not isinstance(dataset, Dataset) else "<in memory>",
                base, model, optimizer, schedule, renderer(backend), backend, device, targets, masks, start, end,
-               history, seconds_before, predictor=coder_predictor(base, config, options.profile, device))
+               history, seconds_before, predictor=coder_predictor(base, config, options.profile, device),
+               children=following_children(base, options.profile) if config.children_follow else None)
 
 
 def coder_predictor(base: HairAsset, config: TrainConfig, profile: str,
@@ -323,8 +326,13 @@ def train_step(run: Run, iteration: int) -> tuple[float, float, float]:
     t3 = run.clock()
     run.optimizer.zero_grad(set_to_none=True)
     loss.backward()
+    follow = it.geometry_on and run.children is not None
+    if follow:
+        run.children.hold(run.model.uv, run.model.delta)
     t4 = run.clock()
     run.optimizer.step()
+    if follow and (iteration + 1) % PROJECT_EVERY == 0:
+        run.children.project(run.model.uv, run.model.delta)
     t5 = run.clock()
     for name, dt in zip(STAGES, (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4), strict=True):
         run.stage[name] += dt
@@ -362,6 +370,8 @@ def run_iterations(run: Run) -> float:
                 run.save(it + 1, time.perf_counter() - t_start)
     if bar is not None:
         bar.close()
+    if run.children is not None and run.start < run.end and run.end > config.geometry_frozen_iters:
+        run.children.project(run.model.uv, run.model.delta)  # the last steps' moves too
     return time.perf_counter() - t_start
 
 
