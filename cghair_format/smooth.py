@@ -55,7 +55,9 @@ def _smooth_group(points: np.ndarray, sigma: float) -> np.ndarray:
     ext_s = np.concatenate([-s[:, :0:-1], s, 2 * length - s[:, -2::-1]], 1)
     ext_w = np.concatenate([share[:, :0:-1], share, share[:, -2::-1]], 1)
     weight = np.exp(-0.5 * ((s[:, :, None] - ext_s[:, None, :]) / sigma) ** 2) * ext_w[:, None, :]
-    out = np.einsum("gij,gjc->gic", weight, ext_x) / weight.sum(2)[..., None]
+    total = weight.sum(2)[..., None]
+    # a strand of zero length (every point the same) has no weights and stays as it is
+    out = np.where(total > 0, np.einsum("gij,gjc->gic", weight, ext_x) / np.where(total > 0, total, 1), points)
     out[:, 0], out[:, -1] = points[:, 0], points[:, -1]
     # the zigzag's share of the length comes back as a straight extension of the tip
     new_ds = np.linalg.norm(np.diff(out, axis=1), axis=2)

@@ -69,6 +69,13 @@ def test_zero_width_is_the_identity_and_mixed_counts_are_filtered():
     np.testing.assert_array_equal(out.points[[0, 3]], s.points[[0, 3]])
 
 
+def test_a_strand_of_zero_length_stays_as_it_is():
+    pts = np.concatenate([np.zeros((1, 8, 3)), _rough(1, 8)]).astype(np.float32)
+    out = smooth_strands(Strands.from_array(pts, meters_per_unit=MM), 6.0).to_array()
+    assert np.isfinite(out).all()
+    np.testing.assert_array_equal(out[0], pts[0])
+
+
 @pytest.mark.parametrize("bad", [-1.0, float("nan"), float("inf"), "wide"])
 def test_bad_widths_are_refused(bad):
     with pytest.raises(AssetError, match="smoothing width"):
