@@ -1,6 +1,6 @@
-"""A low-pass filter along each strand's arc length: roots fixed, every segment's length kept.
+"""A low-pass filter along each strand's arc length: the root fixed, the strand's length kept.
 
-Reconstructed strands zigzag from point to point (growth's steps and refinement's per-point moves),
+Reconstructed strands zigzag from point to point (refinement's per-point moves, mostly),
 and the strand coder pays for every zigzag: it predicts each point from its neighbours and stores the
 miss. :func:`smooth_strands` averages each point with its neighbours, weighted by a Gaussian of
 their distance along the strand (``sigma_mm`` millimetres, from the strands' ``meters_per_unit``;
@@ -9,8 +9,9 @@ length the zigzag took back as a straight extension of the tip, and spaces the s
 equally along the result (as :func:`cghair_format.strands.resample` does). A bend much longer than
 ``sigma_mm`` stays where it was (a curl of curvature k moves inwards by about k sigma^2 / 2), a zigzag
 at the point spacing goes, uneven spacing with it (the coder pays for both), and the root and the
-strand's length do not move. Smoothing the strand's direction instead and integrating it from the
-root moves the tips by centimetres on curly hair (docs/reconstruct.md, "Smoothing").
+strand's length do not move. Smoothing the segments' directions instead and integrating them from
+the root (tried first) left a higher curvature error at the same strand F1 (docs/reconstruct.md,
+"Smoothing the reconstructed strands").
 """
 
 from __future__ import annotations
@@ -70,7 +71,7 @@ def _smooth_group(points: np.ndarray, sigma: float) -> np.ndarray:
 def smooth_strands(strands: Strands, sigma_mm: float) -> Strands:
     """``strands`` low-passed along arc length with a Gaussian of ``sigma_mm`` millimetres (see the
     module docstring); 0 returns them unchanged. Colours, widths and root UVs are kept per point
-index (the points move along the strand by at most the spacing's unevenness)."""
+    index (the points move along the strand by at most the spacing's unevenness)."""
     sigma_mm = check_sigma(sigma_mm)
     if sigma_mm == 0 or strands.count == 0:
         return strands
