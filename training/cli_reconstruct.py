@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import argparse
 
-from cghair_format.cli.argtypes import int_at_least, positive_float
+from cghair_format.cli.argtypes import int_at_least, non_negative_float, positive_float
+from cghair_format.smooth import RECONSTRUCT_SMOOTH_MM
 
 from .cli_train import add_backend_argument
 
@@ -32,6 +33,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="scale of the dataset's scene units, written into the strands (default: 1)")
     p.add_argument("--prior", metavar="FILE", help="strand prior for the refinement (from cgh fit-strand-prior); "
                    "'none' for no prior (default: the built-in basis of the synthetic styles)")
+    p.add_argument("--smooth", type=non_negative_float, metavar="MM", default=RECONSTRUCT_SMOOTH_MM,
+                   help="last, low-pass the strands along their length with a Gaussian of MM millimetres, root and "
+                        "length kept (default: %(default)s; 0: none; cgh convert --smooth does it to a strand file)")
     p.add_argument("--debug-dir", help="folder for each stage's images (orientation maps, hull projections)")
     p.add_argument("--resume", metavar="CKPT", help="continue from a checkpoint (<out>.recon.npz)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
@@ -62,7 +66,8 @@ def run(args: argparse.Namespace) -> int:
         raise FileNotFoundError(2, "No such file or directory", str(out.parent))
     cfg = ReconstructConfig(strands=args.strands, points_per_strand=args.points, hull_resolution=args.hull_resolution,
                             refine_iters=args.refine_iters, meters_per_unit=args.meters_per_unit, seed=args.seed,
-                            backend=args.backend, prior=args.prior)
+                            backend=args.backend, prior=args.prior,
+                            smooth_mm=args.smooth)
     ckpt = Path(args.resume) if args.resume else out.with_suffix(".recon.npz")
     ds = read_dataset(args.dataset)
     print(f"read {args.dataset}: {detect_layout(args.dataset).describe()}, {len(ds.train)} training views")

@@ -3,14 +3,15 @@
 Optional processing on the way: ``--points N`` resamples every strand to N points
 (``--method arclength|bspline``), ``--densify N`` adds interpolated strands up to N strands,
 ``--units`` / ``--up`` override the metres per unit and up axis of the input; ``--scale`` multiplies
-the output's coordinates and widths (its units shrink alike).
+the output's coordinates and widths (its units shrink alike); ``--smooth MM`` low-passes every strand
+along its length first (:mod:`cghair_format.smooth`, as ``cgh reconstruct --smooth`` does).
 """
 
 from __future__ import annotations
 
 import argparse
 
-from .argtypes import positive_float
+from .argtypes import non_negative_float, positive_float
 from .synth import _at_least_two, _positive
 
 
@@ -27,6 +28,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--up", choices=("Y", "Z", "y", "z"), help="up axis of the input (overrides the file)")
     p.add_argument("--scale", type=positive_float, default=1.0, metavar="S",
                    help="multiply output coordinates and widths by S; the units shrink alike (100: metres to cm)")
+    p.add_argument("--smooth", type=non_negative_float, default=0.0, metavar="MM",
+                   help="low-pass every strand along its length with a Gaussian of MM millimetres (by the "
+                        "input's units), root and length kept, before --points (default: 0, none)")
     p.add_argument("--points-per-strand", type=_at_least_two, metavar="P",
                    help="point count of vertex-only strand PLY input (GaussianHaircut layout)")
 
@@ -34,10 +38,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..exchange import load_strands, save_strands
     from ..exchange._common import scale_strands
+    from ..smooth import smooth_strands
     from ..strands import densify, resample
 
     strands = load_strands(args.input, units=args.units, up=args.up, points_per_strand=args.points_per_strand)
     n_in = strands.count
+    strands = smooth_strands(strands, args.smooth)
     if args.points:
         strands = resample(strands, args.points, args.method)
     if args.densify:

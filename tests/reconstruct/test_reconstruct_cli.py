@@ -108,3 +108,36 @@ def test_bad_scalp_meshes_are_refused(capture, tmp_path, capsys):
 def test_unwritable_format_is_refused_first(capture, tmp_path, capsys):
     assert main(["reconstruct", str(capture / "ds"), "-o", str(tmp_path / "r.cgh")]) == 2
     _one_line_error(capsys, "cannot write strands")
+
+
+def _zigzag(strands) -> float:
+    a = strands.to_array().astype(np.float64)
+    return float(np.median(np.linalg.norm(a[:, 2:] - 2 * a[:, 1:-1] + a[:, :-2], axis=2)))
+
+
+@pytest.mark.slow
+def test_resume_with_another_smoothing_re_smooths_the_checkpointed_strands(capture, tmp_path, capsys):
+    rc, out = _run(capture, tmp_path, "--refine-iters", "0", "--smooth", "0")
+    assert rc == 0
+    assert "[smooth]" not in capsys.readouterr().out
+    rough = load_strands(out)
+    rc, _ = _run(capture, tmp_path, "--refine-iters", "0", "--smooth", "20",
+                 "--resume", str(out.with_suffix(".recon.npz")))
+    assert rc == 0
+    log = capsys.readouterr().out
+    assert "[smooth] 20 mm" in log and "[growth]" not in log
+    smooth = load_strands(out)
+    assert smooth.count == rough.count and _zigzag(smooth) < 0.8 * _zigzag(rough)
+    np.testing.assert_array_equal(smooth.to_array()[:, 0], rough.to_array()[:, 0])
+
+
+def test_bad_smoothing_width_is_refused(capture, tmp_path, capsys):
+    from training.reconstruct.hull import ReconstructError
+    from training.reconstruct.pipeline import ReconstructConfig
+
+    with pytest.raises(ReconstructError, match="smoothing width must be >= 0 mm"):
+        ReconstructConfig(smooth_mm=-1.0).validate()
+    with pytest.raises(SystemExit) as exc:
+        main(["reconstruct", str(capture / "ds"), "-o", str(tmp_path / "r.npz"), "--smooth", "nan"])
+    assert exc.value.code == 2
+    assert "argument --smooth: must be a number >= 0" in capsys.readouterr().err

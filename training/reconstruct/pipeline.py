@@ -4,7 +4,9 @@ Stages: ``orientation`` (2D Gabor maps of the training views), ``hull`` (visual 
 orientation field), ``scalp`` (roots on the given mesh or the estimated cap), ``growth`` (strands
 along the field), ``refine`` (joint refinement through the differentiable splatter, see
 :mod:`.refine`). The checkpoint (``<out>.recon.npz``) holds every finished stage's result; a run
-with ``resume`` skips them.
+with ``resume`` skips them. Last, the strands are low-passed along their arc length
+(:func:`cghair_format.smooth.smooth_strands`, ``smooth_mm``): cheap, so never checkpointed, and a
+``resume`` with another width re-smooths the checkpointed strands.
 """
 
 from __future__ import annotations
@@ -16,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from cghair_format.errors import AssetError
+from cghair_format.smooth import RECONSTRUCT_SMOOTH_MM, check_sigma, smooth_strands
 from cghair_format.strands import Strands
 
 from .hull import Grid, Hull, ReconstructError, check_masks, orientation_field, pixel_footprint, visual_hull
@@ -44,12 +48,17 @@ class ReconstructConfig:
     seed: int = 0
     backend: str | None = None
     prior: str | None = None  # a strand prior file; None: the built-in basis, "none": no prior
+    smooth_mm: float = RECONSTRUCT_SMOOTH_MM  # low-pass width along the strands (mm of arc length); 0: none
 
     def validate(self) -> ReconstructConfig:
         if self.strands < 1 or self.points_per_strand < 4 or self.hull_resolution < 8 or self.orientations < 4:
             raise ReconstructError("need strands >= 1, points >= 4, hull resolution >= 8, orientations >= 4")
         if self.refine_iters < 0 or not self.meters_per_unit > 0:
             raise ReconstructError("refine iterations must be >= 0 and meters per unit > 0")
+        try:
+            check_sigma(self.smooth_mm)
+        except AssetError as exc:
+            raise ReconstructError(str(exc)) from None
         return self
 
 
@@ -140,7 +149,7 @@ def reconstruct(dataset, config: ReconstructConfig, checkpoint: str | Path, scal
     roots = _scalp_stage(run, hull, mesh, scalp, up, cfg)
     grown = _growth_stage(run, hull, roots, views, up, up_axis, cfg)
     result = _refine_stage(run, grown, views, maps, up, up_axis, cfg) if cfg.refine_iters > 0 else grown
-    return Result(result, grown, run.timings, run.losses)
+    return Result(_smooth_stage(run, result, cfg), grown, run.timings, run.losses)
 
 
 def _orientation_stage(run: _Progress, views, cfg: ReconstructConfig, debug: Path | None) -> list:
@@ -218,6 +227,19 @@ def _refine_stage(run: _Progress, grown: Strands, views, maps, up: np.ndarray, u
     run.state.update(_strands_state("refined", result))
     run.finish("refine", t0, f"loss {hist[0]:.4f} -> {hist[-1]:.4f} over {cfg.refine_iters} iterations")
     return result
+
+
+def _smooth_stage(run: _Progress, strands: Strands, cfg: ReconstructConfig) -> Strands:
+    """The strands low-passed with ``cfg.smooth_mm``; timed, not checkpointed (it takes a second)."""
+    if cfg.smooth_mm == 0:
+        return strands
+    t0 = time.perf_counter()
+    smoothed = smooth_strands(strands, cfg.smooth_mm)
+    moved = np.linalg.norm(smoothed.points - strands.points, axis=1)
+    run.timings["smooth"] = round(time.perf_counter() - t0, 2)
+    run.log(f"[smooth] {cfg.smooth_mm:g} mm along the strands: points moved by {np.median(moved):.4g} units "
+            f"(median), {moved.max():.4g} at most ({run.timings['smooth']:.1f} s)")
+    return smoothed
 
 
 def _save_hull_debug(hull: Hull, path: Path) -> None:
