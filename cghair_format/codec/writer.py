@@ -18,10 +18,9 @@ from .. import container, memory
 from ..animation.clip import Animation
 from ..asset import Cards, HairAsset
 from ..atomic import write_bytes
-from ..cards.inverse import points_on_cards
 from ..children import WEIGHT_ONE, Children, best_weights, find_children, fit_weights, place_children
 from ..errors import AssetError
-from ..geometry import CardMap, bounding_diagonal, card_scales, lengths, strand_points
+from ..geometry import CardMap, bounding_diagonal, card_scales, lengths, points_on_cards, strand_points
 from ..parallel import map_blocks, map_threads
 from ..profiles import DEFAULT_PROFILE, PROFILES, Profile, get_profile
 from ..quantize import weight_steps
