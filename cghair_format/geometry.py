@@ -283,30 +283,3 @@ def strand_points(cards: Cards, strand_card: np.ndarray, uvd: np.ndarray) -> np.
     """
     return CardMap(cards).strand_points(strand_card, uvd)
 
-
-def points_on_cards(cards: Cards, cmap: CardMap, strand_card: np.ndarray, uvd: np.ndarray, points: np.ndarray,
-                    atol: float) -> tuple[np.ndarray, float]:
-    """The card coordinates ``[S, P, 3]`` of world ``points [S, P, 3]`` on ``cards`` (``cmap`` their
-    map), strand ``s`` on card ``strand_card[s]``, from nearby coordinates ``uvd`` (on slightly other
-    cards, such as the input's before quantization, or before the points moved), and the largest
-    distance left between a point and its coordinates' image. Newton steps (compiled) solve nearly
-    every point; the few they leave farther than ``atol`` off (off the strip, where the mapping folds)
-    are solved exactly (:func:`.cards.inverse.solve_uvd`) where that is nearer."""
-    from .cards.inverse import solve_uvd  # (the card builder's package, which imports this module)
-
-    s, p = uvd.shape[:2]
-    card = np.repeat(strand_card.astype(np.int64), p)
-    flat_uvd, flat_points = uvd.reshape(-1, 3), points.reshape(-1, 3)
-    out, miss = np.empty((s * p, 3)), np.empty(s * p)
-
-    def block(b: slice) -> None:
-        out[b], miss[b] = cmap.invert(card[b], flat_uvd[b], flat_points[b])
-
-    map_blocks(block, s * p, 1 << 16)
-    off = np.flatnonzero(miss > atol)
-    if len(off):
-        exact, _ = solve_uvd(cards, flat_points[off], card[off], out[off, 0] * cards.segments)
-        exact_miss = np.linalg.norm(cmap(card[off], exact) - flat_points[off], axis=-1)
-        nearer = exact_miss < miss[off]
-        out[off[nearer]], miss[off[nearer]] = exact[nearer], exact_miss[nearer]
-    return out.reshape(s, p, 3), float(miss.max(initial=0.0))

@@ -18,16 +18,17 @@ import numpy as np
 import torch
 
 from cghair_format.asset import Cards, HairAsset
+from cghair_format.cards.inverse import points_on_cards
 from cghair_format.children import blend, find_children
 from cghair_format.codec.writer import MIN_CHILD_SHARE
-from cghair_format.geometry import CardMap, bounding_diagonal, points_on_cards, strand_points
+from cghair_format.geometry import CardMap, bounding_diagonal, strand_points
 from cghair_format.profiles import get_profile
 
 PROJECT_EVERY = 50  # iterations between two projections (1.4-1.8 s at the paper's scale at load 6, against about
 # 60 s for the 50 iterations); Adam moves a guide about its learning rate an iteration, so a child lags its blend
 # by at most 50 such steps
 REACH = 1e-3  # x the profile's position tolerance: where Newton steps leave a child point farther than this
-# from its blend, the point is solved exactly (cghair_format.geometry.points_on_cards)
+# from its blend, the point is solved exactly (cghair_format.cards.inverse.points_on_cards)
 
 
 class FollowingChildren(NamedTuple):
@@ -54,7 +55,7 @@ class FollowingChildren(NamedTuple):
         """Set the children's coordinates ``uv [S, P, 2]``, ``delta [S, P]`` to those of the blend of their
         parents' points (as the writer gets them: float32, :meth:`~cghair_format.geometry.CardMap.strand_points`);
         returns the largest distance left between a child point and the blend
-        (:func:`~cghair_format.geometry.points_on_cards`, from their coordinates before)."""
+        (:func:`~cghair_format.cards.inverse.points_on_cards`, from their coordinates before)."""
         uvd = torch.cat([uv, delta[..., None]], -1).cpu().numpy()
         world = self.cmap.strand_points(self.all_cards, uvd)
         target = blend(world, self.parents, self.weights, self.respaced)

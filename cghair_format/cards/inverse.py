@@ -25,7 +25,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..asset import Cards
-from ..geometry import card_mesh
+from ..geometry import CardMap, card_mesh
+from ..parallel import map_blocks
 from ._util import chunks, progress
 from .normals import consistent_signs, orthonormalize
 
@@ -237,3 +238,28 @@ def fit_strip(cards: Cards, points: np.ndarray, card: np.ndarray, s: np.ndarray,
         uvd[lost[ok]], solved[lost[ok]] = res[ok], True
     return current, uvd, solved, rounds
 
+
+def points_on_cards(cards: Cards, cmap: CardMap, strand_card: np.ndarray, uvd: np.ndarray, points: np.ndarray,
+                    atol: float) -> tuple[np.ndarray, float]:
+    """The card coordinates ``[S, P, 3]`` of world ``points [S, P, 3]`` on ``cards`` (``cmap`` their
+    map), strand ``s`` on card ``strand_card[s]``, from nearby coordinates ``uvd`` (on slightly other
+    cards, such as the input's before quantization, or before the points moved), and the largest
+    distance left between a point and its coordinates' image. Newton steps (compiled) solve nearly
+    every point; the few they leave farther than ``atol`` off (off the strip, where the mapping folds)
+    are solved exactly (:func:`solve_uvd`) where that is nearer."""
+    s, p = uvd.shape[:2]
+    card = np.repeat(strand_card.astype(np.int64), p)
+    flat_uvd, flat_points = uvd.reshape(-1, 3), points.reshape(-1, 3)
+    out, miss = np.empty((s * p, 3)), np.empty(s * p)
+
+    def block(b: slice) -> None:
+        out[b], miss[b] = cmap.invert(card[b], flat_uvd[b], flat_points[b])
+
+    map_blocks(block, s * p, 1 << 16)
+    off = np.flatnonzero(miss > atol)
+    if len(off):
+        exact, _ = solve_uvd(cards, flat_points[off], card[off], out[off, 0] * cards.segments)
+        exact_miss = np.linalg.norm(cmap(card[off], exact) - flat_points[off], axis=-1)
+        nearer = exact_miss < miss[off]
+        out[off[nearer]], miss[off[nearer]] = exact[nearer], exact_miss[nearer]
+    return out.reshape(s, p, 3), float(miss.max(initial=0.0))

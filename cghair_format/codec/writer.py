@@ -20,7 +20,7 @@ from ..asset import Cards, HairAsset
 from ..atomic import write_bytes
 from ..children import WEIGHT_ONE, Children, best_weights, find_children, fit_weights, place_children
 from ..errors import AssetError
-from ..geometry import CardMap, bounding_diagonal, card_scales, lengths, points_on_cards, strand_points
+from ..geometry import CardMap, bounding_diagonal, card_scales, lengths, strand_points
 from ..parallel import map_blocks, map_threads
 from ..profiles import DEFAULT_PROFILE, PROFILES, Profile, get_profile
 from ..quantize import weight_steps
@@ -379,6 +379,8 @@ def _with_late_guides(geometry: _Geometry, before: np.ndarray, order: np.ndarray
     q["children"] = len(kids)
     if not len(kids):
         del q["children"]  # (and no CHLD: every child became a guide)
+    from ..cards.inverse import points_on_cards  # (the card builder's package: loaded when a file is written)
+
     card = asset.strand_card[:guides]
     on_cards, _ = points_on_cards(coding.cards, coding.cmap, card[g0:], asset.uvd[g0:guides], points[g0:guides],
                             1e-3 * q["step"])
@@ -417,6 +419,8 @@ def _quantized_cards(asset: HairAsset, q: dict, points: np.ndarray, tol: float
     """The CARD streams at ``q["card_step"]`` (halved, down to MIN_CARD_STEP_FRACTION of the point
     step, while some point is left more than CARD_MISS_SHARE x ``tol`` off), the cards a decoder will
     get, their map, and the input ``points``' card coordinates ``[S, P, 3]`` on them."""
+    from ..cards.inverse import points_on_cards  # (the card builder's package: loaded when a file is written)
+
     while True:
         cards_w, cards = quantized_cards(asset.cards, q)
         cmap = CardMap(cards)
