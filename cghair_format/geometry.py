@@ -282,4 +282,3 @@ def strand_points(cards: Cards, strand_card: np.ndarray, uvd: np.ndarray) -> np.
     ``x = sum_j beta_j V_j + delta * normalize(sum_j beta_j N_j)`` over the point's card triangle.
     """
     return CardMap(cards).strand_points(strand_card, uvd)
-

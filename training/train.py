@@ -286,10 +286,12 @@ def start_run(dataset: Dataset | str | Path, config: TrainConfig | None, options
         torch.set_rng_state(state["rng"])
     targets, masks = (t.to(options.device) for t in _targets(ds.train, config.background))
     end = config.iterations if options.stop_at is None else max(start, min(options.stop_at, config.iterations))
+    follow = config.children_follow and end > config.geometry_frozen_iters  # (finding them takes 5 s at the
+    # paper's scale: only for a run whose geometry moves)
     return Run(config, options, ds.train, str(dataset) if not isinstance(dataset, Dataset) else "<in memory>",
                base, model, optimizer, schedule, renderer(backend), backend, device, targets, masks, start, end,
                history, seconds_before, predictor=coder_predictor(base, config, options.profile, device),
-               children=following_children(base, options.profile) if config.children_follow else None)
+               children=following_children(base, options.profile) if follow else None)
 
 
 def coder_predictor(base: HairAsset, config: TrainConfig, profile: str,
@@ -370,8 +372,8 @@ def run_iterations(run: Run) -> float:
                 run.save(it + 1, time.perf_counter() - t_start)
     if bar is not None:
         bar.close()
-    if run.children is not None and run.start < run.end and run.end > config.geometry_frozen_iters:
-        run.children.project(run.model.uv, run.model.delta)  # the last steps' moves too
+    if run.children is not None and run.start < run.end and run.end % PROJECT_EVERY:
+        run.children.project(run.model.uv, run.model.delta)  # the moves since the last projection too
     return time.perf_counter() - t_start
 
 

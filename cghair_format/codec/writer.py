@@ -383,7 +383,7 @@ def _with_late_guides(geometry: _Geometry, before: np.ndarray, order: np.ndarray
 
     card = asset.strand_card[:guides]
     on_cards, _ = points_on_cards(coding.cards, coding.cmap, card[g0:], asset.uvd[g0:guides], points[g0:guides],
-                            1e-3 * q["step"])
+                                  1e-3 * q["step"])
     uvd = np.concatenate([coding.card_uvd, on_cards])
     scale = uvd_scale(*card_scales(coding.cards, q["step"]), card, q["step"])
     zone = DeadZone(points[:guides], coding.zone_distance, geometry.choices.neighbour_zone)
