@@ -60,6 +60,8 @@ class TrainConfig:
     lambda_opacity_smooth: float = 0.01
     geometry_rate: float = 0.0  # weight of the strand coder's estimated bits per coordinate while the points move
     # (training.losses.geometry_rate; 0: off, today's geometry training; docs/training.md, "Rate-aware geometry")
+    geometry_controls: int = 0  # > 0: each strand moves by a smooth correction, a cubic B-spline of this many
+    # coefficients over its points (training.smooth_moves; 0: every point on its own; docs/training.md, "Smooth moves")
     children_follow: bool = True  # the strands the writer stores as blends of others (children) move only with
     # their guides, and the file keeps them so (training.children; docs/training.md, "Children follow their guides")
     # export
@@ -89,6 +91,9 @@ class TrainConfig:
             raise ConfigError("need 0 < tau_end <= tau_start")
         if not (isinstance(self.geometry_rate, (int, float)) and 0 <= self.geometry_rate < float("inf")):
             raise ConfigError(f"geometry_rate must be a number >= 0, got {self.geometry_rate!r}")
+        if not isinstance(self.geometry_controls, int) or isinstance(self.geometry_controls, bool) \
+                or self.geometry_controls < 0:
+            raise ConfigError(f"geometry_controls must be an integer >= 0, got {self.geometry_controls!r}")
         if not isinstance(self.children_follow, bool):
             raise ConfigError(f"children_follow must be true or false, got {self.children_follow!r}")
         if not 0 <= self.opacity_budget < 1:

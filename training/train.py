@@ -31,6 +31,7 @@ from cghair_format.strands import Strands
 from . import losses
 from .backends import renderer, resolve_backend
 from .children import PROJECT_EVERY, FollowingChildren, following_children
+from .smooth_moves import SmoothMoves
 from .config import RunOptions, TrainConfig
 from .datasets.read import read_dataset
 from .datasets.types import Dataset, View
@@ -223,6 +224,7 @@ class Run:
     stage: dict = field(default_factory=lambda: dict.fromkeys(STAGES, 0.0))  # seconds per stage
     predictor: losses.CoderPredictor | None = None  # the strand coder's, for the rate term (None: no rate term)
     children: FollowingChildren | None = None  # the interpolated strands that follow their guides (None: none)
+    smooth: SmoothMoves | None = None  # keeps the other strands' moves smooth (None: every point moves on its own)
 
     def clock(self) -> float:
         """Now; on a GPU after waiting for the kernels (they run asynchronously), so that each stage is timed."""
@@ -286,12 +288,16 @@ def start_run(dataset: Dataset | str | Path, config: TrainConfig | None, options
         torch.set_rng_state(state["rng"])
     targets, masks = (t.to(options.device) for t in _targets(ds.train, config.background))
     end = config.iterations if options.stop_at is None else max(start, min(options.stop_at, config.iterations))
-    follow = config.children_follow and end > config.geometry_frozen_iters  # (finding them takes 5 s at the
-    # paper's scale: only for a run whose geometry moves)
+    moves = end > config.geometry_frozen_iters
+    # (finding the children takes 5 s at the paper's scale: only for a run whose geometry moves)
+    children = following_children(base, options.profile) if moves and config.children_follow else None
+    smooth = None
+    if moves and config.geometry_controls:
+        smooth = SmoothMoves(base, config.geometry_controls, None if children is None else children.child, device)
     return Run(config, options, ds.train, str(dataset) if not isinstance(dataset, Dataset) else "<in memory>",
                base, model, optimizer, schedule, renderer(backend), backend, device, targets, masks, start, end,
                history, seconds_before, predictor=coder_predictor(base, config, options.profile, device),
-               children=following_children(base, options.profile) if follow else None)
+               children=children, smooth=smooth)
 
 
 def coder_predictor(base: HairAsset, config: TrainConfig, profile: str,
@@ -333,6 +339,8 @@ def train_step(run: Run, iteration: int) -> tuple[float, float, float]:
         run.children.hold(run.model.uv, run.model.delta)
     t4 = run.clock()
     run.optimizer.step()
+    if it.geometry_on and run.smooth is not None:
+        run.smooth.project(run.model.uv, run.model.delta)
     if follow and (iteration + 1) % PROJECT_EVERY == 0:
         run.children.project(run.model.uv, run.model.delta)
     t5 = run.clock()

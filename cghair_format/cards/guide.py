@@ -29,24 +29,27 @@ def spline_coefficients(p: int, segments: int) -> int:
     return int(min(p, max(4, segments // 2 + 3)))
 
 
+def bspline_basis(x: np.ndarray, n_coef: int) -> np.ndarray:
+    """The design matrix ``[len(x), n_coef]`` of the clamped B-spline of ``n_coef`` coefficients on uniform
+    knots over [0, 1] (cubic, or of degree ``n_coef - 1`` below four), at parameters ``x``: constant and
+    linear curves are in its span, and it interpolates its end coefficients."""
+    interpolate = require("scipy.interpolate", "cards", "B-spline fits", package="scipy")
+    degree = min(3, n_coef - 1)
+    knots = np.concatenate([np.zeros(degree), np.linspace(0.0, 1.0, n_coef - degree + 1), np.ones(degree)])
+    return interpolate.BSpline.design_matrix(np.asarray(x, np.float64), knots, degree).toarray()
+
+
 def smoothing_spline(centroids: np.ndarray, segments: int, samples: int, n_coef: int | None = None) -> np.ndarray:
     """Least-squares cubic B-spline fits of curves ``[C, P, 3]``, evaluated at ``samples`` points.
 
     The knots are uniform in the point index (strands are resampled to equal arc length, so their
     mean is close to uniform too), so one design matrix serves every card.
     """
-    interpolate = require("scipy.interpolate", "cards", "card guide splines", package="scipy")
-    c, p = centroids.shape[:2]
-    degree = min(3, p - 1)
-    n_coef = max(min(n_coef or spline_coefficients(p, segments), p), degree + 1)
-    inner = np.linspace(0.0, 1.0, n_coef - degree + 1)
-    knots = np.concatenate([np.zeros(degree), inner, np.ones(degree)])
-    x = np.linspace(0.0, 1.0, p)
-    basis = interpolate.BSpline.design_matrix(x, knots, degree).toarray()  # [P, n_coef]
-    fit = np.linalg.pinv(basis)  # [n_coef, P]
+    p = centroids.shape[1]
+    n_coef = max(min(n_coef or spline_coefficients(p, segments), p), min(4, p))
+    fit = np.linalg.pinv(bspline_basis(np.linspace(0.0, 1.0, p), n_coef))  # [n_coef, P]
     coef = np.einsum("kp,cpd->ckd", fit, centroids)
-    dense = interpolate.BSpline.design_matrix(np.linspace(0.0, 1.0, samples), knots, degree).toarray()
-    return np.einsum("qk,ckd->cqd", dense, coef)
+    return np.einsum("qk,ckd->cqd", bspline_basis(np.linspace(0.0, 1.0, samples), n_coef), coef)
 
 
 def _resample(dense, arc, t0, t1, before, after, segments: int) -> np.ndarray:

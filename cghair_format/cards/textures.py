@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import require
+from .guide import bspline_basis
 
 TEXTURE_SIZE = 32  # texels along u and across v
 SAMPLES_PER_POINT = 2  # dense samples per strand point ...
@@ -21,14 +22,10 @@ SPLINE_COEFFICIENTS = 12
 
 def uv_splines(uv: np.ndarray, samples: int) -> np.ndarray:
     """Least-squares cubic B-spline fits of UV curves ``[S, P, 2]``, sampled at ``samples`` points."""
-    interpolate = require("scipy.interpolate", "cards", "strand textures", package="scipy")
     p = uv.shape[1]
-    degree = min(3, p - 1)
-    n_coef = max(min(SPLINE_COEFFICIENTS, p), degree + 1)
-    knots = np.concatenate([np.zeros(degree), np.linspace(0, 1, n_coef - degree + 1), np.ones(degree)])
-    basis = interpolate.BSpline.design_matrix(np.linspace(0, 1, p), knots, degree).toarray()
-    dense = interpolate.BSpline.design_matrix(np.linspace(0, 1, samples), knots, degree).toarray()
-    resample = dense @ np.linalg.pinv(basis)  # [samples, P]
+    n_coef = min(SPLINE_COEFFICIENTS, p)
+    basis = bspline_basis(np.linspace(0, 1, p), n_coef)
+    resample = bspline_basis(np.linspace(0, 1, samples), n_coef) @ np.linalg.pinv(basis)  # [samples, P]
     return np.einsum("qp,spd->sqd", resample, uv)
 
 

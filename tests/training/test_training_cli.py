@@ -59,6 +59,8 @@ def test_geometry_frozen_iters_flag(tmp_path, strands_file):
                                  "--geometry-frozen-iters", "300"])).geometry_frozen_iters == 300
     assert _config(p.parse_args(["DS", "-o", "x.cgh"])).geometry_rate == 0
     assert _config(p.parse_args(["DS", "-o", "x.cgh", "--geometry-rate", "0.1"])).geometry_rate == 0.1
+    assert _config(p.parse_args(["DS", "-o", "x.cgh"])).geometry_controls == 0
+    assert _config(p.parse_args(["DS", "-o", "x.cgh", "--geometry-controls", "12"])).geometry_controls == 12
     # frozen for the whole run, the strands come out exactly as they went in
     ds = tmp_path / "ds"
     assert main(["render-dataset", str(strands_file), "-o", str(ds), "--views", "4", "--res", "16",
@@ -216,6 +218,7 @@ def test_bad_inputs_give_clear_errors(tmp_path, strands_file, capsys, monkeypatc
                                   ["train", "d", "-o", "x.cgh", "--backend", "vulkan"],
                                   ["train", "d", "-o", "x.cgh", "--opacity-budget", "1"],
                                   ["train", "d", "-o", "x.cgh", "--geometry-rate", "-1"],
+                                  ["train", "d", "-o", "x.cgh", "--geometry-controls", "0"],
                                   ["encode", "f.cgh", "-o", "x.cgh", "--opacity-budget", "-0.1"],
                                   ["eval", "f.cgh", "d", "--backend", "vulkan"],
                                   ["train", "d", "--strands", "a", "--cards", "b", "-o", "x.cgh"]])
