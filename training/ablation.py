@@ -28,6 +28,7 @@ from typing import TextIO
 
 from cghair_format.atomic import write_text
 from cghair_format.cli.argtypes import int_at_least
+from cghair_format.errors import CghError
 
 from .cli_train import FROZEN_FRACTION, add_backend_argument
 from .config import VARIANTS, ConfigError, TrainConfig
@@ -52,14 +53,16 @@ PAPER_SWEEPS: dict[str, dict[int, tuple[float, float]]] = {
     "D": {32: (32.39, 0.60), 64: (32.40, 0.71), 128: (32.18, 0.93), 256: (31.94, 1.37)},
     "N_T": {16: (31.49, 0.60), 32: (31.84, 0.64), 64: (32.40, 0.71), 96: (32.57, 0.79), 400: (33.04, 1.53)},
 }
+CHECKPOINT_EVERY = 250  # iterations: 5-10 minutes of a paper-scale variant on 2 cores, a few seconds to write
 SWEEP_FIELDS = {"K": "codebook_size", "D": "latent_dim", "N_T": "n_groups"}  # sweep key -> TrainConfig field
 
 
 def scaled_config(variant: str, iters: int, **overrides) -> TrainConfig:
     """The paper's config for a shorter run: the schedules (geometry freeze, temperature, decay)
-    keep their proportions."""
+    keep their proportions. Checkpointed every :data:`CHECKPOINT_EVERY` iterations, so that a stopped
+    run resumes inside its variant."""
     cfg = TrainConfig(variant=variant, iterations=iters, geometry_frozen_iters=round(FROZEN_FRACTION * iters),
-                      checkpoint_every=max(1, iters), log_every=max(1, iters // 20))
+                      checkpoint_every=max(1, min(iters, CHECKPOINT_EVERY)), log_every=max(1, iters // 20))
     for key, value in overrides.items():
         setattr(cfg, key, value)
     return cfg.validate()
@@ -197,6 +200,20 @@ def _trained_model(ckpt: Path, cfg: TrainConfig, ds, device: str):
     return model.to(device)
 
 
+def _resumable(ckpt: Path, cfg: TrainConfig) -> int | None:
+    """The iteration of ``ckpt`` where it is a checkpoint of this very run (the same config, in a work
+    folder whose settings :class:`RowFile` has checked); None where there is none or it is another's."""
+    from .train import load_checkpoint
+
+    if not ckpt.is_file():
+        return None
+    try:
+        state = load_checkpoint(ckpt)
+    except CghError:
+        return None  # unreadable: trained again from the start
+    return int(state["iteration"]) if state["config"] == cfg.to_dict() else None
+
+
 def train_row(ds, base, cfg: TrainConfig, name: str, setup: Setup) -> dict:
     """Train ``cfg`` from ``base``'s cards, write ``<work>/<name>.cgh`` where the variant has an encoding,
     and measure it on the held-out views. A failure after training (the export, the written file's
@@ -207,11 +224,16 @@ def train_row(ds, base, cfg: TrainConfig, name: str, setup: Setup) -> dict:
 
     out = setup.work / f"{name}.cgh"
     ckpt = out.with_suffix(".ckpt.pt")
-    ckpt.unlink(missing_ok=True)  # a stale checkpoint must not pass for this run's
+    resume = _resumable(ckpt, cfg)
+    if resume is None:
+        ckpt.unlink(missing_ok=True)  # a stale checkpoint must not pass for this run's
+    else:
+        print(f"{name}: resuming {ckpt} at iteration {resume} of {cfg.iterations}", file=setup.log)
     row: dict = {}
     try:
-        result = train(ds, cards=base, out=out, config=cfg, progress=True, log=setup.log, device=setup.device,
-                       backend=setup.backend)
+        result = train(ds, cards=base if resume is None else None, out=out, config=cfg,
+                       resume=None if resume is None else ckpt,
+                       progress=True, log=setup.log, device=setup.device, backend=setup.backend)
         model, mode, asset, seconds = result.model, result.weight_mode, result.asset, result.seconds
         history = result.history
     except Exception as exc:  # noqa: BLE001 - whatever failed, a finished training is kept

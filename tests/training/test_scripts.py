@@ -105,6 +105,37 @@ def test_rerun_resumes_after_the_last_finished_row(tmp_path, strands_file, monke
     assert "holds rows of another run (iterations 4 there, 5 now)" in capsys.readouterr().err
 
 
+def test_a_variant_stopped_midway_resumes_from_its_checkpoint(tmp_path, strands_file, monkeypatch, capsys):
+    """A run stopped inside a variant (a session's end) keeps that variant's checkpoint; the rerun
+    continues it from there rather than from the start, and never from another run's checkpoint."""
+    argv = ["--strands", str(strands_file), "--work", str(tmp_path / "w"), *TINY, "--variants", "latents"]
+    done: list[int] = []
+
+    def stopped(*args, config, **kwargs):  # trains 2 of the 4 iterations, then the session ends
+        REAL_TRAIN(*args, config=config, stop_at=2, **kwargs)
+        raise training.train.TrainError("stopped for the test")
+
+    monkeypatch.setattr(training.train, "train", stopped)
+    assert ablation.main(argv) == 2
+    ckpt = tmp_path / "w" / "latents.ckpt.pt"
+    cfg = ablation.scaled_config("latents", 4, n_cards=6, points_per_strand=6)
+    assert ablation._resumable(ckpt, cfg) == 2
+    assert ablation._resumable(ckpt, ablation.scaled_config("latents", 4, n_cards=6, points_per_strand=5)) is None
+
+    def counting(*args, config, **kwargs):
+        result = REAL_TRAIN(*args, config=config, **kwargs)
+        done.append(result.iterations_run)
+        return result
+
+    monkeypatch.setattr(training.train, "train", counting)
+    capsys.readouterr()
+    assert ablation.main(argv) == 0
+    assert done == [2]  # the two iterations left, not four
+    assert "latents: resuming" in capsys.readouterr().err
+    row = json.loads((tmp_path / "w" / "ablation.json").read_text())["rows"][0]
+    assert row["variant"] == "latents" and row["iterations"] == 4 and "file_psnr" in row
+
+
 def test_a_damaged_row_file_is_refused_before_the_dataset(tmp_path, strands_file, capsys):
     work = tmp_path / "w"
     work.mkdir()
