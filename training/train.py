@@ -31,12 +31,12 @@ from cghair_format.strands import Strands
 from . import losses
 from .backends import renderer, resolve_backend
 from .children import PROJECT_EVERY, FollowingChildren, following_children
-from .smooth_moves import SmoothMoves
 from .config import RunOptions, TrainConfig
 from .datasets.read import read_dataset
 from .datasets.types import Dataset, View
 from .model import HairModel, tau_at
 from .schedule import Schedule
+from .smooth_moves import SmoothMoves
 from .splatter import torch_device
 from .visibility import negligible_segments
 
