@@ -37,10 +37,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="while the strand points move, add W times the strand coder's estimated bits per stored "
                         "coordinate to the loss, which keeps the moved strands cheap to store (default: 0, off; "
                         "docs/training.md, 'Rate-aware geometry')")
-    p.add_argument("--geometry-controls", type=int_at_least(1), metavar="N", default=None,
+    p.add_argument("--geometry-controls", type=int_at_least(0), metavar="N", default=None,
                    help="move each strand by a smooth correction only, a cubic B-spline of N coefficients over its "
-                        "points, which keeps the moved strands as cheap to store as the given ones (default: off, "
-                        "every point moves on its own; docs/training.md, 'Smooth moves')")
+                        "points, which keeps the moved strands about as cheap to store as the given ones (default: 0, "
+                        "off: every point moves on its own; docs/training.md, 'Smooth moves')")
     p.add_argument("--free-children", action="store_true",
                    help="move every strand on its own, the interpolated ones (children) too; by default the strands "
                         "the file stores as blends of others follow those, and stay a few bytes each "

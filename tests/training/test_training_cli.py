@@ -218,7 +218,7 @@ def test_bad_inputs_give_clear_errors(tmp_path, strands_file, capsys, monkeypatc
                                   ["train", "d", "-o", "x.cgh", "--backend", "vulkan"],
                                   ["train", "d", "-o", "x.cgh", "--opacity-budget", "1"],
                                   ["train", "d", "-o", "x.cgh", "--geometry-rate", "-1"],
-                                  ["train", "d", "-o", "x.cgh", "--geometry-controls", "0"],
+                                  ["train", "d", "-o", "x.cgh", "--geometry-controls", "-1"],
                                   ["encode", "f.cgh", "-o", "x.cgh", "--opacity-budget", "-0.1"],
                                   ["eval", "f.cgh", "d", "--backend", "vulkan"],
                                   ["train", "d", "--strands", "a", "--cards", "b", "-o", "x.cgh"]])
