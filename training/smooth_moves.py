@@ -29,30 +29,26 @@ class SmoothMoves:
         moving = np.ones(base.n_strands, bool)
         if skip is not None:
             moving[skip.cpu().numpy()] = False
-        self.start = torch.as_tensor(base.uvd.astype(np.float32), device=device)  # [S, P, 3] the run's start
-        self.groups: list[tuple[torch.Tensor | None, int, torch.Tensor]] = []
+        start = base.uvd.astype(np.float32)  # [S, P, 3] the run's start
+        # per point count: the rows (None: every strand), the count, the orthonormal basis q [count, k] (the
+        # fit is q q^T) and those rows' starting coordinates [n, count, 3]
+        self.groups: list[tuple[torch.Tensor | None, int, torch.Tensor, torch.Tensor]] = []
         for count in np.unique(counts[moving]):
             count = int(count)
             rows = np.flatnonzero(moving & (counts == count))
-            basis = bspline_basis(np.linspace(0.0, 1.0, count), min(controls, count))
-            q, _ = np.linalg.qr(basis)  # [count, k] orthonormal: the fit is q q^T
+            q, _ = np.linalg.qr(bspline_basis(np.linspace(0.0, 1.0, count), min(controls, count)))
             index = None if len(rows) == base.n_strands else torch.as_tensor(rows, device=device)
-            self.groups.append((index, count, torch.as_tensor(q.astype(np.float32), device=device)))
+            self.groups.append((index, count, torch.as_tensor(q.astype(np.float32), device=device),
+                                torch.as_tensor(start[rows, :count], device=device)))
 
     @torch.no_grad()
     def project(self, uv: torch.Tensor, delta: torch.Tensor) -> None:
         """Set each moving strand's coordinates ``uv [S, P, 2]``, ``delta [S, P]`` to its start plus the
         smooth fit of its change since then."""
-        for index, count, q in self.groups:
+        for index, count, q, start in self.groups:
             rows = slice(None) if index is None else index
-            now = torch.cat([uv[rows, :count], delta[rows, :count, None]], -1)
-            start = self.start[rows, :count]
-            change = now - start
-            fit = torch.einsum("pk,nkd->npd", q, torch.einsum("pk,npd->nkd", q, change))
-            smooth = start + fit
-            if index is None:
-                uv[:, :count] = smooth[..., :2]
-                delta[:, :count] = smooth[..., 2]
-            else:
-                uv[index, :count] = smooth[..., :2]
-                delta[index, :count] = smooth[..., 2]
+            change = torch.cat([uv[rows, :count], delta[rows, :count, None]], -1) - start  # [n, count, 3]
+            across = change.transpose(1, 2).reshape(-1, count)  # one row per strand and coordinate
+            smooth = start + ((across @ q) @ q.T).reshape(-1, 3, count).transpose(1, 2)
+            uv[rows, :count] = smooth[..., :2]
+            delta[rows, :count] = smooth[..., 2]

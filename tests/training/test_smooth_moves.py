@@ -62,7 +62,7 @@ def test_children_and_points_past_a_strands_count_are_left_alone(cap):
     with torch.no_grad():
         model.uv[..., 1] += zigzag
     moves = SmoothMoves(short, 3, skip=torch.arange(0, 10))
-    assert sorted(count for _, count, _ in moves.groups) == [5, base.points_per_strand]
+    assert sorted(group[1] for group in moves.groups) == [5, base.points_per_strand]
     before = model.uv.detach().clone()
     moves.project(model.uv, model.delta)
     assert torch.equal(model.uv[:10], before[:10])  # the children: their own projection's
@@ -92,3 +92,17 @@ def test_smooth_moves_keep_moved_strands_cheap_to_store(cap, tmp_path):
     for bad in (-1, 2.5, True):
         with pytest.raises(ConfigError, match="geometry_controls must be an integer >= 0"):
             TrainConfig(geometry_controls=bad).validate()
+
+
+def test_smooth_moves_resume_exactly(cap, tmp_path):
+    """The controls are saved with the checkpoint's config, and a resumed run projects onto the same start."""
+    from training.train import load_checkpoint
+
+    root, strands, _ = cap
+    ds = read_dataset(root / "ds")
+    cfg = _tiny_config(iterations=12, geometry_frozen_iters=4, log_every=4, lr_geometry=1e-3, geometry_controls=3)
+    full = train(ds, strands=strands, config=cfg, checkpoint=tmp_path / "a.pt", progress=False, threads=1)
+    train(ds, strands=strands, config=cfg, checkpoint=tmp_path / "b.pt", progress=False, threads=1, stop_at=6)
+    assert load_checkpoint(tmp_path / "b.pt")["config"]["geometry_controls"] == 3
+    resumed = train(ds, resume=tmp_path / "b.pt", checkpoint=tmp_path / "b.pt", progress=False, threads=1)
+    assert torch.allclose(full.model.uv, resumed.model.uv, atol=1e-6)
