@@ -8,24 +8,19 @@ import numpy as np
 import pytest
 import torch
 from test_train import _strand_bytes, _tiny_config
-from training_helpers import hair_cap
 
 from cghair_format.cards.guide import bspline_basis
 from training.config import ConfigError, TrainConfig
 from training.datasets.read import read_dataset
-from training.datasets.synthetic import render_dataset
 from training.model import HairModel
 from training.smooth_moves import SmoothMoves
 from training.train import base_asset, train
 
 
 @pytest.fixture(scope="module")
-def cap(tmp_path_factory):
-    """80 strands of 10 points, their cards (8 points a strand) and a tiny dataset of them."""
-    torch.set_num_threads(1)
-    root = tmp_path_factory.mktemp("smooth")
-    strands = hair_cap(80, 10, seed=1)
-    render_dataset(strands, root / "ds", views=9, res=32, engine="splat")
+def cap(tiny):
+    """The tiny dataset's folder and strands, and their cards (8 points a strand)."""
+    root, strands = tiny
     return root, strands, base_asset(_tiny_config(), strands, progress=False)
 
 

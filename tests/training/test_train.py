@@ -11,7 +11,6 @@ import torch
 from cghair_format import read
 from training.config import ConfigError, TrainConfig
 from training.datasets.read import read_dataset
-from training.datasets.synthetic import render_dataset
 from training.evaluate import evaluate, evaluate_model
 from training.model import HairModel
 from training.schedule import view_at
@@ -25,21 +24,6 @@ def _tiny_config(**kw) -> TrainConfig:
                 log_every=10, checkpoint_every=1000, lr_mlp=5e-3, lr_codebook=5e-3)
     base.update(kw)
     return TrainConfig(**base)
-
-
-@pytest.fixture(scope="module")
-def tiny(tmp_path_factory):
-    import sys
-    from pathlib import Path
-
-    sys.path.insert(0, str(Path(__file__).parent))
-    from training_helpers import hair_cap
-
-    torch.set_num_threads(1)
-    root = tmp_path_factory.mktemp("tiny")
-    strands = hair_cap(80, 10, seed=1)
-    render_dataset(strands, root / "ds", views=9, res=32, engine="splat")
-    return root, strands
 
 
 def test_training_lowers_the_loss_and_writes_a_cgh(tiny, tmp_path):
