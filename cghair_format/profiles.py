@@ -7,7 +7,11 @@ decoded points and tightening the step until it holds.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+
+# the loosest point tolerance ``Profile.with_position_tolerance`` takes: 1 % of the diagonal (about 4 mm on a
+# 40 cm groom), 50 x compact's
+MAX_POSITION_TOLERANCE = 0.01
 
 
 @dataclass(frozen=True)
@@ -51,6 +55,26 @@ class Profile:
             ("zstd_level must be in [1, 22]", 1 <= self.zstd_level <= 22)) if not ok]
         if problems:
             raise ValueError(f"profile {self.name!r}: " + "; ".join(problems))
+
+    def with_position_tolerance(self, fraction: float | None) -> Profile:
+        """This profile with its strand points held within ``fraction`` of the bounding-box diagonal instead
+        (None: as it is); a file so written records the bound in META (``quant.position_tolerance``)."""
+        if fraction is None:
+            return self
+        if self.lossless:
+            raise ValueError(f"profile {self.name!r} stores points exactly: a point tolerance needs a quantized "
+                             "profile (compact or high)")
+        if not 0 < fraction <= MAX_POSITION_TOLERANCE:
+            raise ValueError(f"a point tolerance is a fraction of the bounding-box diagonal in (0, "
+                             f"{MAX_POSITION_TOLERANCE:g}], got {fraction}")
+        return replace(self, position_tolerance=float(fraction))
+
+    @property
+    def states_tolerance(self) -> bool:
+        """Whether a file of this profile records its point bound: a quantized profile that is not one of
+        :data:`PROFILES` as it stands (its name alone does not tell the bound)."""
+        return not self.lossless and (self.name not in PROFILES or
+                                      PROFILES[self.name].position_tolerance != self.position_tolerance)
 
     @property
     def opacity_tolerance(self) -> float:

@@ -10,7 +10,13 @@ from __future__ import annotations
 import argparse
 import sys
 
-from cghair_format.cli.argtypes import int_at_least, non_negative_float, share
+from cghair_format.cli.argtypes import (
+    add_point_tolerance_argument,
+    int_at_least,
+    non_negative_float,
+    share,
+    with_point_tolerance,
+)
 from cghair_format.profiles import DEFAULT_OPACITY_BUDGET
 
 from .config import BACKENDS, VARIANTS
@@ -57,6 +63,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="points per strand after resampling (default: 32)")
     p.add_argument("--seed", type=int, default=None, help="random seed (default: 0)")
     p.add_argument("--profile", choices=PROFILE_NAMES, default="compact", help="precision of the written .cgh")
+    add_point_tolerance_argument(p)
     add_opacity_budget_argument(p)
     p.add_argument("--threads", type=int_at_least(1), default=None,
                    help="torch CPU threads (default: torch's choice; 1 is faster on a busy machine)")
@@ -133,10 +140,11 @@ def run(args: argparse.Namespace) -> int:
     if not (args.strands or args.cards or args.resume):
         raise TrainError("give --strands (to build cards) or --cards (a .cgh), or --resume a checkpoint")
     cfg = _config(args)
+    profile = with_point_tolerance(args.profile, args.point_tolerance)
     _resolve_backend(args.backend, args.device)  # a backend that cannot run here fails before the dataset is read
     print(f"reading {args.dataset}: {detect_layout(args.dataset).describe()}")
     result = train(args.dataset, strands=args.strands, cards=args.cards, out=args.output, config=cfg,
-                   resume=args.resume, profile=args.profile, progress=not args.no_progress,
+                   resume=args.resume, profile=profile, progress=not args.no_progress,
                    threads=args.threads, device=args.device, backend=args.backend)
     final = result.history[-1] if result.history else None
     if final:
@@ -148,7 +156,7 @@ def run(args: argparse.Namespace) -> int:
               f" and {result.out_path.with_suffix('.train.json')}", file=sys.stderr)
         return 0
     from cghair_format import read_info
-    from cghair_format.cli.info import mlp_line, opacity_line
+    from cghair_format.cli.info import mlp_line, opacity_line, points_line
 
     from .train import EXPORT_PROBE_VIEWS
 
@@ -157,6 +165,7 @@ def run(args: argparse.Namespace) -> int:
           f"weights, opacities as stored) on up to {EXPORT_PROBE_VIEWS} training views; with {other} weights "
           f"{result.export_psnr[other]:.2f} dB")
     info = read_info(args.output)
+    print(f"points: {points_line(info)}")
     print(f"opacities: {opacity_line(info)}")
     print(f"MLP {'->'.join(map(str, [info['latent_dim'], *info['mlp']]))}: {mlp_line(info['mlp_weights'])}")
     return 0

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import TextIO
 
 from cghair_format.errors import CghError
-from cghair_format.profiles import DEFAULT_OPACITY_BUDGET
+from cghair_format.profiles import DEFAULT_OPACITY_BUDGET, Profile
 
 VARIANTS = ("latents", "unique", "single-sh", "multi-sh", "no-card-clustering")
 BACKENDS = ("reference", "native", "gsplat")  # rasterizers, see training/backends.py
@@ -134,7 +134,7 @@ class RunOptions:
     out: Path | None = None  # the .cgh (and <out>.train.json) to write; None: write nothing
     checkpoint: Path | None = None  # default <out>.ckpt.pt
     resume: Path | None = None  # a checkpoint to continue
-    profile: str = "compact"  # precision of the written .cgh
+    profile: str | Profile = "compact"  # precision of the written .cgh (a name, or a Profile)
     progress: bool = True  # a progress bar on ``log``
     log: TextIO = field(default_factory=lambda: sys.stderr)
     threads: int | None = None  # torch CPU threads (None: torch's choice)

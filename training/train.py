@@ -25,7 +25,7 @@ from cghair_format.asset import HairAsset
 from cghair_format.atomic import atomic_path, write_text
 from cghair_format.codec import EncodeReport
 from cghair_format.errors import CghError
-from cghair_format.profiles import get_profile
+from cghair_format.profiles import Profile, get_profile
 from cghair_format.strands import Strands
 
 from . import losses
@@ -147,7 +147,7 @@ def load_checkpoint(path: str | Path) -> dict:
 
 
 def choose_export(model: HairModel, base: HairAsset, views: list[View], config: TrainConfig,
-                  profile: str, device: str | torch.device = "cpu", backend: str = "reference",
+                  profile: str | Profile, device: str | torch.device = "cpu", backend: str = "reference",
                   negligible: np.ndarray | None = None, opacity_budget: float | None = None
                   ) -> tuple[HairAsset | None, str | None, dict, EncodeReport | None]:
     """Export with hard and with soft weights, encode each with ``profile`` and the ``negligible`` marks
@@ -300,7 +300,7 @@ def start_run(dataset: Dataset | str | Path, config: TrainConfig | None, options
                children=children, smooth=smooth)
 
 
-def coder_predictor(base: HairAsset, config: TrainConfig, profile: str,
+def coder_predictor(base: HairAsset, config: TrainConfig, profile: str | Profile,
                     device: torch.device | str = "cpu") -> losses.CoderPredictor | None:
     """The strand coder's predictor for the rate term (:func:`training.losses.geometry_rate`), on the
     profile's first base stride, with residuals counted in steps of twice the profile's position tolerance
@@ -461,7 +461,7 @@ def finish(run: Run, seconds: float) -> TrainResult:
 def train(dataset: Dataset | str | Path, *, strands: Strands | str | Path | None = None,
           cards: HairAsset | str | Path | None = None, out: str | Path | None = None,
           config: TrainConfig | None = None, resume: str | Path | None = None,
-          checkpoint: str | Path | None = None, profile: str = "compact", progress: bool = True,
+          checkpoint: str | Path | None = None, profile: str | Profile = "compact", progress: bool = True,
           log=None, threads: int | None = None, stop_at: int | None = None,
           device: str = "cpu", backend: str | None = None) -> TrainResult:
     """Fit the model to the dataset's training views and write ``out`` (.cgh) if given.

@@ -82,13 +82,23 @@ def run(args: argparse.Namespace) -> int:
     else:
         animation = _simulated(asset, args)
     seconds = time.perf_counter() - t
-    profile = args.profile or (info["profile"] if info["profile"] in PROFILES else "compact")
+    profile = _profile(args.profile, info)
     report = write(asset, args.output, profile, animation=animation)
     print(f"{animation.frames} frames at {animation.fps:g} fps ({animation.source}) in {seconds:.1f} s "
           f"({1e3 * seconds / animation.frames:.1f} ms a frame)")
-    print(f"wrote {args.output}: {sum(report.chunk_sizes.values()):,} bytes of chunks, profile {profile}")
+    print(f"wrote {args.output}: {sum(report.chunk_sizes.values()):,} bytes of chunks, profile {report.profile}")
     print(report.animation.summary(report.bbox_diagonal))
     return 0
+
+
+def _profile(name: str | None, info: dict):
+    """``--profile``, else the input's: its named profile with the point bound it records (compact for a
+    profile of the caller's own)."""
+    if name is not None:
+        return PROFILES[name]
+    if info["profile"] not in PROFILES:
+        return PROFILES["compact"]
+    return PROFILES[info["profile"]].with_position_tolerance(info["quant"].get("position_tolerance"))
 
 
 def _simulated(asset, args: argparse.Namespace):

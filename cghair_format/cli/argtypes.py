@@ -46,6 +46,37 @@ def share(text: str) -> float:
     return v
 
 
+def point_tolerance(text: str) -> float:
+    """A strand point bound as a fraction of the bounding-box diagonal, in (0, MAX_POSITION_TOLERANCE]."""
+    from ..profiles import MAX_POSITION_TOLERANCE
+
+    v = _number(text)
+    if not 0 < v <= MAX_POSITION_TOLERANCE:
+        raise argparse.ArgumentTypeError(f"must be a fraction of the bounding-box diagonal in (0, "
+                                         f"{MAX_POSITION_TOLERANCE:g}] (compact 2e-4, high 2e-5), got {text}")
+    return v
+
+
+def add_point_tolerance_argument(p: argparse.ArgumentParser) -> None:
+    """``--point-tolerance``, shared by the commands that write a quantized .cgh (cgh encode, cgh train)."""
+    p.add_argument("--point-tolerance", type=point_tolerance, metavar="FRACTION",
+                   help="hold the strand points within this fraction of their bounding-box diagonal instead of the "
+                        "profile's (compact 2e-4, high 2e-5): looser is smaller, and the file records the bound "
+                        "(quantized profiles only; docs/compression.md, 'Point tolerance')")
+
+
+def with_point_tolerance(name: str, fraction: float | None):
+    """The profile ``name`` with its points held within ``fraction`` of the bbox diagonal if given (a
+    ``--point-tolerance``); a one-line ``CghError`` for the lossless profile."""
+    from ..errors import CghError
+    from ..profiles import get_profile
+
+    try:
+        return get_profile(name).with_position_tolerance(fraction)
+    except ValueError as exc:
+        raise CghError(f"--point-tolerance: {exc}") from None
+
+
 def rgb(text: str) -> list[float]:
     parts = text.split(",")
     try:

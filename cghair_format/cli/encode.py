@@ -1,6 +1,7 @@
-"""``cgh encode IN.cgh -o OUT.cgh --profile P [--views DATASET]``: re-encode with another precision
-profile; with a dataset, the opacities of the Gaussians its training views hardly use may be stored
-lower (measured by the training package, which registers that step: ``training.cli_encode_views``)."""
+"""``cgh encode IN.cgh -o OUT.cgh --profile P [--point-tolerance F] [--views DATASET]``: re-encode with
+another precision profile, its strand points held within ``F`` of the bbox diagonal if given; with a
+dataset, the opacities of the Gaussians its training views hardly use may be stored lower (measured by
+the training package, which registers that step: ``training.cli_encode_views``)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import argparse
 
 from ..errors import CghError, MissingDependencyError
 from ..profiles import DEFAULT_OPACITY_BUDGET, PROFILES
-from .argtypes import share
+from .argtypes import add_point_tolerance_argument, share, with_point_tolerance
 from .info import opacity_line
 from .registry import registered
 
@@ -21,6 +22,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("-o", "--output", required=True, help="the .cgh file to write")
     p.add_argument("--profile", choices=list(PROFILES), default="compact",
                    help="precision profile (default: compact)")
+    add_point_tolerance_argument(p)
     p.add_argument("--keep-order", action="store_true",
                    help="keep the input's strand order (default: the writer's order, card by card, which codes "
                         "smaller; the lossless profile always keeps it)")
@@ -40,6 +42,7 @@ def run(args: argparse.Namespace) -> int:
     if args.views is not None and PROFILES[args.profile].lossless:
         raise CghError("--views lowers opacities, which the lossless profile keeps exact: choose a quantized "
                        "--profile")
+    profile = with_point_tolerance(args.profile, args.point_tolerance)
     source = read_info(args.input)
     asset = read(args.input)
     negligible, budget = None, None
@@ -48,20 +51,20 @@ def run(args: argparse.Namespace) -> int:
         negligible = _negligible(asset, args.views, budget)
         print(f"{int(negligible.sum()):,} of {asset.n_gaussians:,} Gaussians carry {budget:g} of the blend "
               f"weight of {args.views}'s training views: their opacities may be stored lower")
-    report = write(asset, args.output, args.profile, keep_order=args.keep_order, negligible=negligible,
+    report = write(asset, args.output, profile, keep_order=args.keep_order, negligible=negligible,
                    opacity_budget=budget, animation=read_animation(args.input))
     total = sum(report.chunk_sizes.values())
+    bound = "" if profile.lossless else f" (bound {profile.position_tolerance:.3g})"
     print(f"wrote {args.output}: profile {report.profile}, {total:,} bytes of chunks, max point error "
           f"{report.max_point_error:.3g} ({report.max_point_error / max(report.bbox_diagonal, 1e-30):.2e} "
-          "of the bbox diagonal)" + ("" if report.strand_order is None else "; strands stored card by card"))
+          f"of the bbox diagonal{bound})" + ("" if report.strand_order is None else "; strands stored card by card"))
     if report.opacity is not None:
         print(report.opacity.summary())
     if report.animation is not None:
         print(report.animation.summary(report.bbox_diagonal))
     if not source["quant"]["lossless"]:
-        known = PROFILES.get(source["profile"])  # (a profile of the caller's own, written through the API: None)
-        bound = (f"up to {known.position_tolerance:.0e} of the bbox diagonal" if known is not None
-                 else "a quantization step")
+        within = source["points_within"]  # (None: a profile of the caller's own, written through the API)
+        bound = f"up to {within:.3g} of the bbox diagonal" if within is not None else "a quantization step"
         print(f"note: {args.input} is a {source['profile']} file, so that error is measured against its decoded "
               f"points, which already lie {bound} from the strands it was made from")
         if source["opacities"]["lowered"] is not None:

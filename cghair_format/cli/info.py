@@ -37,7 +37,7 @@ def format_info(name: str, info: dict) -> str:
         f"  MLP         {mlp_line(info['mlp_weights'])}",
         f"  scene       thickness {info['thickness']:.3g}, {info['meters_per_unit']:g} m per unit, "
         f"up axis {info['up_axis']}",
-        f"  points      {_coding(info['quant'])}",
+        f"  points      {points_line(info)}",
         f"  opacities   {opacity_line(info)}",
         f"  generator   {info['generator']}" + (f"; attribution: {info['attribution']}" if info["attribution"] else ""),
         *([] if info["animation"] is None else [f"  animation   {animation_line(info['animation'])}"]),
@@ -89,10 +89,17 @@ GUIDES = ("", ", guided by the card neighbour's steps", ", guided by the card ne
 LEVEL_GUIDES = ("", ", level residuals as differences from the most alike earlier strand's")
 
 
-def _coding(quant: dict) -> str:
-    """The strand coder's settings (META quant, spec 4.3 and 4.5) in a line."""
+def points_line(info: dict) -> str:
+    """How near the strand points lie to the writer's input (spec 7) and the coder's settings, in a line."""
+    quant, within = info["quant"], info["points_within"]
     if quant["lossless"]:
         return "float32 card coordinates (lossless)"
+    bound = "" if within is None else f"within {within:.3g} of the bbox diagonal, "
+    return bound + _coding(quant)
+
+
+def _coding(quant: dict) -> str:
+    """The strand coder's settings (META quant, spec 4.3 and 4.5) in a line."""
     return (f"step {quant['step']:.3g}, base samples every {quant['base_stride']} points"
             f"{GUIDES[quant['base_guide']]}{LEVEL_GUIDES[quant['level_guide']]}, "
             f"levels interpolating {'/'.join(map(str, quant['level_taps'])) or '-'} points, "

@@ -23,6 +23,7 @@ from ..gaussians import Gaussians, decode_gaussians
 from ..geometry import CardMap, angle_normals, card_scales
 from ..limits import ReadLimits, default_limits
 from ..limits import check as check_limits
+from ..profiles import PROFILES
 from ..quantize import hier_decode, level_plan, softmax_levels_decode, weights_decode
 from ..residual_coder import read_residuals
 from ..strand_coder import decode_uvd, level_widths, neighbour_decode, neighbour_order
@@ -95,7 +96,8 @@ def read_info(source: Source) -> dict:
         "thickness": meta["thickness"], "meters_per_unit": meta["meters_per_unit"], "up_axis": meta["up_axis"],
         "generator": meta["generator"], "attribution": meta["attribution"],
         "animation": _animation_info(meta, infos, meta_info.offset),
-        "bits_per_gaussian": 8 * len(data) / gaussians, "quant": meta["quant"], "opacities": _opacities(meta),
+        "bits_per_gaussian": 8 * len(data) / gaussians, "quant": meta["quant"], "points_within": _points_within(meta),
+        "opacities": _opacities(meta),
         "mlp_weights": _mlp_weights(meta, infos),
         "chunks": [{"type": i.type, "required": i.required, "codec": ["raw", "zstd"][i.codec],
                     "stored_bytes": i.stored, "raw_bytes": i.raw} for i in infos],
@@ -118,6 +120,17 @@ def _animation_info(meta: dict, infos: list[container.ChunkInfo], meta_offset: i
         return animation_info(meta, anim)
     except CghFormatError as exc:
         raise exc.at(anim.offset if exc.chunk == ANIM_CHUNK else meta_offset) from None
+
+
+def _points_within(meta: dict) -> float | None:
+    """The strand points' bound as a fraction of the bbox diagonal (spec 7): 0 for lossless, META's
+    ``quant.position_tolerance`` where recorded, else the named profile's (None: a profile this reader
+    does not know)."""
+    q = meta["quant"]
+    if q["lossless"]:
+        return 0.0
+    known = PROFILES.get(meta["profile"])
+    return q.get("position_tolerance", None if known is None else known.position_tolerance)
 
 
 def _opacities(meta: dict) -> dict:

@@ -117,6 +117,8 @@ QUANT_FIELDS = (
     Field("opacity_lowered", INTEGER, 0, lambda m: m["strands"] * (m["points"] - 1), when=_quantized,
           optional=True),
     Field("opacity_budget", NUMBER, 0, 1, when=_quantized, optional=True, rule=_with_lowered),
+    # the points' bound as a fraction of bbox_diagonal, where the profile's name does not tell it (spec 7)
+    Field("position_tolerance", NUMBER, TINY, 1, when=_quantized, optional=True),
 )
 
 ANIMATION_FIELDS = (  # spec 2.1 and 4.6: the animation part

@@ -294,7 +294,8 @@ def _meta(asset: HairAsset, prof: Profile, step: float | None, diag: float) -> d
             "newton_halvings": NEWTON_HALVINGS, "stretch_max": STRETCH_MAX,
             "opacity_scale": prof.opacity_scale, "logit_levels": prof.logit_levels, "logit_floor": prof.logit_floor,
             "weight_steps": weight_steps(app.codebooks, [(x.weight, x.bias) for x in app.mlp], prof.weight_step,
-                                         prof.mlp_fraction)},
+                                         prof.mlp_fraction),
+            **({"position_tolerance": prof.position_tolerance} if prof.states_tolerance else {})},
     }
 
 

@@ -100,6 +100,7 @@ def main() -> None:
     counts_file = _variable_counts_vector(built)
     _reject_vectors(minimal, compact, children, family, counts_file)
     _lowered_vectors()
+    _tolerance_vectors()
     _animation_vectors()
 
 
@@ -151,6 +152,21 @@ def _lowered_vectors() -> None:
         c, lambda m: m["quant"].update(opacity_lowered=held + 1))))
     reject = json.loads((HERE / "reject.json").read_text())
     reject["reject_opacity_lowered.cgh"] = {"error": "InvalidContentError", "message": "opacity_lowered"}
+    (HERE / "reject.json").write_text(json.dumps(reject, indent=2) + "\n")
+
+
+def _tolerance_vectors() -> None:
+    """A compact file whose points were held to a bound of the user's (spec 7, META
+    ``quant.position_tolerance``), and the must-reject file whose bound is out of range, added to
+    reject.json."""
+    asset = example_asset(2, strands=12, points=8, cards=4, segments=6, k=4)
+    data = cgh.encode(asset, cgh.PROFILES["compact"].with_position_tolerance(2e-3))[0]
+    assert _quant(data)["position_tolerance"] == 2e-3
+    _expected("loose_points_compact", data)
+    (HERE / "reject_position_tolerance.cgh").write_bytes(_rechunk(data, lambda c: _meta_edit(
+        c, lambda m: m["quant"].update(position_tolerance=0))))
+    reject = json.loads((HERE / "reject.json").read_text())
+    reject["reject_position_tolerance.cgh"] = {"error": "InvalidContentError", "message": "position_tolerance"}
     (HERE / "reject.json").write_text(json.dumps(reject, indent=2) + "\n")
 
 

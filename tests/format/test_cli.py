@@ -80,7 +80,7 @@ def test_encode_changes_profile(asset_file, tmp_path, capsys):
 def test_encode_of_a_quantized_file_says_what_its_error_is_measured_against(asset_file, tmp_path, capsys):
     assert main(["encode", str(asset_file), "-o", str(tmp_path / "h.cgh"), "--profile", "high"]) == 0
     out = capsys.readouterr().out
-    assert "is a compact file" in out and "2e-04 of the bbox diagonal from the strands it was made from" in out
+    assert "is a compact file" in out and "0.0002 of the bbox diagonal from the strands it was made from" in out
     lossless = tmp_path / "l.cgh"
     cgh.write(example_asset(1), lossless, "lossless")
     assert main(["encode", str(lossless), "-o", str(tmp_path / "c.cgh")]) == 0
@@ -128,15 +128,16 @@ def test_info_and_validate_say_how_many_opacities_are_stored_lower(tmp_path, cap
 
 
 def test_encode_of_a_file_written_with_a_profile_of_ones_own(tmp_path, capsys):
-    """A Profile the caller made (its name unknown to the CLI) is stored in META: re-encoding that file
-    says what its error is measured against without the profile's bound."""
+    """A Profile the caller made (its name unknown to the CLI) is stored in META with its point bound:
+    re-encoding that file says what its error is measured against."""
     from dataclasses import replace
 
     mine = tmp_path / "mine.cgh"
     cgh.write(example_asset(1), mine, replace(cgh.PROFILES["compact"], name="mine", position_tolerance=1e-4))
     assert cgh.read_info(mine)["profile"] == "mine"
     assert main(["encode", str(mine), "-o", str(tmp_path / "c.cgh")]) == 0
-    assert "is a mine file" in capsys.readouterr().out
+    assert "is a mine file, so that error is measured against its decoded points, which already lie up to " \
+           "0.0001 of the bbox diagonal" in capsys.readouterr().out
 
 
 def test_a_profile_the_writer_cannot_follow_is_refused_when_made():

@@ -33,11 +33,13 @@ def test_render_train_eval(tmp_path, strands_file, capsys):
     # a .cgh with cards is a valid starting point too (its cards and strand coordinates are kept)
     out2 = tmp_path / "again.cgh"
     assert main(["train", str(ds), "--cards", str(out), "-o", str(out2), "--iters", "3", "--config", str(cfg),
-                 "--no-progress", "--threads", "1"]) == 0
-    from cghair_format import read
+                 "--no-progress", "--threads", "1", "--point-tolerance", "2e-3"]) == 0
+    assert "points: within 0.002 of the bbox diagonal" in capsys.readouterr().out
+    from cghair_format import read, read_info
 
     first, second = read(out), read(out2)
     assert second.cards.count == first.cards.count and second.uvd.shape == first.uvd.shape
+    assert read_info(out2)["points_within"] == 2e-3 and read_info(out)["points_within"] == 2e-4
     capsys.readouterr()
     assert main(["eval", str(out), str(ds), "--out", str(tmp_path / "ev"), "--threads", "1",
                  "--backend", "reference"]) == 0
@@ -194,6 +196,8 @@ def test_unique_variant_writes_no_cgh(tmp_path, strands_file, capsys):
     (["train", "DS", "--strands", "S", "-o", "x.cgh", "--backend", "gsplat"],
      "the gsplat backend runs on CUDA, not cpu; use --device cuda"),
     (["eval", "NOTCGH", "DS", "--backend", "gsplat"], "the gsplat backend runs on CUDA"),
+    (["train", "DS", "--strands", "S", "-o", "x.cgh", "--profile", "lossless", "--point-tolerance", "1e-3"],
+     "--point-tolerance: profile 'lossless' stores points exactly"),
     (["render-dataset", "S", "-o", "OUT", "--views", "4", "--res", "8", "--backend", "native"],
      "the native backend is not built"),
 ])
@@ -219,6 +223,7 @@ def test_bad_inputs_give_clear_errors(tmp_path, strands_file, capsys, monkeypatc
                                   ["train", "d", "-o", "x.cgh", "--opacity-budget", "1"],
                                   ["train", "d", "-o", "x.cgh", "--geometry-rate", "-1"],
                                   ["train", "d", "-o", "x.cgh", "--geometry-controls", "-1"],
+                                  ["train", "d", "-o", "x.cgh", "--point-tolerance", "0.02"],
                                   ["encode", "f.cgh", "-o", "x.cgh", "--opacity-budget", "-0.1"],
                                   ["eval", "f.cgh", "d", "--backend", "vulkan"],
                                   ["train", "d", "--strands", "a", "--cards", "b", "-o", "x.cgh"]])
