@@ -114,10 +114,22 @@ class Setup:
     backend: str | None = None
 
     def settings(self) -> dict:
-        """The settings a row depends on: a rerun resumes rows only where these match."""
-        return {"strands": self.strands_path, "engine": self.engine, "backend": self.backend, "views": self.views,
-                "res": self.res, "iterations": self.iters, "n_cards": self.n_cards, "points": self.points,
-                "dataset": str(self.dataset) if self.dataset else None}
+        """The settings a row depends on: a rerun resumes rows only where these match (a given dataset's
+        views are its own: the rendering settings are not recorded with it)."""
+        rendering = {} if self.dataset else {"engine": self.engine, "views": self.views, "res": self.res}
+        return {"strands": self.strands_path, **rendering, "backend": self.backend, "iterations": self.iters,
+                "n_cards": self.n_cards, "points": self.points, "dataset": str(self.dataset) if self.dataset else None}
+
+    @property
+    def held_out(self) -> str:
+        return held_out_views(self.dataset, self.engine, self.views, self.res)
+
+
+def held_out_views(dataset: Path | None, engine: str, views: int, res: int) -> str:
+    """Which views the rows are scored on, for tables and plots."""
+    if dataset:
+        return f"the held-out views of {dataset}"
+    return f"{engine}-rendered held-out views ({views} views of {res} px)"
 
 
 class RowFile:
@@ -288,7 +300,7 @@ def run_ablation(strands_path: str, work: Path, iters: int, views: int, res: int
         r["ratio_vs_unique"] = unique["appearance_bytes"] / r["appearance_bytes"] if unique else None
     record.save(**sizes)
     plot_ablation(rows, PAPER_ABLATION, work / "ablation.png",
-                  f"{base.n_strands} strands, {iters} iterations, {engine}")
+                  f"{base.n_strands} strands, {iters} iterations, {setup.held_out}")
     return rows
 
 
@@ -322,7 +334,7 @@ def run_sweep(strands_path: str, work: Path, key: str, values: list[int], iters:
         record.add(row)
     rows = sorted(record.rows, key=lambda r: r["value"])  # with those of earlier calls on the same folder
     plot_sweep(key, rows, PAPER_SWEEPS[key], work / f"sweep_{key}.png",
-               f"{key} sweep (latents), {iters} iterations, {engine}")
+               f"{key} sweep (latents), {iters} iterations, {setup.held_out}")
     return rows
 
 
@@ -333,8 +345,8 @@ def _file_psnr(row: dict, missing: str) -> str:
     return row.get("file_error", row.get("export_error", missing))
 
 
-def table(rows: list[dict], engine: str) -> str:
-    lines = [f"ablation on {engine}-rendered held-out views",
+def table(rows: list[dict], held_out: str) -> str:
+    lines = [f"ablation on {held_out}",
              "| variant | PSNR (dB) | SSIM | LPIPS | appearance | ratio vs unique | .cgh PSNR | .cgh size |",
              "|---|---|---|---|---|---|---|---|"]
     for r in rows:
@@ -350,9 +362,9 @@ def table(rows: list[dict], engine: str) -> str:
     return "\n".join(lines)
 
 
-def sweep_table(key: str, rows: list[dict], engine: str) -> str:
+def sweep_table(key: str, rows: list[dict], held_out: str) -> str:
     paper = PAPER_SWEEPS[key]
-    lines = [f"{key} sweep of the latents variant ({SWEEP_FIELDS[key]}) on {engine}-rendered held-out views",
+    lines = [f"{key} sweep of the latents variant ({SWEEP_FIELDS[key]}) on {held_out}",
              f"| {key} | PSNR (dB) | SSIM | LPIPS | appearance | .cgh PSNR | .cgh size | paper PSNR | paper size |",
              "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
@@ -403,10 +415,11 @@ def run(args: argparse.Namespace) -> int:
     common = dict(iters=args.iters, views=args.views, res=args.res, engine=args.engine, samples=args.samples,
                   threads=args.threads, n_cards=args.n_cards, points=args.points,
                   dataset=Path(args.dataset) if args.dataset else None, device=args.device, backend=args.backend)
+    held_out = held_out_views(common["dataset"], args.engine, args.views, args.res)
     for key, values in sweeps:
-        print(sweep_table(key, run_sweep(args.strands, Path(args.work), key, values, **common), args.engine))
+        print(sweep_table(key, run_sweep(args.strands, Path(args.work), key, values, **common), held_out))
     if not sweeps:
-        print(table(run_ablation(args.strands, Path(args.work), variants=variants, **common), args.engine))
+        print(table(run_ablation(args.strands, Path(args.work), variants=variants, **common), held_out))
     return 0
 
 

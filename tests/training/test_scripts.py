@@ -43,6 +43,15 @@ def test_ablation_table(tmp_path, strands_file, capsys):
     rows = {r["variant"]: r for r in data["rows"]}
     assert rows["unique"]["ratio_vs_unique"] == 1.0 and "file_psnr" in rows["latents"]
     assert (tmp_path / "w" / "ablation.png").is_file() and "paper's table (its data)" in out
+    assert "ablation on splat-rendered held-out views (4 views of 16 px)" in out
+    # from a given dataset: its own views, whatever --views and --res say, and the record does not claim them
+    given = tmp_path / "w" / "dataset_splat"
+    assert ablation.main(["--strands", str(strands_file), "--work", str(tmp_path / "w2"), "--iters", "1",
+                          "--dataset", str(given), "--variants", "latents", "--n-cards", "6", "--points", "6",
+                          "--threads", "1"]) == 0
+    assert f"ablation on the held-out views of {given}" in capsys.readouterr().out
+    record = json.loads((tmp_path / "w2" / "ablation.json").read_text())
+    assert record["dataset"] == str(given) and not {"views", "res", "engine"} & set(record)
 
 
 @pytest.mark.parametrize("script", [ablation, bench])
