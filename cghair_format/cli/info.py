@@ -91,11 +91,19 @@ LEVEL_GUIDES = ("", ", level residuals as differences from the most alike earlie
 
 def points_line(info: dict) -> str:
     """How near the strand points lie to the writer's input (spec 7) and the coder's settings, in a line."""
-    quant, within = info["quant"], info["points_within"]
-    if quant["lossless"]:
+    if info["quant"]["lossless"]:
         return "float32 card coordinates (lossless)"
-    bound = "" if within is None else f"within {within:.3g} of the bbox diagonal, "
-    return bound + _coding(quant)
+    return f"{bound_line(info)}, {_coding(info['quant'])}"
+
+
+def bound_line(info: dict) -> str:
+    """How near the strand points lie to the writer's input (:func:`.codec.read_info`'s ``points_within``)."""
+    within = info["points_within"]
+    if within == 0:
+        return "stored exactly"
+    if within is None:  # a profile of the caller's own, from before files recorded the bound
+        return f"on a step of {info['quant']['step']:.3g} (profile {info['profile']}: bound not recorded)"
+    return f"within {within:.3g} of the bbox diagonal"
 
 
 def _coding(quant: dict) -> str:

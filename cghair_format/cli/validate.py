@@ -7,7 +7,7 @@ from __future__ import annotations
 import argparse
 
 from .argtypes import int_at_least
-from .info import animation_line, opacity_line
+from .info import animation_line, bound_line, opacity_line
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -30,7 +30,7 @@ def run(args: argparse.Namespace) -> int:
     counts = asset.counts
     points = f"{counts.max()}" if counts.min() == counts.max() else f"{counts.min()}-{counts.max()}"
     print(f"{args.file}: valid .cgh ({asset.n_strands:,} strands of {points} points, {asset.n_gaussians:,} "
-          f"Gaussians); opacities: {opacity_line(info)}")
+          f"Gaussians); points: {bound_line(info)}; opacities: {opacity_line(info)}")
     if animation is not None:
         print(f"{args.file}: animation: {animation_line(info['animation'])}")
     if not args.reference:

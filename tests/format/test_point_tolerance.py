@@ -64,6 +64,8 @@ def test_cgh_encode_point_tolerance(asset, tmp_path, capsys):
     assert "(bound 0.001)" in capsys.readouterr().out
     assert main(["info", str(out)]) == 0
     assert "points      within 0.001 of the bbox diagonal, step" in capsys.readouterr().out
+    assert main(["validate", str(out)]) == 0
+    assert "; points: within 0.001 of the bbox diagonal; opacities:" in capsys.readouterr().out
     assert main(["info", str(out), "--json"]) == 0
     info = json.loads(capsys.readouterr().out)
     assert info["points_within"] == 1e-3 and info["quant"]["position_tolerance"] == 1e-3
