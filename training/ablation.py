@@ -134,29 +134,37 @@ def held_out_views(dataset: Path | None, engine: str, views: int, res: int) -> s
 
 class RowFile:
     """The JSON of a run's rows, rewritten (atomically) after every finished row, so an interrupted run
-    keeps them and a rerun with the same settings skips them."""
+    keeps them and a rerun with the same settings skips them. Runs side by side in one folder, each
+    with its own variants or values, keep each other's rows: each reads the file again before it writes."""
 
     def __init__(self, path: Path, settings: dict, key: str, log: TextIO):
         self.path, self.settings, self.key = path, settings, key
         self.rows: list[dict] = []
-        if path.is_file():
-            try:
-                data = json.loads(path.read_text())
-            except json.JSONDecodeError as exc:
-                raise ConfigError(f"{path} is not valid JSON ({exc}); give another --work or remove it") from None
-            old = {k: data.get(k) for k in settings}
-            if old != settings:
-                diff = ", ".join(f"{k} {old[k]!r} there, {v!r} now" for k, v in settings.items() if old[k] != v)
-                raise ConfigError(f"{path} holds rows of another run ({diff}); give another --work or remove it")
-            self.rows = data["rows"]
-            if self.rows:
-                print(f"resuming {path}: rows already there, not trained again: {key} "
-                      + ", ".join(str(r[key]) for r in self.rows), file=log)
+        self.refresh()
+        if self.rows:
+            print(f"resuming {path}: rows already there, not trained again: {key} "
+                  + ", ".join(str(r[key]) for r in self.rows), file=log)
+
+    def refresh(self) -> None:
+        """Take in the rows another run has written to the file since (a :class:`ConfigError` where the
+        file is not JSON or holds another run's settings)."""
+        if not self.path.is_file():
+            return
+        try:
+            data = json.loads(self.path.read_text())
+        except json.JSONDecodeError as exc:
+            raise ConfigError(f"{self.path} is not valid JSON ({exc}); give another --work or remove it") from None
+        old = {k: data.get(k) for k in self.settings}
+        if old != self.settings:
+            diff = ", ".join(f"{k} {old[k]!r} there, {v!r} now" for k, v in self.settings.items() if old[k] != v)
+            raise ConfigError(f"{self.path} holds rows of another run ({diff}); give another --work or remove it")
+        self.rows += [r for r in data["rows"] if not self.done(r[self.key])]
 
     def done(self, value) -> bool:
         return any(r[self.key] == value for r in self.rows)
 
     def add(self, row: dict, **extra) -> None:
+        self.refresh()
         self.rows.append(row)
         self.save(**extra)
 
@@ -291,9 +299,11 @@ def run_ablation(strands_path: str, work: Path, iters: int, views: int, res: int
                       progress=False)
     sizes = {"gaussians": base.n_gaussians, "strands_count": base.n_strands}
     for variant in variants:
+        record.refresh()  # a run beside this one may have finished it
         if not record.done(variant):
             cfg = scaled_config(variant, iters, n_cards=n_cards, points_per_strand=points)
             record.add({"variant": variant, **train_row(ds, base, cfg, variant, setup)}, **sizes)
+    record.refresh()
     rows = record.rows  # with those of earlier calls on the same folder (other --variants)
     unique = next((r for r in record.rows if r["variant"] == "unique"), None)
     for r in record.rows:
@@ -332,6 +342,7 @@ def run_sweep(strands_path: str, work: Path, key: str, values: list[int], iters:
         if key == "N_T" and row["groups"] != value:
             print(f"N_T={value}: the cards hold {row['groups']} groups (capped at the strand count)", file=log)
         record.add(row)
+    record.refresh()
     rows = sorted(record.rows, key=lambda r: r["value"])  # with those of earlier calls on the same folder
     plot_sweep(key, rows, PAPER_SWEEPS[key], work / f"sweep_{key}.png",
                f"{key} sweep (latents), {iters} iterations, {setup.held_out}")

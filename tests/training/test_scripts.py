@@ -114,6 +114,23 @@ def test_rerun_resumes_after_the_last_finished_row(tmp_path, strands_file, monke
     assert "holds rows of another run (iterations 4 there, 5 now)" in capsys.readouterr().err
 
 
+def test_runs_side_by_side_keep_each_others_rows(tmp_path, strands_file, monkeypatch):
+    """Two runs in one folder with other variants: the one that finishes last keeps the other's row."""
+    base = ["--strands", str(strands_file), "--work", str(tmp_path / "w"), *TINY]
+    beside: list[int] = []
+
+    def train(*args, config, **kwargs):
+        if config.variant == "latents":  # the run beside finishes unique while this one trains latents
+            beside.append(ablation.main([*base, "--variants", "unique"]))
+        return REAL_TRAIN(*args, config=config, **kwargs)
+
+    monkeypatch.setattr(training.train, "train", train)
+    assert ablation.main([*base, "--variants", "latents"]) == 0 and beside == [0]
+    rows = json.loads((tmp_path / "w" / "ablation.json").read_text())["rows"]
+    assert [r["variant"] for r in rows] == ["unique", "latents"]
+    assert rows[1]["ratio_vs_unique"] > 1  # the ratio is taken against the other run's row
+
+
 def test_a_variant_stopped_midway_resumes_from_its_checkpoint(tmp_path, strands_file, monkeypatch, capsys):
     """A run stopped inside a variant (a session's end) keeps that variant's checkpoint; the rerun
     continues it from there rather than from the start, and never from another run's checkpoint."""
