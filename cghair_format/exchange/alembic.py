@@ -64,21 +64,26 @@ def run_worker(op: str, src: Path, dst: Path) -> None:
         raise BlenderRunError(f"Blender failed ({op}, exit {proc.returncode}): {' | '.join(tail)}")
 
 
+def read_through_usd(path: Path, op: str, usd: Path, read: Callable):
+    """``read(usd)`` after Blender's ``op`` has converted ``path`` to the USD stage ``usd``; a failure of
+    either is a :class:`StrandFileError` naming ``path``, not Blender's temporary stage."""
+    try:
+        run_worker(op, path.resolve(), usd)
+    except BlenderRunError as exc:
+        raise StrandFileError(path, str(exc)) from exc
+    try:
+        return read(usd)
+    except StrandFileError as exc:
+        raise StrandFileError(path, exc.message) from exc
+
+
 def load(path: str | Path) -> Strands:
     """Strands of every curves object in an Alembic file (through Blender), y-up, 1 m per unit."""
     from .usd_curves import load as load_usd
 
     path = Path(path)
     with tempfile.TemporaryDirectory(prefix="cgh_abc_") as tmp:
-        usd = Path(tmp) / "groom.usdc"
-        try:
-            run_worker("abc_to_usd", path.resolve(), usd)
-        except BlenderRunError as exc:
-            raise StrandFileError(path, str(exc)) from exc
-        try:
-            strands = load_usd(usd)
-        except StrandFileError as exc:  # name the Alembic file, not Blender's temporary stage
-            raise StrandFileError(path, exc.message) from exc
+        strands = read_through_usd(path, "abc_to_usd", Path(tmp) / "groom.usdc", load_usd)
     return finish(path, strands)
 
 

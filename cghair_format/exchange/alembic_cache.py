@@ -10,24 +10,15 @@ from __future__ import annotations
 import tempfile
 from pathlib import Path
 
-from ._common import StrandFileError
 from .strand_cache import StrandCache
 
 
 def load_cache(path: Path) -> StrandCache:
     """The animated curves of every curves object of the Alembic file ``path``."""
-    from .alembic import BlenderRunError, run_worker
+    from .alembic import read_through_usd
     from .usd_cache import load_cache as load_usd
 
     folder = tempfile.TemporaryDirectory(prefix="cgh_abc_frames_")
-    usd = Path(folder.name) / "frames.usdc"
-    try:
-        run_worker("abc_frames_to_usd", path.resolve(), usd)
-    except BlenderRunError as exc:
-        raise StrandFileError(path, str(exc)) from exc
-    try:
-        cache = load_usd(usd)
-    except StrandFileError as exc:  # name the Alembic file, not Blender's temporary stage
-        raise StrandFileError(path, exc.message) from exc
+    cache = read_through_usd(path, "abc_frames_to_usd", Path(folder.name) / "frames.usdc", load_usd)
     cache.path, cache.folder = str(path), folder
     return cache
