@@ -8,7 +8,9 @@ appearance size and ratio.
 Renders the dataset once (Cycles by default; ``--engine splat`` when bpy is missing, and the
 table says so), builds the cards once, trains every variant from the same cards with the same
 schedule, and prints one table row per variant; ``ablation.json`` keeps everything and
-``ablation.png`` plots PSNR against appearance size next to the paper's points. ``--sweep`` instead
+``ablation.png`` plots PSNR against appearance size next to the paper's points and
+``ablation_curves.png`` each variant's training-view PSNR against the iteration (the table's last column:
+how much it still rose over the last tenth of the run, near 0 once it has flattened). ``--sweep`` instead
 trains the latents variant at each value of K (codebook size), D (latent size) or N_T (card groups;
 N_T = --n-cards is one group per card), into ``sweep_<key>.json`` and ``sweep_<key>.png``. Each JSON
 is rewritten after every finished row, and a rerun with the same --work and settings skips the rows
@@ -204,7 +206,8 @@ def _start(setup: Setup, name: str, key: str, **settings):
 
 
 def _trained_model(ckpt: Path, cfg: TrainConfig, ds, device: str):
-    """The model of a finished run from its final checkpoint, or None where the run did not finish."""
+    """The model and history of a finished run from its final checkpoint, or None where the run did not
+    finish."""
     from cghair_format import decode
 
     from .model import HairModel
@@ -217,7 +220,7 @@ def _trained_model(ckpt: Path, cfg: TrainConfig, ds, device: str):
         return None
     model = HairModel(decode(state["base_cgh"]), TrainConfig.from_dict(state["config"]), mean_hair_colour(ds.train))
     model.load_state_dict(state["model"])
-    return model.to(device)
+    return model.to(device), state["history"]
 
 
 def _resumable(ckpt: Path, cfg: TrainConfig) -> int | None:
@@ -257,18 +260,20 @@ def train_row(ds, base, cfg: TrainConfig, name: str, setup: Setup) -> dict:
         model, mode, asset, seconds = result.model, result.weight_mode, result.asset, result.seconds
         history = result.history
     except Exception as exc:  # noqa: BLE001 - whatever failed, a finished training is kept
-        model = _trained_model(ckpt, cfg, ds, setup.device)
-        if model is None:
+        trained = _trained_model(ckpt, cfg, ds, setup.device)
+        if trained is None:
             raise
+        model, history = trained
         row["export_error"] = f"{type(exc).__name__}: {exc}"
         print(f"{name}: trained, but {row['export_error']}; the row keeps the model's figures", file=setup.log)
-        mode, asset, seconds, history = None, None, None, None
+        mode, asset, seconds = None, None, None
     tau = tau_at(cfg, cfg.iterations)
     ev = evaluate_model(model, ds.test, mode or "soft", tau, out_dir=setup.work / f"{name}_test", use_lpips=True,
                         backend=setup.backend)
     row.update(psnr=ev.psnr, ssim=ev.ssim, lpips=ev.lpips, appearance_bytes=model.appearance_bytes(),
                groups=model.n_groups, seconds=seconds, iterations=cfg.iterations, weight_mode=mode,
-               train_psnr=history[-1]["psnr"] if history else None)
+               train_psnr=history[-1]["psnr"] if history else None,
+               history=[[h["iteration"], h["psnr"]] for h in history])
     if asset is not None:
         try:
             fev = evaluate(out, ds, use_lpips=False, device=setup.device, backend=setup.backend)
@@ -288,7 +293,7 @@ def run_ablation(strands_path: str, work: Path, iters: int, views: int, res: int
     """Train each of ``variants`` from the same cards; rows go to ``<work>/ablation.json`` as they finish
     (a rerun with the same settings skips those there) and the plot to ``<work>/ablation.png``. Returns,
     plots and prints every row of the folder, earlier calls' included."""
-    from .plot import plot_ablation
+    from .plot import COLOURS, plot_ablation, plot_curves
     from .train import base_asset
 
     log = log if log is not None else sys.stderr
@@ -311,6 +316,10 @@ def run_ablation(strands_path: str, work: Path, iters: int, views: int, res: int
     record.save(**sizes)
     plot_ablation(rows, PAPER_ABLATION, work / "ablation.png",
                   f"{base.n_strands} strands, {iters} iterations, {setup.held_out}")
+    curves = {r["variant"]: r["history"] for r in rows if r.get("history")}
+    if curves:  # rows recorded before the histories were kept have none
+        plot_curves(curves, COLOURS, work / "ablation_curves.png",
+                    f"{base.n_strands} strands: training-view PSNR, mean of each {max(1, iters // 20)} iterations")
     return rows
 
 
@@ -349,6 +358,17 @@ def run_sweep(strands_path: str, work: Path, key: str, values: list[int], iters:
     return rows
 
 
+def late_rise(history: list[list[float]]) -> float | None:
+    """How much the logged training-view PSNR rose over the last tenth of the run: the last figure less the
+    one logged a tenth of the iterations before it (None without a history that long). Near 0 where
+    the training has flattened."""
+    if not history:
+        return None
+    last_it, last = history[-1]
+    earlier = [psnr for it, psnr in history if it <= 0.9 * last_it]
+    return last - earlier[-1] if earlier else None
+
+
 def _file_psnr(row: dict, missing: str) -> str:
     """The written file's PSNR cell: the figure, else why there is none (its error, or ``missing``)."""
     if "file_psnr" in row:
@@ -358,15 +378,19 @@ def _file_psnr(row: dict, missing: str) -> str:
 
 def table(rows: list[dict], held_out: str) -> str:
     lines = [f"ablation on {held_out}",
-             "| variant | PSNR (dB) | SSIM | LPIPS | appearance | ratio vs unique | .cgh PSNR | .cgh size |",
-             "|---|---|---|---|---|---|---|---|"]
+             "| variant | PSNR (dB) | SSIM | LPIPS | appearance | ratio vs unique | .cgh PSNR | .cgh size "
+             "| train PSNR (rise, last 10 %) |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         ratio = f"{r['ratio_vs_unique']:.1f} x" if r.get("ratio_vs_unique") else "-"
         fp = _file_psnr(r, "n/a (no .cgh encoding)")
         fb = f"{r['file_bytes'] / 1024:.0f} KiB" if "file_bytes" in r else "-"
         lp = f"{r['lpips']:.4f}" if r.get("lpips") is not None else "-"
+        rise = late_rise(r.get("history"))
+        tp = "-" if r.get("train_psnr") is None else f"{r['train_psnr']:.2f}" + (
+            "" if rise is None else f" ({rise:+.2f})")
         lines.append(f"| {r['variant']} | {r['psnr']:.2f} | {r['ssim']:.4f} | {lp} | "
-                     f"{r['appearance_bytes'] / 1024:.0f} KiB | {ratio} | {fp} | {fb} |")
+                     f"{r['appearance_bytes'] / 1024:.0f} KiB | {ratio} | {fp} | {fb} | {tp} |")
     lines.append(PAPER_NOTE)
     lines.append("paper's table (its data): " + ", ".join(f"{v} {psnr:.2f} dB / {mb:g} MB"
                                                           for v, (psnr, mb) in PAPER_ABLATION.items()))

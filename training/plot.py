@@ -52,63 +52,95 @@ def plot_psnr_size(ours: list[tuple[str, float, float]], paper: list[tuple[str, 
     """Write a PNG of held-out PSNR against ``size_label`` (bytes, log scale): ``ours`` as dots and ``paper``
     as hollow squares (the shapes' legend only where there are some), each point ``(label, bytes, PSNR)``
     coloured by ``colours[label]`` (the legend)."""
-    from PIL import Image, ImageDraw, ImageFont
-
     ours = [(label, math.log10(size), psnr) for label, size, psnr in ours]
     paper = [(label, math.log10(size), psnr) for label, size, psnr in paper]
     xs = [p[1] for p in ours + paper]
-    ys = [p[2] for p in ours + paper]
     x0, x1 = math.floor(min(xs) - 0.1), math.ceil(max(xs) + 0.1)  # whole decades, no point on an edge
     x1 = max(x1, x0 + 1)
-    step = _nice_step(max(ys) - min(ys) + 1)
-    y0, y1 = step * math.floor((min(ys) - 0.5) / step), step * math.ceil((max(ys) + 0.5) / step)
-
-    img = Image.new("RGB", SIZE, "white")
-    draw = ImageDraw.Draw(img)
-    font, small = ImageFont.load_default(size=15), ImageFont.load_default(size=12)
-    left, top, right, bottom = MARGIN[0], MARGIN[1], SIZE[0] - MARGIN[2], SIZE[1] - MARGIN[3]
-
-    def px(x: float, y: float) -> tuple[float, float]:
-        return left + (x - x0) / (x1 - x0) * (right - left), bottom - (y - y0) / (y1 - y0) * (bottom - top)
-
-    for e in range(x0, x1 + 1):  # decades, with a label each
-        gx = px(e, y0)[0]
-        draw.line([(gx, top), (gx, bottom)], fill=(225, 225, 225))
-        draw.text((gx, bottom + 8), _label(e), fill="black", font=small, anchor="mt")
-    y = y0
-    while y <= y1 + 1e-9:
-        gy = px(x0, y)[1]
-        draw.line([(left, gy), (right, gy)], fill=(225, 225, 225))
-        draw.text((left - 8, gy), f"{y:g}", fill="black", font=small, anchor="rm")
-        y += step
-    draw.rectangle([left, top, right, bottom], outline="black")
-    draw.text(((left + right) / 2, SIZE[1] - 20), f"{size_label} (bytes, log scale)", fill="black", font=font,
-              anchor="mm")
-    ylabel = Image.new("RGB", (bottom - top, 24), "white")
-    ImageDraw.Draw(ylabel).text(((bottom - top) / 2, 12), "held-out PSNR (dB)", fill="black", font=font, anchor="mm")
-    img.paste(ylabel.rotate(90, expand=True), (12, top))
-    if title:
-        draw.text(((left + right) / 2, top / 2), title, fill="black", font=font, anchor="mm")
-
+    frame = _Frame((x0, x1), [p[2] for p in ours + paper], f"{size_label} (bytes, log scale)", "held-out PSNR (dB)",
+                   title, [(e, _label(e)) for e in range(x0, x1 + 1)])
     for label, x, y in paper:
-        cx, cy = px(x, y)
-        draw.rectangle([cx - MARK, cy - MARK, cx + MARK, cy + MARK], outline=colours.get(label, (0, 0, 0)), width=2)
+        cx, cy = frame.px(x, y)
+        frame.draw.rectangle([cx - MARK, cy - MARK, cx + MARK, cy + MARK], outline=colours.get(label, (0, 0, 0)),
+                             width=2)
     for label, x, y in ours:
-        cx, cy = px(x, y)
-        draw.ellipse([cx - MARK, cy - MARK, cx + MARK, cy + MARK], fill=colours.get(label, (0, 0, 0)))
-
-    lx, ly = right + 20, top + 10  # legend: one colour per label, the two marker shapes
-    for label, colour in colours.items():
-        draw.ellipse([lx, ly - 5, lx + 10, ly + 5], fill=colour)
-        draw.text((lx + 18, ly), label, fill="black", font=small, anchor="lm")
-        ly += 22
+        cx, cy = frame.px(x, y)
+        frame.draw.ellipse([cx - MARK, cy - MARK, cx + MARK, cy + MARK], fill=colours.get(label, (0, 0, 0)))
+    ly = frame.legend(colours)
     if paper:
-        ly += 10
-        draw.ellipse([lx, ly - 5, lx + 10, ly + 5], fill="black")
-        draw.text((lx + 18, ly), "ours", fill="black", font=small, anchor="lm")
-        draw.rectangle([lx, ly + 17, lx + 10, ly + 27], outline="black", width=2)
-        draw.text((lx + 18, ly + 22), "paper (its data)", fill="black", font=small, anchor="lm")
+        lx, ly = frame.right + 20, ly + 10
+        frame.draw.ellipse([lx, ly - 5, lx + 10, ly + 5], fill="black")
+        frame.draw.text((lx + 18, ly), "ours", fill="black", font=frame.small, anchor="lm")
+        frame.draw.rectangle([lx, ly + 17, lx + 10, ly + 27], outline="black", width=2)
+        frame.draw.text((lx + 18, ly + 22), "paper (its data)", fill="black", font=frame.small, anchor="lm")
+    return frame.save(path)
 
-    path = Path(path)
-    img.save(path)
-    return path
+
+def plot_curves(curves: dict[str, list[tuple[float, float]]], colours: dict[str, tuple[int, int, int]],
+                path: str | Path, title: str = "", x_label: str = "iteration",
+                y_label: str = "training-view PSNR (dB)") -> Path:
+    """Write a PNG of one line a curve, ``label -> [(x, y), ...]`` (x linear), coloured by ``colours[label]``
+    (the legend), e.g. the ablation's training-view PSNR against the iteration."""
+    xs = [x for points in curves.values() for x, _ in points]
+    x0, x1 = 0.0, max(xs)
+    step = _nice_step(x1 / 1000) * 1000 if x1 >= 1000 else _nice_step(x1)
+    ticks = [(t * step, f"{t * step:g}") for t in range(int(x1 // step) + 1)]
+    frame = _Frame((x0, x1), [y for points in curves.values() for _, y in points], x_label, y_label, title, ticks)
+    for label, points in curves.items():
+        line = [frame.px(x, y) for x, y in points]
+        frame.draw.line(line, fill=colours.get(label, (0, 0, 0)), width=3)
+    frame.legend({label: colours.get(label, (0, 0, 0)) for label in curves})
+    return frame.save(path)
+
+
+class _Frame:
+    """A white image with a framed plot area over ``xr`` (x0, x1) and the y range ``ys`` spans, grid lines at
+    ``x_ticks`` (value, label) and at round y values, axis labels and a title; :meth:`px` maps data to pixels."""
+
+    def __init__(self, xr: tuple[float, float], ys: list[float], x_label: str, y_label: str, title: str,
+                 x_ticks: list[tuple[float, str]]):
+        from PIL import Image, ImageDraw, ImageFont
+
+        self.x0, self.x1 = xr
+        step = _nice_step(max(ys) - min(ys) + 1)
+        self.y0, self.y1 = step * math.floor((min(ys) - 0.5) / step), step * math.ceil((max(ys) + 0.5) / step)
+        self.img = Image.new("RGB", SIZE, "white")
+        self.draw = draw = ImageDraw.Draw(self.img)
+        font, self.small = ImageFont.load_default(size=15), ImageFont.load_default(size=12)
+        left, top, right, bottom = self.left, self.top, self.right, self.bottom = (
+            MARGIN[0], MARGIN[1], SIZE[0] - MARGIN[2], SIZE[1] - MARGIN[3])
+        for value, label in x_ticks:
+            gx = self.px(value, self.y0)[0]
+            draw.line([(gx, top), (gx, bottom)], fill=(225, 225, 225))
+            draw.text((gx, bottom + 8), label, fill="black", font=self.small, anchor="mt")
+        y = self.y0
+        while y <= self.y1 + 1e-9:
+            gy = self.px(self.x0, y)[1]
+            draw.line([(left, gy), (right, gy)], fill=(225, 225, 225))
+            draw.text((left - 8, gy), f"{y:g}", fill="black", font=self.small, anchor="rm")
+            y += step
+        draw.rectangle([left, top, right, bottom], outline="black")
+        draw.text(((left + right) / 2, SIZE[1] - 20), x_label, fill="black", font=font, anchor="mm")
+        rotated = Image.new("RGB", (bottom - top, 24), "white")
+        ImageDraw.Draw(rotated).text(((bottom - top) / 2, 12), y_label, fill="black", font=font, anchor="mm")
+        self.img.paste(rotated.rotate(90, expand=True), (12, top))
+        if title:
+            draw.text(((left + right) / 2, top / 2), title, fill="black", font=font, anchor="mm")
+
+    def px(self, x: float, y: float) -> tuple[float, float]:
+        return (self.left + (x - self.x0) / (self.x1 - self.x0) * (self.right - self.left),
+                self.bottom - (y - self.y0) / (self.y1 - self.y0) * (self.bottom - self.top))
+
+    def legend(self, colours: dict[str, tuple[int, int, int]]) -> int:
+        """One colour a label right of the plot area; returns the y below it."""
+        lx, ly = self.right + 20, self.top + 10
+        for label, colour in colours.items():
+            self.draw.ellipse([lx, ly - 5, lx + 10, ly + 5], fill=colour)
+            self.draw.text((lx + 18, ly), label, fill="black", font=self.small, anchor="lm")
+            ly += 22
+        return ly
+
+    def save(self, path: str | Path) -> Path:
+        path = Path(path)
+        self.img.save(path)
+        return path

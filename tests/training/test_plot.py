@@ -1,4 +1,5 @@
-"""The ablation and sweep plots: our points as dots placed by size (log x) and PSNR, the paper's as squares."""
+"""The ablation and sweep plots: our points as dots placed by size (log x) and PSNR, the paper's as squares;
+the training curves as lines."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ import numpy as np
 from PIL import Image
 
 from training.ablation import PAPER_ABLATION, PAPER_SWEEPS
-from training.plot import COLOURS, MARGIN, PALETTE, SIZE, plot_ablation, plot_sweep
+from training.plot import COLOURS, MARGIN, PALETTE, SIZE, plot_ablation, plot_curves, plot_sweep
 
 
 def _dot_centre(img: np.ndarray, colour) -> np.ndarray:
@@ -50,3 +51,20 @@ def test_sweep_dots_are_coloured_by_value(tmp_path):
     # 1e5 .. 4.72e6 bytes (the paper's K = 90) span the decades 10^4 .. 10^7
     per_decade = (SIZE[0] - MARGIN[2] - MARGIN[0]) / 3
     assert abs((k30[0] - k10[0]) - per_decade) <= 1.5 and k10[1] < k30[1]
+
+
+def test_curves_are_lines_through_their_points(tmp_path):
+    """A flat curve at 30 dB and one rising from 25 to 35 dB over 0..3,000 iterations: each colour lies on
+    a straight line of its own, and the two cross at mid-plot (30 dB, 1,500 iterations)."""
+    path = plot_curves({"unique": [(0, 30.0), (3000, 30.0)], "latents": [(0, 25.0), (3000, 35.0)]}, COLOURS,
+                       tmp_path / "c.png", "curves")
+    plot_area = np.asarray(Image.open(path).convert("RGB"))[:, :SIZE[0] - MARGIN[2]]
+    fits = {}
+    for variant in ("unique", "latents"):
+        ys, xs = np.nonzero(np.all(plot_area == np.asarray(COLOURS[variant], np.uint8), axis=-1))
+        assert len(xs) > 500, variant
+        fits[variant] = np.polyfit(xs, ys, 1)  # pixel y against pixel x
+        assert np.abs(np.polyval(fits[variant], xs) - ys).max() <= 3, variant
+    assert abs(fits["unique"][0]) < 0.01 and fits["latents"][0] < -0.5  # flat; PSNR up is up in the image
+    mid_x = (MARGIN[0] + SIZE[0] - MARGIN[2]) / 2
+    assert abs(np.polyval(fits["unique"], mid_x) - np.polyval(fits["latents"], mid_x)) <= 2

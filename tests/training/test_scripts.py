@@ -43,6 +43,12 @@ def test_ablation_table(tmp_path, strands_file, capsys):
     rows = {r["variant"]: r for r in data["rows"]}
     assert rows["unique"]["ratio_vs_unique"] == 1.0 and "file_psnr" in rows["latents"]
     assert (tmp_path / "w" / "ablation.png").is_file() and "paper's table (its data)" in out
+    # each row keeps its training curve (the mean PSNR of each logged window), plotted and summed up
+    assert [it for it, _ in rows["latents"]["history"]] == [1, 2, 3, 4]
+    assert rows["latents"]["history"][-1][1] == rows["latents"]["train_psnr"]
+    assert (tmp_path / "w" / "ablation_curves.png").is_file()
+    rise = ablation.late_rise(rows["latents"]["history"])
+    assert f"| {rows['latents']['train_psnr']:.2f} ({rise:+.2f}) |" in out
     assert "ablation on splat-rendered held-out views (4 views of 16 px)" in out
     # from a given dataset: its own views, whatever --views and --res say, and the record does not claim them
     given = tmp_path / "w" / "dataset_splat"
@@ -52,6 +58,13 @@ def test_ablation_table(tmp_path, strands_file, capsys):
     assert f"ablation on the held-out views of {given}" in capsys.readouterr().out
     record = json.loads((tmp_path / "w2" / "ablation.json").read_text())
     assert record["dataset"] == str(given) and not {"views", "res", "engine"} & set(record)
+
+
+def test_late_rise_reads_the_last_tenth_of_the_run():
+    rising = [[i * 150, 30 + i / 10] for i in range(1, 21)]  # 20 windows of 150 iterations, +0.1 dB each
+    assert ablation.late_rise(rising) == pytest.approx(0.2)  # 2,700 -> 3,000
+    assert ablation.late_rise([[150 * i, 33.0] for i in range(1, 21)]) == 0
+    assert ablation.late_rise([[3000, 33.0]]) is None and ablation.late_rise(None) is None
 
 
 @pytest.mark.parametrize("script", [ablation, bench])
