@@ -1,5 +1,6 @@
 """The ablation and sweep plots: held-out PSNR against appearance size (log scale), our points next to
-the paper's, drawn with Pillow (already a training dependency): one scatter plot needs no plotting library."""
+the paper's, and the training curves, drawn with Pillow (already a training dependency): a scatter plot
+and a few lines need no plotting library."""
 
 from __future__ import annotations
 
