@@ -160,9 +160,12 @@ class RowFile:
         if old != self.settings:
             diff = ", ".join(f"{k} {old[k]!r} there, {v!r} now" for k, v in self.settings.items() if old[k] != v)
             raise ConfigError(f"{self.path} holds rows of another run ({diff}); give another --work or remove it")
-        self.rows += [r for r in data["rows"] if not self.done(r[self.key])]
+        held = {r[self.key] for r in self.rows}
+        self.rows += [r for r in data["rows"] if r[self.key] not in held]
 
     def done(self, value) -> bool:
+        """Whether the file holds ``value``'s row, this run's or one beside it."""
+        self.refresh()
         return any(r[self.key] == value for r in self.rows)
 
     def add(self, row: dict, **extra) -> None:
@@ -300,11 +303,10 @@ def run_ablation(strands_path: str, work: Path, iters: int, views: int, res: int
     setup = Setup(strands_path, work, iters, views, res, engine, samples, threads, n_cards, points, dataset, log,
                   device, backend)
     record, strands, ds = _start(setup, "ablation.json", "variant")
-    base = base_asset(scaled_config("latents", iters, n_cards=n_cards, points_per_strand=points), strands,
-                      progress=False)
+    latents = scaled_config("latents", iters, n_cards=n_cards, points_per_strand=points)
+    base = base_asset(latents, strands, progress=False)
     sizes = {"gaussians": base.n_gaussians, "strands_count": base.n_strands}
     for variant in variants:
-        record.refresh()  # a run beside this one may have finished it
         if not record.done(variant):
             cfg = scaled_config(variant, iters, n_cards=n_cards, points_per_strand=points)
             record.add({"variant": variant, **train_row(ds, base, cfg, variant, setup)}, **sizes)
@@ -319,7 +321,7 @@ def run_ablation(strands_path: str, work: Path, iters: int, views: int, res: int
     curves = {r["variant"]: r["history"] for r in rows if r.get("history")}
     if curves:  # rows recorded before the histories were kept have none
         plot_curves(curves, COLOURS, work / "ablation_curves.png",
-                    f"{base.n_strands} strands: training-view PSNR, mean of each {max(1, iters // 20)} iterations")
+                    f"{base.n_strands} strands: training-view PSNR, mean of each {latents.log_every} iterations")
     return rows
 
 

@@ -84,7 +84,8 @@ def plot_curves(curves: dict[str, list[tuple[float, float]]], colours: dict[str,
     (the legend), e.g. the ablation's training-view PSNR against the iteration."""
     xs = [x for points in curves.values() for x, _ in points]
     x0, x1 = 0.0, max(xs)
-    step = _nice_step(x1 / 1000) * 1000 if x1 >= 1000 else _nice_step(x1)
+    decade = 10.0 ** math.floor(math.log10(x1))
+    step = _nice_step(x1 / decade) * decade
     ticks = [(t * step, f"{t * step:g}") for t in range(int(x1 // step) + 1)]
     frame = _Frame((x0, x1), [y for points in curves.values() for _, y in points], x_label, y_label, title, ticks)
     for label, points in curves.items():
