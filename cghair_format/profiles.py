@@ -9,9 +9,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
+import numpy as np
+
 # the loosest point tolerance ``Profile.with_position_tolerance`` takes: 1 % of the diagonal (about 4 mm on a
 # 40 cm groom), 50 x compact's
 MAX_POSITION_TOLERANCE = 0.01
+# the finest opacity step ``Profile.for_opacities`` takes: 1/255
+MAX_ADAPTIVE_OPACITY_SCALE = 127.5
 
 
 @dataclass(frozen=True)
@@ -23,6 +27,12 @@ class Profile:
     # model's validation views, 0.02 dB there and 0.05 dB on another model's test views against 1/63, 40 % fewer
     # opacity bytes; docs/ablation.md, "Validation"; on four trained files 0.01-0.07 dB, "The trained file")
     opacity_scale: float = 7.5
+    # where the opacities are low (thin, translucent hair), the writer halves the opacity step (within 1/31,
+    # 1/63, ... 1/255) until the mean rounding error is at most this share of the mean opacity (None: never). 0.08 keeps
+    # 1/15 on the paper-scale files (0.05-0.06 there, 0.05-0.07 dB held out) and takes 1/63 on a small groom
+    # trained 10,000 iterations whose median opacity is 0.02 (1/15: 0.21 and 0.82 dB on its validation views;
+    # 1/31: 0.12 and 0.17 dB; 1/63: 0.07 and 0.02 dB; docs/ablation.md, "Opacity steps for translucent hair")
+    opacity_error: float | None = None
     logit_levels: int = 63  # soft logits stored as round(levels * exp((logit - max) / temperature)) ...
     logit_floor: float = -16.0  # ... and a stored 0 decodes to this logit
     # codebook and MLP weights (and biases): integers times a step of this fraction of each array's RMS
@@ -45,6 +55,8 @@ class Profile:
         problems = [what for what, ok in (
             ("position_tolerance must be a positive number", 0 < self.position_tolerance < 1),
             ("opacity_scale must be a positive number", 0 < self.opacity_scale < math.inf),
+            ("opacity_error must be None or a positive number",
+             self.opacity_error is None or 0 < self.opacity_error < math.inf),
             ("logit_levels must be in [1, 2^24]", 1 <= self.logit_levels <= 1 << 24),
             ("logit_floor must be in [-1e6, 0]", -1e6 <= self.logit_floor <= 0),
             ("weight_step must be a positive number", 0 < self.weight_step < math.inf),
@@ -76,6 +88,21 @@ class Profile:
         return not self.lossless and (self.name not in PROFILES or
                                       PROFILES[self.name].position_tolerance != self.position_tolerance)
 
+    def for_opacities(self, opacity: np.ndarray) -> Profile:
+        """This profile with the opacity step the writer takes for ``opacity`` (the asset's real segments'):
+        its own, or, where the mean rounding error would exceed ``opacity_error`` of the mean opacity, the
+        coarsest of the finer steps (within 1/31, 1/63, ... 1/255) that keeps within it, else the finest. A
+        file records its step (META ``quant.opacity_scale``), so a decoder needs nothing of this."""
+        if self.lossless or self.opacity_error is None:
+            return self
+        o = np.asarray(opacity, dtype=np.float64).ravel()
+        o = o[np.isfinite(o)]
+        limit = self.opacity_error * (float(o.mean()) if o.size else 0.0)
+        scale = self.opacity_scale
+        while scale < MAX_ADAPTIVE_OPACITY_SCALE and limit > 0 and _mean_error(o, scale) > limit:
+            scale = 2 * scale + 0.5  # 1/15 -> 1/31 -> 1/63: half the step, 0 and 1 still on it
+        return self if scale == self.opacity_scale else replace(self, opacity_scale=scale)
+
     @property
     def opacity_tolerance(self) -> float:
         return 0.5 / self.opacity_scale
@@ -92,8 +119,9 @@ PROFILES: dict[str, Profile] = {
     "high": Profile("high", position_tolerance=2e-5, opacity_scale=1023.5, logit_levels=8191,
                     logit_floor=-24.0, weight_step=0.02, normal_bits=12,
                     description="points within 2e-5 of the bbox diagonal, opacity within 1/2047"),
-    "compact": Profile("compact", mlp_step=0.7,
-                       description="the default: points within 2e-4 of the bbox diagonal, opacity within 1/15, "
+    "compact": Profile("compact", mlp_step=0.7, opacity_error=0.08,
+                       description="the default: points within 2e-4 of the bbox diagonal, opacity within 1/15 "
+                                   "(finer where the opacities are low), "
                                    "codebooks on steps of 0.35 RMS, MLP weights 0.7 RMS"),
 }
 DEFAULT_PROFILE = "compact"
@@ -103,6 +131,11 @@ DEFAULT_PROFILE = "compact"
 # 0.15 dB for 62 % off OPAC); on the paper-scale model 42-48 % off OPAC for 0.01-0.05 dB held out
 # (docs/ablation.md, "Validation" and "Negligible opacities")
 DEFAULT_OPACITY_BUDGET = 0.1
+
+
+def _mean_error(opacity: np.ndarray, scale: float) -> float:
+    """The mean error of ``opacity`` stored as round(o * scale) / scale."""
+    return float(np.abs(np.round(opacity * scale) / scale - opacity).mean())
 
 
 def get_profile(name: str | Profile) -> Profile:

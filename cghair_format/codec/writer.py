@@ -174,8 +174,8 @@ class _Passed(NamedTuple):
 
 def _encode(asset: HairAsset, options: EncodeOptions, negligible: np.ndarray | None, budget: float | None,
             animation: Animation | None) -> tuple[bytes, EncodeReport]:
-    prof = options.profile
     asset = asset.validate().with_placeholders()
+    prof = options.profile.for_opacities(asset.opacity[asset.real_segments()])
     points = strand_points(asset.cards, asset.strand_card, asset.uvd)
     diag = bounding_diagonal(points)
     schema.check_writable(_meta(asset, PROFILES["lossless"], None, diag))  # counts and scalars, before the search

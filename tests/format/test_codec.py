@@ -410,3 +410,25 @@ def test_a_recurring_isolated_miss_is_nudged_up_to_nudges_times(recurring, monke
     assert steps[1:nudged + 1] == pytest.approx([steps[0] * writer.NUDGE ** (i + 1) for i in range(nudged)])
     if recurring > writer.NUDGES:
         assert steps[-1] == pytest.approx(writer.TIGHTEN_TARGET / 1.2 * steps[-2])
+
+
+@pytest.mark.parametrize("mean, within", [(None, 15), (0.5, 31), (0.1, 127), (0.02, 255)])
+def test_low_opacities_take_a_finer_step_the_file_records(mean, within):
+    """compact halves its opacity step (within 1/15, 1/31, ... 1/255) until the mean rounding error is at
+    most opacity_error of the mean opacity: the coarsest such step, recorded in META, each opacity
+    decoding within half of it; high and lossless keep their own. (mean None: uniform opacities.)"""
+    a = example_asset(4, strands=60, points=24)
+    rng = np.random.default_rng(2)
+    drawn = rng.uniform(0, 1, a.opacity.shape) if mean is None else rng.exponential(mean, a.opacity.shape)
+    a.opacity = np.clip(drawn, 0, 1).astype(np.float32)
+    compact = cgh.PROFILES["compact"]
+    data, report = cgh.encode(a, "compact")
+    scale = quant_of(data)["opacity_scale"]
+    assert 2 * scale == within and cgh.read_info(data)["opacities"]["within"] == 0.5 / scale
+    assert np.abs(cgh.decode(data).opacity - report.in_file_order(a).opacity).max() <= 0.5 / scale + 1e-7
+    o = a.opacity[a.real_segments()].astype(np.float64)
+    error = [np.abs(np.round(o * s) / s - o).mean() for s in (scale, (scale - 0.5) / 2)]
+    assert error[0] <= compact.opacity_error * o.mean() or within == 255
+    assert within == 15 or error[1] > compact.opacity_error * o.mean()
+    for profile in ("high", "lossless"):
+        assert cgh.PROFILES[profile].for_opacities(o) is cgh.PROFILES[profile]
