@@ -95,8 +95,7 @@ class Profile:
         file records its step (META ``quant.opacity_scale``), so a decoder needs nothing of this."""
         if self.lossless or self.opacity_error is None:
             return self
-        o = np.asarray(opacity, dtype=np.float64).ravel()
-        o = o[np.isfinite(o)]
+        o = np.asarray(opacity, dtype=np.float64).ravel()  # (a validated asset's: in [0, 1])
         limit = self.opacity_error * (float(o.mean()) if o.size else 0.0)
         scale = self.opacity_scale
         while scale < MAX_ADAPTIVE_OPACITY_SCALE and limit > 0 and _mean_error(o, scale) > limit:
